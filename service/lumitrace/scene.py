@@ -1,0 +1,118 @@
+"""The flat scene the tracer works on: triangles, materials and emitters as numpy arrays.
+
+Everything here is in SI units (metres, lumens) and in the stage's own world axes; the
+stage reader builds it, the tracer only reads it. Arrays are plain numpy so the scene can
+be hashed, pickled to workers and compared.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Scattering models, in the order of their integer codes in :attr:`Materials.kind`.
+SCATTERING_MODELS = ("diffuse", "mirror", "glossy", "translucent", "dielectric", "absorber")
+DIFFUSE, MIRROR, GLOSSY, TRANSLUCENT, DIELECTRIC, ABSORBER = range(len(SCATTERING_MODELS))
+
+#: UsdLux light types we emit from, in the order of their codes in :attr:`Emitter.kind`.
+EMITTER_KINDS = ("sphere", "disk", "rect", "cylinder")
+
+
+@dataclass(frozen=True)
+class Material:
+    """Photometric surface properties of one material (all fractions in [0, 1]).
+
+    ``reflectance`` is the diffuse (Lambertian) reflectance, ``specular_reflectance`` the
+    mirror/glossy albedo, ``transmittance`` the diffuse transmittance of a translucent
+    material or the internal transmittance per crossing of a dielectric, ``ior`` the
+    refractive index of a dielectric (outside is air, n = 1), ``roughness`` the GGX
+    roughness (alpha = roughness**2) of a glossy one.
+    """
+
+    path: str
+    scattering: str = "diffuse"
+    reflectance: float = 0.8
+    specular_reflectance: float = 1.0
+    transmittance: float = 0.0
+    ior: float = 1.5
+    roughness: float = 0.2
+
+    @property
+    def kind(self) -> int:
+        return SCATTERING_MODELS.index(self.scattering)
+
+
+@dataclass(frozen=True)
+class Emitter:
+    """One UsdLux light as a Lambertian emitter of known flux.
+
+    ``to_world`` (4x4, column-vector convention: ``p_world = M[:3,:3] @ p + M[:3,3]``) maps
+    the light's local space, in stage units, to world metres. Shape sizes are in local stage
+    units, as authored. One-sided area lights (disk, rect) emit towards their local -Z, as
+    UsdLux defines; sphere and cylinder lights emit outward from their surface.
+    ``cone_angle`` (degrees, 90 means unshaped) and ``cone_softness`` come from
+    UsdLuxShapingAPI, measured from the emission axis (-Z).
+    """
+
+    path: str
+    kind: str
+    flux: float
+    to_world: np.ndarray
+    radius: float = 0.5
+    width: float = 1.0
+    height: float = 1.0
+    length: float = 1.0
+    treat_as_point: bool = False
+    cone_angle: float = 90.0
+    cone_softness: float = 0.0
+
+    @property
+    def key(self) -> int:
+        """A stable 64-bit key from the prim path: keys the emitter's random stream, so
+        adding or removing another emitter does not change this one's photons."""
+        return int.from_bytes(hashlib.sha256(self.path.encode()).digest()[:8], "little")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A luminaire as flat arrays, ready to trace.
+
+    ``triangles`` is (T, 3, 3) float64 in world metres, front faces counter-clockwise
+    (the reader flips left-handed meshes). ``material_index`` (T,) int32 indexes
+    ``materials``; ``part_index`` (T,) int32 indexes ``parts`` (gprim paths), so results and
+    errors can name the part a triangle came from.
+    """
+
+    triangles: np.ndarray
+    material_index: np.ndarray
+    part_index: np.ndarray
+    materials: tuple[Material, ...]
+    parts: tuple[str, ...]
+    emitters: tuple[Emitter, ...]
+    up_axis: str = "Z"
+    meters_per_unit: float = 1.0
+    luminaire_path: str = "/Luminaire"
+    stage_path: str = ""
+    warnings: tuple[str, ...] = field(default=(), compare=False)
+
+    @property
+    def total_flux(self) -> float:
+        """Luminous flux of all emitters together (lm)."""
+        return float(sum(e.flux for e in self.emitters))
+
+    def content_hash(self) -> str:
+        """SHA-256 of everything the traced result depends on (geometry, materials,
+        emitters, units), so a stored result can be recognised as stale."""
+        h = hashlib.sha256()
+        h.update(np.ascontiguousarray(self.triangles, dtype=np.float64).tobytes())
+        h.update(np.ascontiguousarray(self.material_index, dtype=np.int32).tobytes())
+        for m in self.materials:
+            h.update(repr((m.scattering, m.reflectance, m.specular_reflectance,
+                           m.transmittance, m.ior, m.roughness)).encode())
+        for e in self.emitters:
+            h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
+                           e.treat_as_point, e.cone_angle, e.cone_softness)).encode())
+            h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
+        h.update(self.up_axis.encode())
+        return h.hexdigest()
