@@ -1,20 +1,132 @@
-"""Registration of the lumitrace codeless USD schema (applied API schemas) with usd-core."""
+"""The lumitrace codeless USD schema: registration with usd-core, names, allowed values.
+
+The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` and
+``schemas/generatedSchema.usda``) defines three single-apply API schemas:
+
+- ``LumitraceMaterialAPI`` on a UsdShade Material or a gprim: ``lumitrace:scattering``,
+  ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
+  ``lumitrace:ior``, ``lumitrace:roughness``;
+- ``LumitraceEmitterAPI`` on a UsdLux light: ``lumitrace:luminousFlux`` (lm);
+- ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``.
+
+Regenerate the generated files after editing ``schema.usda`` with::
+
+    pip install jinja2
+    python tools/generate_schema.py
+
+USD does not enforce ``allowedTokens`` nor value ranges: the constants below are what the
+stage reader validates against (:mod:`lumitrace.stage.validate`).
+"""
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
+
+from .scene import SCATTERING_MODELS
 
 #: Folder holding plugInfo.json and generatedSchema.usda (``schemas/`` of the source tree).
 SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schemas"
+
+#: API schema type names, as written in ``schemas/schema.usda``.
+MATERIAL_API = "LumitraceMaterialAPI"
+EMITTER_API = "LumitraceEmitterAPI"
+LUMINAIRE_API = "LumitraceLuminaireAPI"
+API_SCHEMAS = (MATERIAL_API, EMITTER_API, LUMINAIRE_API)
+
+# -- LumitraceMaterialAPI -------------------------------------------------------------
+SCATTERING = "lumitrace:scattering"
+REFLECTANCE = "lumitrace:reflectance"
+SPECULAR_REFLECTANCE = "lumitrace:specularReflectance"
+TRANSMITTANCE = "lumitrace:transmittance"
+IOR = "lumitrace:ior"
+ROUGHNESS = "lumitrace:roughness"
+#: Material attribute name -> :class:`lumitrace.scene.Material` field name.
+MATERIAL_ATTRIBUTES = {
+    SCATTERING: "scattering",
+    REFLECTANCE: "reflectance",
+    SPECULAR_REFLECTANCE: "specular_reflectance",
+    TRANSMITTANCE: "transmittance",
+    IOR: "ior",
+    ROUGHNESS: "roughness",
+}
+#: Allowed values of ``lumitrace:scattering`` (same order as the scene's integer codes).
+SCATTERING_TOKENS: tuple[str, ...] = SCATTERING_MODELS
+#: Schema fallbacks of the material attributes (mirrors ``schemas/schema.usda``).
+MATERIAL_FALLBACKS = {
+    SCATTERING: "diffuse",
+    REFLECTANCE: 0.8,
+    SPECULAR_REFLECTANCE: 1.0,
+    TRANSMITTANCE: 0.0,
+    IOR: 1.5,
+    ROUGHNESS: 0.2,
+}
+#: Closed ranges ``(low, high)`` of the fractional material attributes.
+UNIT_INTERVAL = (0.0, 1.0)
+MATERIAL_RANGES = {
+    REFLECTANCE: UNIT_INTERVAL,
+    SPECULAR_REFLECTANCE: UNIT_INTERVAL,
+    TRANSMITTANCE: UNIT_INTERVAL,
+    ROUGHNESS: UNIT_INTERVAL,
+}
+#: ``lumitrace:ior`` must be finite and strictly greater than this.
+IOR_EXCLUSIVE_MIN = 0.0
+
+# -- LumitraceEmitterAPI --------------------------------------------------------------
+#: Luminous flux in lm; only an authored value counts, and it must be finite and > 0.
+LUMINOUS_FLUX = "lumitrace:luminousFlux"
+
+# -- LumitraceLuminaireAPI ------------------------------------------------------------
+RESULT_PREFIX = "lumitrace:result:"
+#: Result attribute name -> Sdf value type name, as in ``schemas/schema.usda``.
+RESULT_ATTRIBUTES = {
+    RESULT_PREFIX + "intensityMap": "asset",
+    RESULT_PREFIX + "iesFile": "asset",
+    RESULT_PREFIX + "ldtFile": "asset",
+    RESULT_PREFIX + "photons": "int64",
+    RESULT_PREFIX + "iterations": "int",
+    RESULT_PREFIX + "elapsedSeconds": "double",
+    RESULT_PREFIX + "relativeError": "double",
+    RESULT_PREFIX + "luminousFlux": "double",
+    RESULT_PREFIX + "lightOutputRatio": "double",
+    RESULT_PREFIX + "threshold": "double",
+    RESULT_PREFIX + "resolution": "int",
+    RESULT_PREFIX + "seed": "int",
+    RESULT_PREFIX + "converged": "bool",
+    RESULT_PREFIX + "inputHash": "string",
+}
 
 _registered = False
 
 
 def register_schema() -> None:
-    """Register the schema plugin by absolute path, once, before any stage is composed."""
+    """Register the schema plugin by absolute path, once, before any stage is composed.
+
+    Importing :mod:`lumitrace` calls this. USD ignores a registration made after its schema
+    registry was first loaded: if that happened (pxr used before ``import lumitrace``), a
+    warning says so and the API schemas stay unknown for this process.
+    """
     global _registered
-    if _registered or not (SCHEMA_DIR / "plugInfo.json").exists():
+    if _registered:
+        return
+    if not (SCHEMA_DIR / "plugInfo.json").exists():
+        warnings.warn(f"lumitrace USD schema not found in {SCHEMA_DIR}: the lumitrace API "
+                      "schemas are unknown to USD (attribute values are still read)",
+                      RuntimeWarning, stacklevel=2)
         return
     from pxr import Plug
 
     Plug.Registry().RegisterPlugins(str(SCHEMA_DIR))
     _registered = True
+    if not is_registered():
+        warnings.warn("the lumitrace USD schema was registered after USD's schema registry "
+                      "was loaded: import lumitrace before composing any stage",
+                      RuntimeWarning, stacklevel=2)
+
+
+def is_registered() -> bool:
+    """Whether USD's schema registry knows all three lumitrace API schemas."""
+    from pxr import Usd
+
+    registry = Usd.SchemaRegistry()
+    return all(registry.FindAppliedAPIPrimDefinition(name) is not None
+               for name in API_SCHEMAS)

@@ -1,0 +1,148 @@
+"""The lumitrace codeless USD schema: registration, fallbacks, generated files."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import lumitrace  # noqa: F401  (registers the schema before pxr composes anything)
+from lumitrace import schema
+from pxr import Sdf, Usd
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_registry_knows_the_api_schemas():
+    assert schema.is_registered()
+    registry = Usd.SchemaRegistry()
+    for name in schema.API_SCHEMAS:
+        assert registry.FindAppliedAPIPrimDefinition(name) is not None, name
+        assert Usd.SchemaRegistry.IsAppliedAPISchema(name)
+        assert not Usd.SchemaRegistry.IsMultipleApplyAPISchema(name)
+
+
+def test_material_api_properties_and_fallbacks():
+    definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(schema.MATERIAL_API)
+    assert set(definition.GetPropertyNames()) == set(schema.MATERIAL_ATTRIBUTES)
+    for name, fallback in schema.MATERIAL_FALLBACKS.items():
+        value = definition.GetAttributeFallbackValue(name)
+        if isinstance(fallback, str):
+            assert value == fallback
+        else:
+            assert value == pytest.approx(fallback)
+    scattering = definition.GetSchemaAttributeSpec(schema.SCATTERING)
+    assert tuple(scattering.allowedTokens) == schema.SCATTERING_TOKENS
+    assert scattering.variability == Sdf.VariabilityUniform
+
+
+def test_emitter_and_luminaire_api_properties():
+    registry = Usd.SchemaRegistry()
+    emitter = registry.FindAppliedAPIPrimDefinition(schema.EMITTER_API)
+    assert emitter.GetPropertyNames() == [schema.LUMINOUS_FLUX]
+    assert (emitter.GetSchemaAttributeSpec(schema.LUMINOUS_FLUX).typeName
+            == Sdf.ValueTypeNames.Float)
+    luminaire = registry.FindAppliedAPIPrimDefinition(schema.LUMINAIRE_API)
+    assert set(luminaire.GetPropertyNames()) == set(schema.RESULT_ATTRIBUTES)
+    for name, type_name in schema.RESULT_ATTRIBUTES.items():
+        spec = luminaire.GetSchemaAttributeSpec(name)
+        assert spec.typeName == Sdf.ValueTypeNames.Find(type_name), name
+
+
+def test_applied_schemas_on_a_stage(tmp_path):
+    stage = Usd.Stage.CreateNew(str(tmp_path / "applied.usda"))
+    material = stage.DefinePrim("/Luminaire/Looks/White", "Material")
+    light = stage.DefinePrim("/Luminaire/Led", "DiskLight")
+    root = stage.GetPrimAtPath("/Luminaire")
+    assert material.CanApplyAPI(schema.MATERIAL_API)
+    material.ApplyAPI(schema.MATERIAL_API)
+    light.ApplyAPI(schema.EMITTER_API)
+    root.ApplyAPI(schema.LUMINAIRE_API)
+
+    assert material.HasAPI(schema.MATERIAL_API)
+    assert light.HasAPI(schema.EMITTER_API)
+    assert root.HasAPI(schema.LUMINAIRE_API)
+    assert not light.HasAPI(schema.MATERIAL_API)
+
+    # Fallbacks come from the schema: nothing is authored on the prims.
+    reflectance = material.GetAttribute(schema.REFLECTANCE)
+    assert reflectance and not reflectance.HasAuthoredValue()
+    assert reflectance.Get() == pytest.approx(0.8)
+    assert material.GetAttribute(schema.SCATTERING).Get() == "diffuse"
+    assert material.GetAttribute(schema.IOR).Get() == pytest.approx(1.5)
+    assert material.GetAttribute(schema.ROUGHNESS).Get() == pytest.approx(0.2)
+    flux = light.GetAttribute(schema.LUMINOUS_FLUX)
+    assert flux and not flux.HasAuthoredValue() and flux.Get() == 0.0
+    assert root.GetAttribute("lumitrace:result:converged").Get() is False
+
+    material.GetAttribute(schema.REFLECTANCE).Set(0.5)
+    assert material.GetAttribute(schema.REFLECTANCE).Get() == pytest.approx(0.5)
+
+
+FRESH_INTERPRETER = textwrap.dedent("""
+    import sys
+    import lumitrace
+    from pxr import Usd
+    stage = Usd.Stage.Open(sys.argv[1])
+    prim = stage.GetPrimAtPath("/Luminaire/Looks/White")
+    assert prim.HasAPI("LumitraceMaterialAPI"), "API not applied"
+    assert abs(prim.GetAttribute("lumitrace:reflectance").Get() - 0.8) < 1e-6
+    assert prim.GetAttribute("lumitrace:scattering").Get() == "diffuse"
+    assert stage.GetPrimAtPath("/Luminaire/Led").GetAttribute(
+        "lumitrace:luminousFlux").Get() == 1000.0
+    print("ok")
+""")
+
+
+def test_registration_in_a_fresh_interpreter(tmp_path):
+    """A stage file opened right after ``import lumitrace`` in a new process sees the
+    schema: registration happens at import, before any stage is composed."""
+    path = tmp_path / "fresh.usda"
+    path.write_text(textwrap.dedent("""\
+        #usda 1.0
+        (
+            defaultPrim = "Luminaire"
+        )
+        def Xform "Luminaire"
+        {
+            def Scope "Looks"
+            {
+                def Material "White" (
+                    prepend apiSchemas = ["LumitraceMaterialAPI"]
+                )
+                {
+                }
+            }
+            def DiskLight "Led" (
+                prepend apiSchemas = ["LumitraceEmitterAPI"]
+            )
+            {
+                float lumitrace:luminousFlux = 1000
+            }
+        }
+        """))
+    result = subprocess.run([sys.executable, "-c", FRESH_INTERPRETER, str(path)],
+                            capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "ok"
+    assert "registered after" not in result.stderr
+
+
+def test_generated_plug_info_is_portable():
+    text = (REPO / "schemas" / "plugInfo.json").read_text()
+    assert "@PLUG_INFO" not in text
+    body = "\n".join(line for line in text.splitlines() if not line.startswith("#"))
+    plugin = json.loads(body)["Plugins"][0]
+    assert plugin["Name"] == "lumitrace"
+    assert (plugin["LibraryPath"], plugin["ResourcePath"], plugin["Root"]) == ("", ".", ".")
+    assert set(plugin["Info"]["Types"]) == set(schema.API_SCHEMAS)
+
+
+def test_generated_files_are_up_to_date():
+    pytest.importorskip("jinja2")
+    result = subprocess.run([sys.executable, str(REPO / "tools" / "generate_schema.py"),
+                             "--check"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
