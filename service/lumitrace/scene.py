@@ -51,8 +51,8 @@ class Emitter:
     the light's local space, in stage units, to world metres. Shape sizes are in local stage
     units, as authored. One-sided area lights (disk, rect) emit towards their local -Z, as
     UsdLux defines; sphere and cylinder lights emit outward from their surface.
-    ``cone_angle`` (degrees, 90 means unshaped) and ``cone_softness`` come from
-    UsdLuxShapingAPI, measured from the emission axis (-Z).
+    ``cone_angle`` (degrees, 90 means unshaped), ``cone_softness`` and ``focus`` come from
+    UsdLuxShapingAPI, measured from the emission axis (-Z); see :mod:`lumitrace.emission`.
     """
 
     path: str
@@ -66,6 +66,7 @@ class Emitter:
     treat_as_point: bool = False
     cone_angle: float = 90.0
     cone_softness: float = 0.0
+    focus: float = 0.0
 
     @property
     def key(self) -> int:
@@ -112,7 +113,7 @@ class Scene:
                            m.transmittance, m.ior, m.roughness)).encode())
         for e in self.emitters:
             h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
-                           e.treat_as_point, e.cone_angle, e.cone_softness)).encode())
+                           e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())
             h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
         h.update(self.up_axis.encode())
         return h.hexdigest()

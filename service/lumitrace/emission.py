@@ -1,0 +1,108 @@
+"""Photon emission from UsdLux lights: start points and directions in world metres.
+
+Every light is a Lambertian emitter of its surface (UsdLux): disk and rect lights emit from
+one side, along their local -Z; sphere lights from their whole surface (isotropic
+intensity); cylinder lights from their side, not their caps. UsdLuxShapingAPI narrows the
+emission about the local -Z axis: intensity is multiplied by ``cos(theta)**focus`` and by a
+cone window that is 1 inside ``angle * (1 - softness)``, falls with a smoothstep to 0 at
+``angle`` and is 0 beyond. The authored luminous flux is the flux after shaping.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from . import rng
+from .sampling import cosine_hemisphere, normalize, to_world, uniform_cone, uniform_disk
+from .scene import Emitter
+
+_PROFILE_SAMPLES = 4096
+
+
+def is_shaped(e: Emitter) -> bool:
+    """True when shaping changes the emission of ``e`` from the plain Lambertian one."""
+    limit = 90.0 if e.kind in ("disk", "rect") else 180.0
+    return e.focus > 0.0 or e.cone_angle < limit
+
+
+def shaping_window(theta: np.ndarray, angle_deg: float, softness: float, focus: float) -> np.ndarray:
+    """Relative intensity factor of the shaping at angles ``theta`` (rad) from the axis."""
+    t_max = np.radians(angle_deg)
+    t_in = t_max * (1.0 - np.clip(softness, 0.0, 1.0))
+    w = np.where(theta <= t_max, 1.0, 0.0)
+    if t_max > t_in:
+        x = np.clip((t_max - theta) / (t_max - t_in), 0.0, 1.0)
+        w = w * x * x * (3.0 - 2.0 * x)
+    if focus > 0.0:
+        w = w * np.maximum(np.cos(theta), 0.0) ** focus
+    return w
+
+
+@functools.lru_cache(maxsize=64)
+def _profile_table(base_cos_power: int, angle_deg: float, softness: float, focus: float):
+    """Inverse-CDF table over theta for intensity ``cos^base * window`` (rad)."""
+    limit = np.pi / 2 if base_cos_power > 0 else np.pi
+    t_hi = min(np.radians(angle_deg), limit)
+    theta = np.linspace(0.0, t_hi, _PROFILE_SAMPLES + 1)
+    f = shaping_window(theta, angle_deg, softness, focus) * np.sin(theta)
+    if base_cos_power:
+        f = f * np.maximum(np.cos(theta), 0.0) ** base_cos_power
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(theta))])
+    if cdf[-1] <= 0.0:
+        raise ValueError("shaping leaves no emission")
+    return theta, cdf / cdf[-1]
+
+
+def _shaped_directions(u1, u2, base_cos_power: int, e: Emitter) -> np.ndarray:
+    """Local directions about +z distributed as the shaped profile (by table inversion)."""
+    theta_tab, cdf = _profile_table(base_cos_power, float(e.cone_angle), float(e.cone_softness),
+                                    float(e.focus))
+    theta = np.interp(u1, cdf, theta_tab)
+    phi = 2.0 * np.pi * u2
+    s = np.sin(theta)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+
+
+def _flip_to_minus_z(d: np.ndarray) -> np.ndarray:
+    """Map directions about +z to directions about -z (the UsdLux emission axis)."""
+    return d * np.array([1.0, -1.0, -1.0])
+
+
+def emit(e: Emitter, key: np.uint64, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start points (N,3, world m) and unit directions (N,3, world) of photons ``index``.
+
+    Uses the random dimensions of bounce 0, so photon i of an emitter always starts the same.
+    """
+    u1, u2, u3, u4 = rng.uniforms(key, index, 0, 4)
+    m = np.asarray(e.to_world, dtype=np.float64)
+    lin, t = m[:3, :3], m[:3, 3]
+    normal_map = np.linalg.inv(lin).T
+    n = index.shape[0]
+
+    if e.kind in ("disk", "rect"):
+        if e.kind == "disk":
+            p = uniform_disk(u1, u2, e.radius)
+        else:
+            p = np.stack([(u1 - 0.5) * e.width, (u2 - 0.5) * e.height, np.zeros(n)], axis=1)
+        n_w = normalize((normal_map @ np.array([0.0, 0.0, -1.0]))[None, :].repeat(n, 0))
+        local = _shaped_directions(u3, u4, 1, e) if is_shaped(e) else cosine_hemisphere(u3, u4)
+        d = to_world(local, n_w)
+    elif e.kind == "sphere":
+        if is_shaped(e):
+            w_local = _flip_to_minus_z(_shaped_directions(u1, u2, 0, e))
+        else:
+            w_local = uniform_cone(u1, u2, -1.0)
+        if e.treat_as_point:
+            p = np.zeros((n, 3))
+        else:
+            p = e.radius * to_world(cosine_hemisphere(u3, u4), w_local)
+        d = normalize(w_local @ lin.T)
+    elif e.kind == "cylinder":
+        phi = 2.0 * np.pi * u2
+        nl = np.stack([np.zeros(n), np.cos(phi), np.sin(phi)], axis=1)
+        p = np.stack([(u1 - 0.5) * e.length, e.radius * nl[:, 1], e.radius * nl[:, 2]], axis=1)
+        d = to_world(cosine_hemisphere(u3, u4), normalize(nl @ normal_map.T))
+    else:
+        raise ValueError(f"{e.path}: unknown emitter kind {e.kind!r}")
+    return p @ lin.T + t, d

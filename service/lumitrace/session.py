@@ -1,0 +1,149 @@
+"""A tracing session: rounds of photon batches on a thread pool until a stop criterion.
+
+Photons are shared among emitters in proportion to their flux, so all photons carry about
+the same flux. Which photons an emitter traces depends only on the photon budget, never on
+the number of threads or the batch size, so the same seed gives the same map anywhere.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .accumulate import Accumulator
+from .scene import Scene
+from .tracer import MAX_DEPTH, PreparedScene, prepare, trace_batch
+
+DEFAULT_PHOTONS = 2_000_000
+DEFAULT_RESOLUTION = 64
+
+
+@dataclass(frozen=True)
+class TraceSettings:
+    """What to trace and when to stop: ``photons`` (total), ``seconds`` or ``target_error``
+    (flux-weighted relative standard error); the first one reached stops the session."""
+
+    photons: int | None = None
+    seconds: float | None = None
+    target_error: float | None = None
+    resolution: int = DEFAULT_RESOLUTION
+    threshold: float = 0.0
+    seed: int = 0
+    threads: int = field(default_factory=lambda: os.cpu_count() or 1)
+    batch_size: int = 1 << 16
+    max_depth: int = MAX_DEPTH
+
+    def budget(self) -> int | None:
+        """Total photons to trace, or None when only time or error stops the session."""
+        if self.photons is None and self.seconds is None and self.target_error is None:
+            return DEFAULT_PHOTONS
+        return self.photons
+
+
+@dataclass
+class Progress:
+    """One iteration's state, passed to progress callbacks."""
+
+    iteration: int
+    photons: int
+    seconds: float
+    relative_error: float
+    budget: int | None
+
+
+@dataclass
+class TraceResult:
+    scene: Scene
+    settings: TraceSettings
+    accumulator: Accumulator
+    iterations: int
+    seconds: float
+    prepare_seconds: float
+
+    @property
+    def photons(self) -> int:
+        return self.accumulator.photons
+
+    @property
+    def relative_error(self) -> float:
+        return self.accumulator.relative_error()
+
+
+def allocate(fluxes: list[float], photons: int) -> list[int]:
+    """Split ``photons`` among emitters in proportion to flux (largest remainder)."""
+    total = float(sum(fluxes))
+    exact = [photons * f / total for f in fluxes]
+    base = [int(math.floor(x)) for x in exact]
+    rest = photons - sum(base)
+    order = sorted(range(len(fluxes)), key=lambda i: (base[i] - exact[i], i))
+    for i in order[:rest]:
+        base[i] += 1
+    return base
+
+
+def _round_jobs(done: list[int], targets: list[float], shares: list[float],
+                round_photons: int, batch: int) -> list[tuple[int, int, int]]:
+    """Jobs (emitter, first photon, count) of the next round, batch-sized."""
+    jobs = []
+    for e, (n_done, n_target, share) in enumerate(zip(done, targets, shares)):
+        want = min(int(math.ceil(round_photons * share)), n_target - n_done)
+        start = n_done
+        while want > 0:
+            c = int(min(batch, want))
+            jobs.append((e, start, c))
+            start += c
+            want -= c
+    return jobs
+
+
+def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
+        progress: Callable[[Progress], None] | None = None) -> TraceResult:
+    """Trace ``scene`` until the settings say stop; return the accumulated result."""
+    t0 = time.perf_counter()
+    ps = prepared or prepare(scene)
+    t_prep = time.perf_counter() - t0
+    acc = Accumulator(scene, settings.resolution)
+    fluxes = [e.flux for e in scene.emitters]
+    shares = [f / sum(fluxes) for f in fluxes]
+    budget = settings.budget()
+    targets = allocate(fluxes, budget) if budget is not None else [math.inf] * len(fluxes)
+    done = [0] * len(fluxes)
+    threads = max(1, int(settings.threads))
+    round_photons = threads * settings.batch_size * 2
+    iteration = 0
+    start = time.perf_counter()
+
+    def job(j):
+        e, first, count = j
+        return trace_batch(ps, e, settings.seed, first, count, settings.resolution,
+                           settings.max_depth)
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        while True:
+            jobs = _round_jobs(done, targets, shares, round_photons, settings.batch_size)
+            if not jobs:
+                break
+            for tally in pool.map(job, jobs):
+                acc.add(tally)
+                done[tally.emitter] += tally.photons
+            iteration += 1
+            elapsed = time.perf_counter() - start
+            err = acc.relative_error()
+            if progress is not None:
+                progress(Progress(iteration, acc.photons, elapsed, err, budget))
+            if settings.seconds is not None and elapsed >= settings.seconds:
+                break
+            if settings.target_error is not None and err <= settings.target_error:
+                break
+    return TraceResult(scene=scene, settings=settings, accumulator=acc, iterations=iteration,
+                       seconds=time.perf_counter() - start, prepare_seconds=t_prep)
+
+
+def intensity_map(result: TraceResult) -> np.ndarray:
+    """The raw intensity map (cd), (6R, R) float64."""
+    return result.accumulator.intensity()
