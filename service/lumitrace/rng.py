@@ -11,7 +11,6 @@ import numpy as np
 
 _M1 = np.uint64(0xFF51AFD7ED558CCD)
 _M2 = np.uint64(0xC4CEB9FE1A85EC53)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _S33 = np.uint64(33)
 _S32 = np.uint64(32)
 _LOW32 = np.uint64(0xFFFFFFFF)
@@ -47,7 +46,7 @@ def uniforms(key: np.uint64, index: np.ndarray, counter: int, count: int = 2) ->
     base = fmix64(idx ^ key)
     out: list[np.ndarray] = []
     for j in range((count + 1) // 2):
-        c = np.uint64((counter + j + 1) & 0xFFFFFFFFFFFFFFFF) * _GOLDEN
+        c = np.uint64(((counter + j + 1) * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF)
         h = fmix64(base + c)
         out.append((h >> _S32).astype(np.float64) * _INV32)
         if len(out) < count:

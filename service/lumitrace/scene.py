@@ -51,7 +51,7 @@ class Emitter:
     the light's local space, in stage units, to world metres. Shape sizes are in local stage
     units, as authored. One-sided area lights (disk, rect) emit towards their local -Z, as
     UsdLux defines; sphere and cylinder lights emit outward from their surface.
-    ``cone_angle`` (degrees, 90 means unshaped), ``cone_softness`` and ``focus`` come from
+    ``cone_angle`` (degrees; 180, or 90 for one-sided lights, means unshaped), ``cone_softness`` and ``focus`` come from
     UsdLuxShapingAPI, measured from the emission axis (-Z); see :mod:`lumitrace.emission`.
     """
 
@@ -64,7 +64,7 @@ class Emitter:
     height: float = 1.0
     length: float = 1.0
     treat_as_point: bool = False
-    cone_angle: float = 90.0
+    cone_angle: float = 180.0
     cone_softness: float = 0.0
     focus: float = 0.0
 
