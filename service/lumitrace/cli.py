@@ -1,0 +1,191 @@
+"""The ``lumitrace`` command line: trace a stage, benchmark the tracer."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from .errors import LumitraceError
+
+
+def _positive_int(text: str) -> int:
+    v = int(float(text))
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    v = float(text)
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
+def _non_negative_float(text: str) -> float:
+    v = float(text)
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be zero or a positive number, got {text}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lumitrace",
+        description="Far-field luminous intensity of OpenUSD luminaires by photon tracing.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    t = sub.add_parser("trace", help="trace a stage and write the intensity map and result layer",
+                       description="Trace photons from the stage's UsdLux emitters through its parts, "
+                                   "bin the photons that leave by direction into a cube-map intensity "
+                                   "map (cd) and write NAME.intensity.exr and NAME.lumitrace.usda.")
+    t.add_argument("stage", type=Path, help="the luminaire stage (.usda, .usdc, .usd)")
+    stop = t.add_argument_group("when to stop (the first reached; default 2e6 photons)")
+    stop.add_argument("--photons", type=_positive_int, help="total photons to trace, e.g. 5e6")
+    stop.add_argument("--time", type=_positive_float, metavar="SECONDS", help="trace for this long")
+    stop.add_argument("--target-error", type=_positive_float, metavar="E",
+                      help="stop at this flux-weighted relative standard error, e.g. 0.02")
+    t.add_argument("--resolution", type=_positive_int, default=64,
+                   help="cube-map face size in texels (default 64)")
+    t.add_argument("--threshold", type=_non_negative_float, default=0.0,
+                   help="filter photon-count threshold; 0 writes the raw estimate (default 0)")
+    t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    t.add_argument("--threads", type=_positive_int, default=None,
+                   help="tracing threads (default: all cores); the map does not depend on it")
+    t.add_argument("--out", type=Path, default=None,
+                   help="folder for the EXR (default: beside the stage); the result layer is "
+                        "always written beside the stage")
+    t.add_argument("--json", action="store_true",
+                   help="print one JSON summary object as the last line of stdout")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    b = sub.add_parser("bench", help="tracer throughput against bare Embree on the same rays",
+                       description="Trace the demo stage, replay every traced ray through bare "
+                                   "embreex run() and report both rates and their ratio.")
+    b.add_argument("--stage", type=Path, default=None, help="stage (default: the demo downlight)")
+    b.add_argument("--seconds", type=_positive_float, default=10.0,
+                   help="approximate tracing time (default 10)")
+    b.add_argument("--threads", type=_positive_int, default=None)
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    return p
+
+
+def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
+    """A tqdm bar on stderr counting photons (or seconds), with iterations and error."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+
+    if total is not None:
+        bar = tqdm(total=total, unit="ph", unit_scale=True, file=sys.stderr, dynamic_ncols=True)
+    elif seconds is not None:
+        bar = tqdm(total=round(seconds, 1), unit="s", file=sys.stderr, dynamic_ncols=True,
+                   bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s {postfix}")
+    else:
+        bar = tqdm(unit="ph", unit_scale=True, file=sys.stderr, dynamic_ncols=True)
+
+    def update(p):
+        if total is not None:
+            bar.update(p.photons - bar.n)
+        elif seconds is not None:
+            bar.update(min(p.seconds, seconds) - bar.n)
+        else:
+            bar.update(p.photons - bar.n)
+        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err {p.relative_error:.2%}")
+
+    return bar, update
+
+
+def cmd_trace(args) -> int:
+    import os
+
+    from .outputs import write_outputs
+    from .session import TraceSettings, run
+    from .stage.reader import read_stage
+
+    scene = read_stage(args.stage)
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    settings = TraceSettings(photons=args.photons, seconds=args.time,
+                             target_error=args.target_error, resolution=args.resolution,
+                             threshold=args.threshold, seed=args.seed,
+                             threads=args.threads or os.cpu_count() or 1)
+    bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
+    try:
+        result = run(scene, settings, progress=update)
+    finally:
+        if bar is not None:
+            bar.close()
+    raw = result.accumulator.intensity()
+    filtered = raw  # the pull-push filter replaces this when threshold > 0
+    written = write_outputs(result, filtered, args.out, args.target_error)
+    fig = written["figures"]
+    summary = {
+        "stage": str(args.stage), "luminaire": scene.luminaire_path,
+        "photons": fig.photons, "iterations": fig.iterations, "seconds": fig.seconds,
+        "emitted_lm": fig.emitted_lm, "escaped_lm": fig.escaped_lm,
+        "absorbed_lm": fig.absorbed_lm, "cut_lm": fig.cut_lm,
+        "light_output_ratio": fig.light_output_ratio, "peak_cd": fig.peak_cd,
+        "peak_direction": fig.peak_direction, "relative_error": fig.relative_error,
+        "converged": fig.converged, "photons_per_second": fig.photons_per_second,
+        "segments_per_second": fig.segments_per_second,
+        "outputs": {"intensity_map": written["intensity_map"],
+                    "result_layer": written["result_layer"]},
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        d = fig.peak_direction
+        print(f"{scene.luminaire_path} in {args.stage}")
+        print(f"  photons         {fig.photons:,} in {fig.iterations} iterations, "
+              f"{fig.seconds:.2f} s ({fig.photons_per_second:,.0f} photons/s)")
+        print(f"  emitted         {fig.emitted_lm:10.2f} lm")
+        print(f"  escaped         {fig.escaped_lm:10.2f} lm   (light output ratio "
+              f"{fig.light_output_ratio:.3f})")
+        print(f"  absorbed        {fig.absorbed_lm:10.2f} lm")
+        if fig.cut_lm:
+            print(f"  cut (depth)     {fig.cut_lm:10.4f} lm")
+        print(f"  peak intensity  {fig.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})")
+        print(f"  relative error  {fig.relative_error:.2%} (flux-weighted, per texel)")
+        print(f"  intensity map   {written['intensity_map']}")
+        print(f"  result layer    {written['result_layer']}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from .bench import run_benchmark
+
+    report = run_benchmark(stage=args.stage, seconds=args.seconds, threads=args.threads)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(f"stage                {report['stage']}")
+        print(f"triangles            {report['triangles']:,}")
+        print(f"photons              {report['photons']:,}")
+        print(f"tracer               {report['segments_per_second']:,.0f} segments/s "
+              f"({report['photons_per_second']:,.0f} photons/s)")
+        print(f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays")
+        print(f"ratio                {report['ratio']:.2f}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "trace":
+            return cmd_trace(args)
+        if args.command == "bench":
+            return cmd_bench(args)
+    except LumitraceError as exc:
+        print(f"lumitrace: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lumitrace: interrupted; nothing was written", file=sys.stderr)
+        return 130
+    return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

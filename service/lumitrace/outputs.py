@@ -1,0 +1,131 @@
+"""Writing a traced result: the intensity EXR first, then the result layer that names it.
+
+File names follow the stage: for ``NAME.usda`` the outputs are ``NAME.intensity.exr`` (in
+the output folder) and ``NAME.lumitrace.usda`` (beside the stage, sublayered into it once).
+Every file is written atomically, textures before the layer that references them.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .cubemap import texel_solid_angles
+from .session import TraceResult
+
+
+@dataclass(frozen=True)
+class ResultFigures:
+    """The numbers a result is summarised by (lm, cd, s)."""
+
+    photons: int
+    iterations: int
+    seconds: float
+    emitted_lm: float
+    escaped_lm: float
+    absorbed_lm: float
+    cut_lm: float
+    light_output_ratio: float
+    peak_cd: float
+    peak_direction: tuple[float, float, float]
+    relative_error: float
+    converged: bool
+    photons_per_second: float
+    segments_per_second: float
+
+
+def stage_name(stage_path: str | os.PathLike) -> str:
+    """``NAME`` of ``NAME.usda`` (the stage file name without its last extension)."""
+    return Path(stage_path).name.rsplit(".", 1)[0]
+
+
+def input_hash(result: TraceResult) -> str:
+    """Hash of the scene content and the settings that shape the map."""
+    s = result.settings
+    h = hashlib.sha256(result.scene.content_hash().encode())
+    h.update(json.dumps({"resolution": s.resolution, "seed": s.seed, "threshold": s.threshold,
+                         "max_depth": s.max_depth}, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def figures(result: TraceResult, filtered: np.ndarray, target_error: float | None) -> ResultFigures:
+    """Summary figures of a result; ``filtered`` is the map the user sees (cd)."""
+    acc = result.accumulator
+    f = acc.fluxes()
+    from .cubemap import texel_directions
+
+    k = int(np.argmax(filtered))
+    peak_dir = texel_directions(acc.resolution).reshape(-1, 3)[k]
+    err = acc.relative_error()
+    secs = max(result.seconds, 1e-9)
+    return ResultFigures(
+        photons=acc.photons, iterations=result.iterations, seconds=result.seconds,
+        emitted_lm=f["emitted"], escaped_lm=f["escaped"], absorbed_lm=f["absorbed"],
+        cut_lm=f["cut"], light_output_ratio=f["escaped"] / f["emitted"] if f["emitted"] else 0.0,
+        peak_cd=float(filtered.ravel()[k]), peak_direction=tuple(float(x) for x in peak_dir),
+        relative_error=err,
+        converged=bool(target_error is not None and err <= target_error),
+        photons_per_second=acc.photons / secs, segments_per_second=acc.segments / secs)
+
+
+def write_outputs(result: TraceResult, filtered: np.ndarray, out_dir: str | os.PathLike | None,
+                  target_error: float | None = None) -> dict:
+    """Write the EXR and the result layer; return the paths and figures as a dict."""
+    from .exr import write_intensity_exr
+    from .stage.writer import write_result_layer
+
+    scene = result.scene
+    stage_path = Path(scene.stage_path)
+    out = Path(out_dir) if out_dir is not None else stage_path.parent
+    name = stage_name(stage_path)
+    exr_path = out / f"{name}.intensity.exr"
+    fig = figures(result, filtered, target_error)
+    acc = result.accumulator
+    digest = input_hash(result)
+    meta = {
+        "software": f"lumitrace {__version__}",
+        "stage": stage_path.name,
+        "luminaire": scene.luminaire_path,
+        "units": {"Y": "cd", "raw.Y": "cd", "count": "photons"},
+        "axes": f"stage axes, up {scene.up_axis}",
+        "photons": fig.photons,
+        "iterations": fig.iterations,
+        "elapsedSeconds": fig.seconds,
+        "relativeError": fig.relative_error,
+        "converged": fig.converged,
+        "threshold": result.settings.threshold,
+        "resolution": acc.resolution,
+        "seed": result.settings.seed,
+        "inputHash": digest,
+        "emittedFlux": fig.emitted_lm,
+        "luminousFlux": fig.escaped_lm,
+        "absorbedFlux": fig.absorbed_lm,
+        "cutFlux": fig.cut_lm,
+        "lightOutputRatio": fig.light_output_ratio,
+        "emitters": [{"path": t.path, "flux": t.flux, "photons": t.photons}
+                     for t in acc.emitters],
+    }
+    channels = {"Y": filtered, "raw.Y": acc.intensity(), "count": acc.counts().astype(np.float64)}
+    write_intensity_exr(exr_path, channels, meta)
+    layer_dir = stage_path.parent
+    layer_path = write_result_layer(stage_path, scene.luminaire_path, {
+        "intensityMap": os.path.relpath(exr_path, layer_dir),
+        "photons": fig.photons,
+        "iterations": fig.iterations,
+        "elapsedSeconds": fig.seconds,
+        "relativeError": fig.relative_error,
+        "luminousFlux": fig.escaped_lm,
+        "lightOutputRatio": fig.light_output_ratio,
+        "threshold": float(result.settings.threshold),
+        "resolution": acc.resolution,
+        "seed": result.settings.seed,
+        "converged": fig.converged,
+        "inputHash": digest,
+    })
+    return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig,
+            "solid_angle_check": float((filtered * texel_solid_angles(acc.resolution)).sum())}
