@@ -285,7 +285,7 @@ def _resolves_to(entry: str, root_dir: Path, target: Path) -> bool:
 
 
 def _warn(message: str) -> None:
-    warnings.warn(message, ResultLayerWarning, stacklevel=3)
+    warnings.warn(message, ResultLayerWarning, stacklevel=4)  # the caller
 
 
 def _sublayer_into_root(stage: Path, layer_path: Path, root) -> None:
