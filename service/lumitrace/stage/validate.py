@@ -1,0 +1,150 @@
+"""Validation rules for what the stage reader takes from a stage.
+
+Each rule checks one kind of value and raises :class:`~lumitrace.errors.StageError` naming
+the prim and the property it came from, so the message says exactly what to fix, e.g.
+``/Luminaire/Reflector.points: 3 points are NaN or infinite``. The reader calls the rules
+as it reads (the first bad value stops the read; nothing is written). They are modelled on
+``usdUtils.complianceChecker``: small, independent checks, one concern each.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..errors import StageError
+from ..schema import (IOR, IOR_EXCLUSIVE_MIN, MATERIAL_RANGES, REFLECTANCE, SCATTERING,
+                      SCATTERING_TOKENS, TRANSMITTANCE)
+
+#: Slack allowed on ``reflectance + transmittance <= 1`` (float attributes are 32-bit).
+SUM_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Sourced:
+    """A value read from the stage with the prim path and property it came from."""
+
+    value: Any
+    where: str
+    prop: str
+
+
+def check_stage_units(meters_per_unit: float, where: str) -> None:
+    """``metersPerUnit`` must be a finite number > 0."""
+    if not _is_number(meters_per_unit) or not math.isfinite(meters_per_unit) \
+            or meters_per_unit <= 0.0:
+        raise StageError(f"must be a finite number > 0, got {meters_per_unit!r}",
+                         where, "metersPerUnit")
+
+
+def check_up_axis(up_axis: str, where: str) -> None:
+    """``upAxis`` must be Y or Z."""
+    if up_axis not in ("Y", "Z"):
+        raise StageError(f"must be 'Y' or 'Z', got {up_axis!r}", where, "upAxis")
+
+
+def check_finite_points(points: np.ndarray, where: str, prop: str = "points",
+                        what: str = "points") -> None:
+    """Every coordinate of an (N, 3) array must be finite."""
+    bad = ~np.isfinite(points).all(axis=-1)
+    count = int(np.count_nonzero(bad))
+    if count:
+        noun = what if count != 1 else what.rstrip("s")
+        verb = "are" if count != 1 else "is"
+        raise StageError(f"{count} {noun} {verb} NaN or infinite", where, prop)
+
+
+def check_finite_matrix(matrix: np.ndarray, where: str, prop: str) -> None:
+    """A transform must have finite entries."""
+    if not np.isfinite(matrix).all():
+        raise StageError("transform is NaN or infinite", where, prop)
+
+
+def check_face_topology(counts: np.ndarray, indices: np.ndarray, n_points: int,
+                        where: str) -> None:
+    """``faceVertexCounts`` must add up to the number of ``faceVertexIndices``, which must
+    index ``points``."""
+    if counts.size and counts.min() < 0:
+        raise StageError("negative face vertex count", where, "faceVertexCounts")
+    if int(counts.sum()) != indices.size:
+        raise StageError(f"counts add up to {int(counts.sum())} but faceVertexIndices has "
+                         f"{indices.size} entries", where, "faceVertexCounts")
+    if indices.size and (indices.min() < 0 or indices.max() >= n_points):
+        bad = int(np.count_nonzero((indices < 0) | (indices >= n_points)))
+        raise StageError(f"{bad} indices are outside the {n_points} points", where,
+                         "faceVertexIndices")
+
+
+def check_number(value: Any, where: str, prop: str) -> float:
+    """The value must be a real number (not None, text or a vector); returns it as float."""
+    if not _is_number(value):
+        raise StageError(f"expected a number, got {value!r}", where, prop)
+    return float(value)
+
+
+def check_finite(value: Any, where: str, prop: str) -> float:
+    """The value must be a finite real number."""
+    v = check_number(value, where, prop)
+    if not math.isfinite(v):
+        raise StageError(f"must be finite, got {v}", where, prop)
+    return v
+
+
+def check_positive(value: Any, where: str, prop: str, unit: str = "") -> float:
+    """The value must be finite and > 0."""
+    v = check_finite(value, where, prop)
+    if v <= 0.0:
+        raise StageError(f"must be > 0{unit}, got {v:g}", where, prop)
+    return v
+
+
+def check_non_negative(value: Any, where: str, prop: str) -> float:
+    """The value must be finite and >= 0."""
+    v = check_finite(value, where, prop)
+    if v < 0.0:
+        raise StageError(f"must be >= 0, got {v:g}", where, prop)
+    return v
+
+
+def check_luminous_flux(value: Any, where: str, prop: str) -> float:
+    """An authored luminous flux must be finite and > 0 (lm)."""
+    return check_positive(value, where, prop, unit=" lm")
+
+
+def check_material(values: Mapping[str, Sourced]) -> None:
+    """Check a material's resolved values, keyed by lumitrace attribute name.
+
+    - ``lumitrace:scattering`` is one of :data:`lumitrace.schema.SCATTERING_TOKENS`
+      (USD does not enforce ``allowedTokens``);
+    - reflectance, specular reflectance, transmittance and roughness are in [0, 1];
+    - ``lumitrace:ior`` is finite and > 0;
+    - a translucent material has reflectance + transmittance <= 1.
+    """
+    scattering = values[SCATTERING]
+    if not isinstance(scattering.value, str) or scattering.value not in SCATTERING_TOKENS:
+        raise StageError(f"unknown scattering {scattering.value!r}: allowed are "
+                         f"{', '.join(SCATTERING_TOKENS)}", scattering.where, scattering.prop)
+    for name, (low, high) in MATERIAL_RANGES.items():
+        item = values[name]
+        v = check_number(item.value, item.where, item.prop)
+        if not (low <= v <= high):  # also false for NaN
+            raise StageError(f"must be in [{low:g}, {high:g}], got {v:g}", item.where, item.prop)
+    ior = values[IOR]
+    v = check_finite(ior.value, ior.where, ior.prop)
+    if v <= IOR_EXCLUSIVE_MIN:
+        raise StageError(f"must be > {IOR_EXCLUSIVE_MIN:g}, got {v:g}", ior.where, ior.prop)
+    if scattering.value == "translucent":
+        r, t = values[REFLECTANCE], values[TRANSMITTANCE]
+        total = float(r.value) + float(t.value)
+        if total > 1.0 + SUM_TOLERANCE:
+            raise StageError(f"{REFLECTANCE} + {TRANSMITTANCE} = {total:g} exceeds 1 for a "
+                             "translucent material", t.where, t.prop)
+
+
+def _is_number(value: Any) -> bool:
+    if isinstance(value, (bool, np.bool_, str, bytes)) or value is None:
+        return False
+    return isinstance(value, numbers.Real)
