@@ -708,3 +708,38 @@ def test_authored_gprim_values_combine_with_each_subset_material(tmp_path):
     assert first.reflectance == pytest.approx(0.2126, rel=1e-6)
     assert second.reflectance == pytest.approx(0.7152, rel=1e-6)
     assert first.roughness == pytest.approx(0.4) and second.roughness == pytest.approx(0.4)
+
+
+LATE_REGISTRATION = """
+import sys, warnings
+from pxr import Usd
+Usd.Stage.CreateInMemory().DefinePrim("/A", "Mesh")  # loads the schema registry
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    import lumitrace
+from lumitrace.schema import is_registered
+from lumitrace.stage import read_stage
+assert not is_registered() and any("registered after" in str(w.message) for w in caught)
+material = read_stage(sys.argv[1]).materials[0]
+assert (material.scattering, material.specular_reflectance) == ("mirror", 1.0), material
+print("ok")
+"""
+
+
+def test_applied_api_counts_even_when_the_schema_registered_too_late(tmp_path):
+    """Schema fallbacks apply where apiSchemas lists the API, even if USD could not load
+    the schema in this process."""
+    import subprocess
+    import sys
+
+    stage = new_stage(tmp_path)
+    mesh = add_mesh(stage, "/Luminaire/Part").GetPrim()
+    mesh.ApplyAPI("LumitraceMaterialAPI")
+    mesh.GetAttribute("lumitrace:scattering").Set("mirror")
+    add_disk(stage)
+    stage.Save()
+    result = subprocess.run([sys.executable, "-c", LATE_REGISTRATION,
+                             stage.GetRootLayer().realPath],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "ok"

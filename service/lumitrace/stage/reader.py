@@ -541,7 +541,7 @@ class _Reader:
             UsdShade.Tokens.full)
         material_prim = material.GetPrim() if material else None
         gprim_values = _material_api_values(gprim, self.time)
-        if gprim.HasAPI(schema.MATERIAL_API):  # every value comes from the gprim
+        if _has_api(gprim, schema.MATERIAL_API):  # every value comes from the gprim
             key = gprim_path
         elif gprim_values:  # some values from the gprim, the rest from this binding
             key = str(bind_prim.GetPath())
@@ -777,10 +777,16 @@ def _as_array(value, width: int) -> np.ndarray:
     return np.asarray(value, dtype=np.float64).reshape(-1, width)
 
 
+def _has_api(prim: Usd.Prim, name: str) -> bool:
+    """Whether the API schema ``name`` is applied to ``prim``, also when USD does not know
+    the schema (its plugin was registered too late): then ``apiSchemas`` still lists it."""
+    return prim.HasAPI(name) or name in prim.GetPrimTypeInfo().GetAppliedAPISchemas()
+
+
 def _material_api_values(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Sourced]:
     """lumitrace material attributes on ``prim``: all of them where LumitraceMaterialAPI is
     applied (schema fallbacks included), else only the authored ones."""
-    applied = prim.HasAPI(schema.MATERIAL_API)
+    applied = _has_api(prim, schema.MATERIAL_API)
     where = str(prim.GetPath())
     values = {}
     for name in schema.MATERIAL_ATTRIBUTES:
