@@ -34,8 +34,13 @@ def generate(out_dir: Path) -> None:
     # The generator resolves the sublayered @usd/schema.usda@ through the plugin system and
     # reads schema.usda relative to the working directory: run it from a copy.
     shutil.copy2(SCHEMAS / "schema.usda", out_dir / "schema.usda")
-    subprocess.run([sys.executable, "-m", "pxr.Usd.usdGenSchema", "-q", "schema.usda", "."],
-                   cwd=out_dir, check=True)
+    # Its notes about C++ build files (__init__.py, CMakeLists.txt, module.cpp) do not apply
+    # to a codeless schema: show its output only when it fails.
+    result = subprocess.run([sys.executable, "-m", "pxr.Usd.usdGenSchema", "-q", "schema.usda",
+                             "."], cwd=out_dir, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.stderr.write(result.stdout + result.stderr)
+        raise SystemExit(f"usdGenSchema failed with exit status {result.returncode}")
     plug_info = out_dir / "plugInfo.json"
     text = plug_info.read_text(encoding="utf-8")
     for placeholder, value in PLACEHOLDERS.items():
