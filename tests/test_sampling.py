@@ -5,7 +5,7 @@ import pytest
 from chi2 import sphere_chi2_pvalue, sphere_integral
 from lumitrace import rng
 from lumitrace.emission import emit, shaping_window
-from lumitrace.materials import MaterialTable, scatter, smith_g1
+from lumitrace.materials import MaterialTable, random_polarisation, scatter, smith_g1
 from lumitrace.scene import Emitter, Material
 from lumitrace.sampling import cosine_hemisphere, uniform_cone
 
@@ -113,7 +113,8 @@ def _scatter(mat: Material, cos_in: float, n=N):
     s = np.sqrt(1 - cos_in**2)
     d = np.tile([s, 0.0, -cos_in], (n, 1))
     ng = np.tile([0.0, 0.0, 1.0], (n, 1))
-    out, alive = scatter(table, np.zeros(n, np.int32), d, ng, _u(n, 4, seed=5))
+    pol = random_polarisation(d, _u(n, 1, seed=9)[0])
+    out, alive, _ = scatter(table, np.zeros(n, np.int32), d, ng, _u(n, 4, seed=5), pol)
     return d, out, alive
 
 
@@ -162,7 +163,8 @@ def test_dielectric_total_internal_reflection_from_inside():
     c = 0.5  # 60 degrees inside glass, beyond the 41.8 degree critical angle
     d = np.tile([np.sqrt(1 - c * c), 0, c], (1000, 1))  # travelling up, hits the back face
     ng = np.tile([0.0, 0, 1], (1000, 1))  # outward normal points up: the photon is inside
-    out, alive = scatter(table, np.zeros(1000, np.int32), d, ng, _u(1000))
+    pol = random_polarisation(d, _u(1000, 1, seed=9)[0])
+    out, alive, _ = scatter(table, np.zeros(1000, np.int32), d, ng, _u(1000), pol)
     assert alive.all() and np.allclose(out, d * [1, 1, -1])
 
 
@@ -189,3 +191,25 @@ def test_glossy_samples_ggx_reflection(rough, cos_in):
     assert abs(alive.mean() - albedo) < 4 * np.sqrt(albedo * (1 - albedo) / N) + 2e-3
     pv = sphere_chi2_pvalue(out[alive], lambda w: ref(w) / albedo, n_theta=48, n_phi=64)
     assert pv > ALPHA
+
+
+def test_polarised_reflectance_at_brewster_angle():
+    """p-polarised light is not reflected at Brewster's angle; s-polarised light is, with R_s."""
+    n_glass = 1.5
+    theta_b = np.arctan(n_glass)
+    ci = np.cos(theta_b)
+    table = MaterialTable.from_materials((Material("/m", "dielectric", ior=n_glass),))
+    m = 50_000
+    d = np.tile([np.sin(theta_b), 0.0, -ci], (m, 1))
+    ng = np.tile([0.0, 0, 1], (m, 1))
+    s_dir = np.tile([0.0, 1.0, 0.0], (m, 1))  # perpendicular to the plane of incidence (xz)
+    p_dir = np.cross(s_dir, d)
+    _, alive, _ = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), p_dir)
+    out_p, _, _ = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), p_dir)
+    assert (out_p[:, 2] < 0).all()  # every p photon is transmitted
+    out_s, _, pol_s = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), s_dir)
+    ct = np.sqrt(1 - np.sin(theta_b) ** 2 / n_glass**2)
+    rs = ((ci - n_glass * ct) / (ci + n_glass * ct)) ** 2
+    refl = out_s[:, 2] > 0
+    assert abs(refl.mean() - rs) < 4.5 * np.sqrt(rs * (1 - rs) / m)
+    assert np.allclose(np.abs(pol_s[:, 1]), 1.0)  # s stays s

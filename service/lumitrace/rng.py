@@ -18,6 +18,9 @@ _INV32 = 1.0 / 4294967296.0
 
 #: Random dimensions each bounce may use (pairs of 32-bit uniforms per hash).
 DIMS_PER_BOUNCE = 4
+#: Counter of the emitted photon's polarisation (emission uses counters 0..3; the first
+#: scattering event starts at DIMS_PER_BOUNCE, whose hashes start one above it).
+EMISSION_POLARISATION = 2
 
 
 def fmix64(k: np.ndarray) -> np.ndarray:

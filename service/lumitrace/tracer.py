@@ -20,7 +20,7 @@ import numpy as np
 from . import rng
 from .cubemap import texel_index
 from .emission import emit
-from .materials import MaterialTable, scatter
+from .materials import MaterialTable, random_polarisation, scatter
 from .scene import Emitter, Scene
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
@@ -123,6 +123,7 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     key = rng.stream_key(seed, e.key)
     idx = np.arange(start, start + count, dtype=np.int64)
     p, d = emit(e, key, idx)
+    pol = random_polarisation(d, rng.uniforms(key, idx, rng.EMISSION_POLARISATION, 1)[0])
     o = (p - ps.center) / ps.scale + RAY_EPSILON * d
     ntex = 6 * resolution * resolution
     tally = BatchTally(emitter_number, start, count, np.zeros(ntex, np.int64),
@@ -149,16 +150,16 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
             tally.cut += int(h.size)
             break
         prim = prim[h]
-        idx, d = idx[h], d[h]
+        idx, d, pol = idx[h], d[h], pol[h]
         u = hit["u"][h].astype(np.float64)[:, None]
         v = hit["v"][h].astype(np.float64)[:, None]
         p = ps.v0[prim] + u * ps.e1[prim] + v * ps.e2[prim]
         ng = ps.normals[prim]
         rnd = rng.uniforms(key, idx, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
-        d, alive = scatter(ps.table, ps.material_index[prim], d, ng, rnd)
+        d, alive, pol = scatter(ps.table, ps.material_index[prim], d, ng, rnd, pol)
         tally.absorbed += int(idx.size - np.count_nonzero(alive))
         keep = np.nonzero(alive)[0]
-        idx, d, p, ng = idx[keep], d[keep], p[keep], ng[keep]
+        idx, d, p, ng, pol = idx[keep], d[keep], p[keep], ng[keep], pol[keep]
         side = np.sign(np.einsum("ij,ij->i", d, ng))
         o = p + (RAY_EPSILON * side)[:, None] * ng
     return tally
