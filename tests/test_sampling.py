@@ -40,7 +40,7 @@ def test_uniforms_moments_and_independence():
 
 def test_cosine_hemisphere_density():
     u1, u2 = _u(N, 2)
-    d = cosine_hemisphere(u1, u2)
+    d = cosine_hemisphere(u1, u2).T
     p = sphere_chi2_pvalue(d, lambda w: np.maximum(w[:, 2], 0) / np.pi)
     assert p > ALPHA
 
@@ -48,7 +48,7 @@ def test_cosine_hemisphere_density():
 def test_uniform_cone_density():
     u1, u2 = _u(N, 2)
     cmax = np.cos(np.radians(60))
-    d = uniform_cone(u1, u2, cmax)
+    d = uniform_cone(u1, u2, cmax).T
     p = sphere_chi2_pvalue(d, lambda w: (w[:, 2] >= cmax) / (2 * np.pi * (1 - cmax)))
     assert p > ALPHA
 
@@ -61,7 +61,7 @@ def _emitter(kind, **kw):
 @pytest.mark.parametrize("kind", ["disk", "rect"])
 def test_area_light_emits_lambertian_along_minus_z(kind):
     e = _emitter(kind, radius=0.05, width=0.1, height=0.2)
-    p, d = emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64))
+    p, d = (a.T for a in emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64)))
     assert np.allclose(p[:, 2], 0.0)
     pv = sphere_chi2_pvalue(d, lambda w: np.maximum(-w[:, 2], 0) / np.pi)
     assert pv > ALPHA
@@ -75,7 +75,7 @@ def test_area_light_emits_lambertian_along_minus_z(kind):
 
 def test_sphere_light_is_isotropic_and_on_its_surface():
     e = _emitter("sphere", radius=0.01)
-    p, d = emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64))
+    p, d = (a.T for a in emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64)))
     assert np.allclose(np.linalg.norm(p, axis=1), 0.01)
     assert (np.einsum("ij,ij->i", p, d) >= -1e-12).all()  # leaves the surface outward
     assert sphere_chi2_pvalue(d, lambda w: np.full(len(w), 1 / (4 * np.pi))) > ALPHA
@@ -83,7 +83,7 @@ def test_sphere_light_is_isotropic_and_on_its_surface():
 
 def test_cylinder_light_emits_from_its_side():
     e = _emitter("cylinder", radius=0.01, length=0.2)
-    p, d = emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64))
+    p, d = (a.T for a in emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64)))
     assert np.allclose(np.hypot(p[:, 1], p[:, 2]), 0.01)
     assert np.abs(p[:, 0]).max() <= 0.1
     # intensity of a Lambertian cylinder along the axis vanishes; perpendicular it peaks:
@@ -95,7 +95,7 @@ def test_cylinder_light_emits_from_its_side():
 @pytest.mark.parametrize("angle,soft,focus", [(30.0, 0.0, 0.0), (45.0, 0.5, 0.0), (90.0, 0.0, 3.0)])
 def test_shaped_disk_follows_its_window(angle, soft, focus):
     e = _emitter("disk", radius=0.01, cone_angle=angle, cone_softness=soft, focus=focus)
-    p, d = emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64))
+    p, d = (a.T for a in emit(e, rng.stream_key(0, e.key), np.arange(N, dtype=np.int64)))
     th = np.arccos(np.clip(-d[:, 2], -1, 1))
     assert th.max() <= np.radians(angle) + 1e-9
     t = np.linspace(0, np.pi / 2, 20001)
@@ -113,9 +113,9 @@ def _scatter(mat: Material, cos_in: float, n=N):
     s = np.sqrt(1 - cos_in**2)
     d = np.tile([s, 0.0, -cos_in], (n, 1))
     ng = np.tile([0.0, 0.0, 1.0], (n, 1))
-    pol = random_polarisation(d, _u(n, 1, seed=9)[0])
-    out, alive, _ = scatter(table, np.zeros(n, np.int32), d, ng, _u(n, 4, seed=5), pol)
-    return d, out, alive
+    pol = random_polarisation(d.T, _u(n, 1, seed=9)[0])
+    out, alive, _ = scatter(table, np.zeros(n, np.int32), d.T, ng.T, _u(n, 4, seed=5), pol)
+    return d, out.T, alive
 
 
 def test_diffuse_albedo_and_lobe():
@@ -131,6 +131,25 @@ def test_translucent_splits_reflection_and_transmission():
     assert abs(up.mean() - 0.3) < 4 * np.sqrt(0.21 / N)
     assert abs(down.mean() - 0.5) < 4 * np.sqrt(0.25 / N)
     assert sphere_chi2_pvalue(out[down], lambda w: np.maximum(-w[:, 2], 0) / np.pi) > ALPHA
+
+
+def test_mixed_materials_keep_photon_order():
+    """Photons hitting different models in one wave come back in their own order."""
+    mats = (Material("/d", "diffuse", reflectance=0.5), Material("/m", "mirror"),
+            Material("/g", "dielectric", ior=1.5))
+    table = MaterialTable.from_materials(mats)
+    n = 3000
+    mat = np.arange(n, dtype=np.int32) % 3
+    d = np.tile([[0.6], [0.0], [-0.8]], (1, n))
+    ng = np.tile([[0.0], [0.0], [1.0]], (1, n))
+    u = _u(n, 4, seed=3)
+    pol = np.full((3, n), np.nan)
+    out, alive, _ = scatter(table, mat, d, ng, u, pol)
+    for k in range(3):
+        sel = mat == k
+        o1, a1, _ = scatter(table, mat[sel], d[:, sel], ng[:, sel], [x[sel] for x in u], pol[:, sel])
+        assert np.array_equal(out[:, sel], o1) and np.array_equal(alive[sel], a1)
+    assert np.allclose(out[:, mat == 1].T, [0.6, 0.0, 0.8])
 
 
 def test_mirror_reflects_exactly():
@@ -163,8 +182,9 @@ def test_dielectric_total_internal_reflection_from_inside():
     c = 0.5  # 60 degrees inside glass, beyond the 41.8 degree critical angle
     d = np.tile([np.sqrt(1 - c * c), 0, c], (1000, 1))  # travelling up, hits the back face
     ng = np.tile([0.0, 0, 1], (1000, 1))  # outward normal points up: the photon is inside
-    pol = random_polarisation(d, _u(1000, 1, seed=9)[0])
-    out, alive, _ = scatter(table, np.zeros(1000, np.int32), d, ng, _u(1000), pol)
+    pol = random_polarisation(d.T, _u(1000, 1, seed=9)[0])
+    out, alive, _ = scatter(table, np.zeros(1000, np.int32), d.T, ng.T, _u(1000), pol)
+    out = out.T
     assert alive.all() and np.allclose(out, d * [1, 1, -1])
 
 
@@ -204,10 +224,10 @@ def test_polarised_reflectance_at_brewster_angle():
     ng = np.tile([0.0, 0, 1], (m, 1))
     s_dir = np.tile([0.0, 1.0, 0.0], (m, 1))  # perpendicular to the plane of incidence (xz)
     p_dir = np.cross(s_dir, d)
-    _, alive, _ = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), p_dir)
-    out_p, _, _ = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), p_dir)
-    assert (out_p[:, 2] < 0).all()  # every p photon is transmitted
-    out_s, _, pol_s = scatter(table, np.zeros(m, np.int32), d, ng, _u(m), s_dir)
+    out_p, _, _ = scatter(table, np.zeros(m, np.int32), d.T, ng.T, _u(m), p_dir.T)
+    assert (out_p[2] < 0).all()  # every p photon is transmitted
+    out_s, _, pol_s = scatter(table, np.zeros(m, np.int32), d.T, ng.T, _u(m), s_dir.T)
+    out_s, pol_s = out_s.T, pol_s.T
     ct = np.sqrt(1 - np.sin(theta_b) ** 2 / n_glass**2)
     rs = ((ci - n_glass * ct) / (ci + n_glass * ct)) ** 2
     refl = out_s[:, 2] > 0

@@ -14,7 +14,8 @@ import functools
 import numpy as np
 
 from . import rng
-from .sampling import cosine_hemisphere, normalize, to_world, uniform_cone, uniform_disk
+from .sampling import (cos_sin, cosine_hemisphere, normalize, to_world, uniform_cone,
+                       uniform_disk)
 from .scene import Emitter
 
 _PROFILE_SAMPLES = 4096
@@ -55,28 +56,26 @@ def _profile_table(base_cos_power: int, angle_deg: float, softness: float, focus
 
 
 def _shaped_directions(u1, u2, base_cos_power: int, e: Emitter) -> np.ndarray:
-    """Local directions about +z distributed as the shaped profile (by table inversion)."""
+    """Local directions (3, N) about +z distributed as the shaped profile (table inversion)."""
     theta_tab, cdf = _profile_table(base_cos_power, float(e.cone_angle), float(e.cone_softness),
                                     float(e.focus))
     theta = np.interp(u1, cdf, theta_tab)
-    phi = 2.0 * np.pi * u2
-    s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+    c, s = cos_sin(2.0 * np.pi * u2)
+    st = np.sin(theta)
+    return np.stack([st * c, st * s, np.cos(theta)])
 
 
-def _flip_to_minus_z(d: np.ndarray) -> np.ndarray:
-    """Map directions about +z to directions about -z (the UsdLux emission axis)."""
-    return d * np.array([1.0, -1.0, -1.0])
+_MINUS_Z = np.array([[1.0], [-1.0], [-1.0]])
 
 
 def emit(e: Emitter, key: np.uint64, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Start points (N,3, world m) and unit directions (N,3, world) of photons ``index``.
+    """Start points (3, N; world m) and unit directions (3, N; world) of photons ``index``.
 
     Uses the random dimensions of bounce 0, so photon i of an emitter always starts the same.
     """
     u1, u2, u3, u4 = rng.uniforms(key, index, 0, 4)
     m = np.asarray(e.to_world, dtype=np.float64)
-    lin, t = m[:3, :3], m[:3, 3]
+    lin, t = m[:3, :3], m[:3, 3:4]
     normal_map = np.linalg.inv(lin).T
     n = index.shape[0]
 
@@ -84,25 +83,26 @@ def emit(e: Emitter, key: np.uint64, index: np.ndarray) -> tuple[np.ndarray, np.
         if e.kind == "disk":
             p = uniform_disk(u1, u2, e.radius)
         else:
-            p = np.stack([(u1 - 0.5) * e.width, (u2 - 0.5) * e.height, np.zeros(n)], axis=1)
-        n_w = normalize((normal_map @ np.array([0.0, 0.0, -1.0]))[None, :].repeat(n, 0))
+            p = np.stack([(u1 - 0.5) * e.width, (u2 - 0.5) * e.height, np.zeros(n)])
+        axis = normal_map @ np.array([0.0, 0.0, -1.0])
+        n_w = np.repeat((axis / np.linalg.norm(axis))[:, None], n, axis=1)
         local = _shaped_directions(u3, u4, 1, e) if is_shaped(e) else cosine_hemisphere(u3, u4)
         d = to_world(local, n_w)
     elif e.kind == "sphere":
         if is_shaped(e):
-            w_local = _flip_to_minus_z(_shaped_directions(u1, u2, 0, e))
+            w_local = _shaped_directions(u1, u2, 0, e) * _MINUS_Z
         else:
             w_local = uniform_cone(u1, u2, -1.0)
         if e.treat_as_point:
-            p = np.zeros((n, 3))
+            p = np.zeros((3, n))
         else:
             p = e.radius * to_world(cosine_hemisphere(u3, u4), w_local)
-        d = normalize(w_local @ lin.T)
+        d = normalize(lin @ w_local)
     elif e.kind == "cylinder":
-        phi = 2.0 * np.pi * u2
-        nl = np.stack([np.zeros(n), np.cos(phi), np.sin(phi)], axis=1)
-        p = np.stack([(u1 - 0.5) * e.length, e.radius * nl[:, 1], e.radius * nl[:, 2]], axis=1)
-        d = to_world(cosine_hemisphere(u3, u4), normalize(nl @ normal_map.T))
+        c, s = cos_sin(2.0 * np.pi * u2)
+        p = np.stack([(u1 - 0.5) * e.length, e.radius * c, e.radius * s])
+        nl = np.stack([np.zeros(n), c, s])
+        d = to_world(cosine_hemisphere(u3, u4), normalize(normal_map @ nl))
     else:
         raise ValueError(f"{e.path}: unknown emitter kind {e.kind!r}")
-    return p @ lin.T + t, d
+    return lin @ p + t, d

@@ -18,8 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import cosine_hemisphere, orthonormal_basis, reflect, to_world
-from .scene import (ABSORBER, DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT, Material)
+from .sampling import cos_sin, cosine_about, cross, dot, orthonormal_basis, reflect
+from .scene import (ABSORBER, DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, SCATTERING_MODELS,
+                    TRANSLUCENT, Material)
+
+SCATTERING_CODES = range(len(SCATTERING_MODELS))
 
 
 @dataclass(frozen=True)
@@ -42,10 +45,6 @@ class MaterialTable:
                    alpha=np.maximum(f("roughness") ** 2, 1e-4))
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
-
-
 def fresnel_amplitudes(cos_i: np.ndarray, eta: np.ndarray):
     """Fresnel amplitude coefficients (r_s, r_p, t_s, t_p) and cos(theta_t).
 
@@ -55,10 +54,12 @@ def fresnel_amplitudes(cos_i: np.ndarray, eta: np.ndarray):
     sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
     tir = sin2_t >= 1.0
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
-    rs = np.where(tir, -1.0, (eta * cos_i - cos_t) / (eta * cos_i + cos_t))
-    rp = np.where(tir, 1.0, (cos_i - eta * cos_t) / (cos_i + eta * cos_t))
-    ts = np.where(tir, 0.0, 2.0 * eta * cos_i / (eta * cos_i + cos_t))
-    tp = np.where(tir, 0.0, 2.0 * eta * cos_i / (cos_i + eta * cos_t))
+    a = eta * cos_i
+    b = eta * cos_t
+    rs = np.where(tir, -1.0, (a - cos_t) / (a + cos_t))
+    rp = np.where(tir, 1.0, (cos_i - b) / (cos_i + b))
+    ts = np.where(tir, 0.0, 2.0 * a / (a + cos_t))
+    tp = np.where(tir, 0.0, 2.0 * a / (cos_i + b))
     return rs, rp, ts, tp, cos_t
 
 
@@ -69,29 +70,42 @@ def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _s_p_basis(d: np.ndarray, n: np.ndarray, pol: np.ndarray):
-    """The s direction of the plane of incidence of ``d`` on ``n`` and the s and p
+    """The s direction of the plane of incidence of ``d`` on ``n`` (3, N) and the s and p
     components (cos phi, sin phi) of the polarisation ``pol``. At normal incidence s is
     taken along ``pol`` (s and p behave alike there)."""
-    s = np.cross(d, n)
-    ls = np.linalg.norm(s, axis=1, keepdims=True)
+    s = cross(d, n)
+    ls = np.sqrt(dot(s, s))
     s = np.where(ls > 1e-12, s / np.maximum(ls, 1e-300), pol)
-    p = np.cross(s, d)
-    return s, _dot(pol, s), _dot(pol, p)
+    p = cross(s, d)
+    return s, dot(pol, s), dot(pol, p)
 
 
 def _polarise(s, c, sn, amp_s, amp_p, d_out, fallback):
     """Polarisation of an outgoing wave along ``d_out`` with s and p amplitudes."""
-    p_out = np.cross(s, d_out)
-    e = (amp_s * c)[:, None] * s + (amp_p * sn)[:, None] * p_out
-    le = np.linalg.norm(e, axis=1, keepdims=True)
+    e = (amp_s * c) * s + (amp_p * sn) * cross(s, d_out)
+    le = np.sqrt(dot(e, e))
     return np.where(le > 1e-12, e / np.maximum(le, 1e-300), fallback)
 
 
+#: Marks an unpolarised photon in a polarisation array (NaN in the first component).
+UNPOLARISED = np.nan
+
+
+def _polarisation(pol: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``pol`` with unpolarised photons given a random linear polarisation (drawn from
+    ``u``): drawing it only where a surface depends on it keeps diffuse paths cheap."""
+    need = np.isnan(pol[0])
+    if need.any():
+        pol = pol.copy()
+        pol[:, need] = random_polarisation(d[:, need], u[need])
+    return pol
+
+
 def random_polarisation(d: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Unpolarised light: a uniformly random unit direction across each ``d`` (N,3)."""
+    """Unpolarised light: a uniformly random unit direction across each ``d`` (3, N)."""
     t, b = orthonormal_basis(d)
-    phi = np.pi * u
-    return np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * b
+    c, s = cos_sin(np.pi * u)
+    return c * t + s * b
 
 
 def smith_g1(cos_theta: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -102,96 +116,112 @@ def smith_g1(cos_theta: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 
 
 def sample_ggx_vndf(wi: np.ndarray, alpha: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
-    """GGX microfacet normals (local frame, z up) distributed as the visible normals seen
-    from ``wi`` (Heitz 2018, "Sampling the GGX distribution of visible normals")."""
-    a = alpha[:, None]
-    vh = wi * np.concatenate([a, a, np.ones_like(a)], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
-    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
-    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.maximum(lensq, 1e-300)), 0.0)
-    t1 = np.stack([np.where(lensq > 0, -vh[:, 1] * inv, 1.0),
-                   np.where(lensq > 0, vh[:, 0] * inv, 0.0), np.zeros_like(lensq)], axis=1)
-    t2 = np.cross(vh, t1)
+    """GGX microfacet normals (local frame, z up, (3, N)) distributed as the visible normals
+    seen from ``wi`` (Heitz 2018, "Sampling the GGX distribution of visible normals")."""
+    vh = np.stack([alpha * wi[0], alpha * wi[1], wi[2]])
+    vh /= np.sqrt(dot(vh, vh))
+    lensq = vh[0] * vh[0] + vh[1] * vh[1]
+    ok = lensq > 0
+    inv = np.where(ok, 1.0 / np.sqrt(np.maximum(lensq, 1e-300)), 0.0)
+    t1 = np.stack([np.where(ok, -vh[1] * inv, 1.0), np.where(ok, vh[0] * inv, 0.0),
+                   np.zeros_like(lensq)])
+    t2 = cross(vh, t1)
     r = np.sqrt(u1)
-    phi = 2.0 * np.pi * u2
-    p1 = r * np.cos(phi)
-    s = 0.5 * (1.0 + vh[:, 2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * r * np.sin(phi)
+    c, s_ = cos_sin(2.0 * np.pi * u2)
+    p1 = r * c
+    s = 0.5 * (1.0 + vh[2])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * r * s_
     p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-    nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
-    ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
+    nh = p1 * t1 + p2 * t2 + p3 * vh
+    ne = np.stack([alpha * nh[0], alpha * nh[1], np.maximum(nh[2], 1e-12)])
+    return ne / np.sqrt(dot(ne, ne))
+
+
+def kind_runs(kind: np.ndarray) -> list[tuple[int, int, int]]:
+    """(model, start, stop) runs of an array of scattering-model codes sorted ascending."""
+    counts = np.bincount(kind, minlength=len(SCATTERING_CODES))
+    ends = np.cumsum(counts)
+    return [(k, int(ends[k] - counts[k]), int(ends[k])) for k in np.flatnonzero(counts)]
 
 
 def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray,
-            u: list[np.ndarray], pol: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """New directions (N,3), survival flags (N,) and polarisations (N,3) of photons arriving
-    along ``d`` with polarisation ``pol`` at surfaces with unit geometric normals ``ng`` and
-    material numbers ``mat``. ``u`` holds four uniform arrays (this bounce's dimensions).
+            u: list[np.ndarray], pol: np.ndarray,
+            runs: list[tuple[int, int, int]] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """New directions (3, N), survival flags (N,) and polarisations (3, N) of photons
+    arriving along ``d`` with polarisation ``pol`` at surfaces with unit geometric normals
+    ``ng`` and material numbers ``mat``. ``u`` holds four uniform arrays (this bounce's).
+
+    ``runs`` (from :func:`kind_runs`) says the photons are already grouped by scattering
+    model, as the tracer arranges, so every model works on slices; without it they are
+    grouped here and put back in their order afterwards.
     """
-    n = d.shape[0]
-    cos_d = _dot(d, ng)
+    if runs is None:
+        kind = np.take(table.kind, mat)
+        order = np.argsort(kind, kind="stable")
+        if np.any(order != np.arange(order.size)):
+            take = lambda a: np.take(a, order, axis=-1)  # noqa: E731
+            o, a, p = scatter(table, take(mat), take(d), take(ng), [take(x) for x in u],
+                              take(pol), kind_runs(take(kind)))
+            inv = np.empty_like(order)
+            inv[order] = np.arange(order.size)
+            return np.take(o, inv, axis=1), np.take(a, inv), np.take(p, inv, axis=1)
+        runs = kind_runs(kind)
+    cos_d = dot(d, ng)
     front = cos_d < 0.0
-    nf = np.where(front[:, None], ng, -ng)  # normal on the side the photon comes from
-    kind = table.kind[mat]
+    nf = ng * np.where(front, 1.0, -1.0)  # normal on the side the photon comes from
+    if len(runs) == 1:
+        return _scatter_kind(table, runs[0][0], mat, d, nf, ng, cos_d, front, u, pol)
     out = np.empty_like(d)
     pol_out = np.empty_like(d)
-    alive = np.zeros(n, dtype=bool)
-    u0, u1, u2, u3 = u
-
-    for k in np.unique(kind):
-        s = np.nonzero(kind == k)[0]
-        m = mat[s]
-        if k == DIFFUSE:
-            alive[s] = u0[s] < table.reflectance[m]
-            out[s] = to_world(cosine_hemisphere(u1[s], u2[s]), nf[s])
-            pol_out[s] = random_polarisation(out[s], u3[s])
-        elif k == TRANSLUCENT:
-            r = table.reflectance[m]
-            refl = u0[s] < r
-            alive[s] = u0[s] < r + table.transmittance[m]
-            side = np.where(refl, 1.0, -1.0)[:, None]
-            out[s] = to_world(cosine_hemisphere(u1[s], u2[s]), nf[s] * side)
-            pol_out[s] = random_polarisation(out[s], u3[s])
-        elif k == MIRROR:
-            alive[s] = u0[s] < table.specular[m]
-            out[s] = reflect(d[s], ng[s])
-            pol_out[s] = _metal_polarisation(d[s], ng[s], pol[s], out[s])
-        elif k == GLOSSY:
-            t, b = orthonormal_basis(nf[s])
-            wi_w = -d[s]
-            wi = np.stack([_dot(wi_w, t), _dot(wi_w, b), _dot(wi_w, nf[s])], axis=1)
-            wi[:, 2] = np.maximum(wi[:, 2], 1e-9)
-            alpha = table.alpha[m]
-            h = sample_ggx_vndf(wi, alpha, u1[s], u2[s])
-            wo = 2.0 * _dot(wi, h)[:, None] * h - wi
-            survive = table.specular[m] * smith_g1(wo[:, 2], alpha)
-            alive[s] = (u0[s] < survive) & (wo[:, 2] > 0.0)
-            out[s] = wo[:, 0:1] * t + wo[:, 1:2] * b + wo[:, 2:3] * nf[s]
-            hw = h[:, 0:1] * t + h[:, 1:2] * b + h[:, 2:3] * nf[s]
-            pol_out[s] = _metal_polarisation(d[s], hw, pol[s], out[s])
-        elif k == DIELECTRIC:
-            ior = table.ior[m]
-            eta = np.where(front[s], 1.0 / ior, ior)
-            ds, ns = d[s], nf[s]
-            cos_i = np.abs(cos_d[s])
-            rs, rp, ts, tp, cos_t = fresnel_amplitudes(cos_i, eta)
-            sv, c, sn = _s_p_basis(ds, ns, pol[s])
-            refl = u0[s] < rs * rs * c * c + rp * rp * sn * sn
-            d_r = reflect(ds, ns)
-            d_t = eta[:, None] * ds + (eta * cos_i - cos_t)[:, None] * ns
-            out[s] = np.where(refl[:, None], d_r, d_t)
-            amp_s = np.where(refl, rs, ts)
-            amp_p = np.where(refl, rp, tp)
-            pol_out[s] = _polarise(sv, c, sn, amp_s, amp_p, out[s], pol[s])
-            alive[s] = True
-        elif k == ABSORBER:
-            alive[s] = False
-            out[s] = d[s]
-            pol_out[s] = pol[s]
-        else:  # pragma: no cover - the reader validates the tokens
-            raise ValueError(f"unknown scattering model {k}")
+    alive = np.empty(d.shape[1], dtype=bool)
+    for k, a, b in runs:
+        out[:, a:b], alive[a:b], pol_out[:, a:b] = _scatter_kind(
+            table, k, mat[a:b], d[:, a:b], nf[:, a:b], ng[:, a:b], cos_d[a:b], front[a:b],
+            [x[a:b] for x in u], pol[:, a:b])
     return out, alive, pol_out
+
+
+def _scatter_kind(table, k, m, d, nf, ng, cos_d, front, u, pol):
+    """:func:`scatter` for photons that all hit surfaces of scattering model ``k``."""
+    u0, u1, u2, u3 = u
+    if k == DIFFUSE:
+        return (cosine_about(nf, u1, u2), u0 < np.take(table.reflectance, m),
+                np.full_like(d, UNPOLARISED))
+    if k == TRANSLUCENT:
+        r = np.take(table.reflectance, m)
+        side = np.where(u0 < r, 1.0, -1.0)
+        return (cosine_about(nf * side, u1, u2), u0 < r + np.take(table.transmittance, m),
+                np.full_like(d, UNPOLARISED))
+    if k == MIRROR:
+        out = reflect(d, ng)
+        pol = _metal_polarisation(d, ng, _polarisation(pol, d, u3), out)
+        return out, u0 < np.take(table.specular, m), pol
+    if k == GLOSSY:
+        t, b = orthonormal_basis(nf)
+        wi = np.stack([-dot(d, t), -dot(d, b), np.maximum(-dot(d, nf), 1e-9)])
+        alpha = np.take(table.alpha, m)
+        h = sample_ggx_vndf(wi, alpha, u1, u2)
+        wo = (2.0 * dot(wi, h)) * h - wi
+        survive = np.take(table.specular, m) * smith_g1(wo[2], alpha)
+        out = wo[0] * t + wo[1] * b + wo[2] * nf
+        hw = h[0] * t + h[1] * b + h[2] * nf
+        pol = _metal_polarisation(d, hw, _polarisation(pol, d, u3), out)
+        return out, (u0 < survive) & (wo[2] > 0.0), pol
+    if k == DIELECTRIC:
+        ior = np.take(table.ior, m)
+        eta = np.where(front, 1.0 / ior, ior)
+        cos_i = np.abs(cos_d)
+        rs, rp, ts, tp, cos_t = fresnel_amplitudes(cos_i, eta)
+        pin = _polarisation(pol, d, u3)
+        sv, c, sn = _s_p_basis(d, nf, pin)
+        refl = u0 < rs * rs * c * c + rp * rp * sn * sn
+        d_t = eta * d + (eta * cos_i - cos_t) * nf
+        out = np.where(refl, reflect(d, nf), d_t)
+        pol = _polarise(sv, c, sn, np.where(refl, rs, ts), np.where(refl, rp, tp), out, pin)
+        return out, np.ones(d.shape[1], dtype=bool), pol
+    if k == ABSORBER:
+        return d, np.zeros(d.shape[1], dtype=bool), pol
+    raise ValueError(f"unknown scattering model {k}")  # pragma: no cover - validated on read
 
 
 def _metal_polarisation(d, n, pol, d_out):

@@ -18,9 +18,6 @@ _INV32 = 1.0 / 4294967296.0
 
 #: Random dimensions each bounce may use (pairs of 32-bit uniforms per hash).
 DIMS_PER_BOUNCE = 4
-#: Counter of the emitted photon's polarisation (emission uses counters 0..3; the first
-#: scattering event starts at DIMS_PER_BOUNCE, whose hashes start one above it).
-EMISSION_POLARISATION = 2
 
 
 def fmix64(k: np.ndarray) -> np.ndarray:
@@ -39,14 +36,22 @@ def stream_key(seed: int, emitter_key: int) -> np.uint64:
     return fmix64(fmix64(a) ^ b)[0]
 
 
+def photon_hash(key: np.uint64, index: np.ndarray) -> np.ndarray:
+    """The per-photon 64-bit hash every draw of photons ``index`` (int64, (N,)) starts from."""
+    return fmix64(index.astype(np.uint64, copy=False) ^ key)
+
+
 def uniforms(key: np.uint64, index: np.ndarray, counter: int, count: int = 2) -> list[np.ndarray]:
     """``count`` arrays of uniform doubles in [0, 1) for photons ``index`` (int64, (N,)).
 
     ``counter`` identifies the draw along the path (bounce * DIMS_PER_BOUNCE + dimension);
     each hash gives two independent 32-bit numbers.
     """
-    idx = index.astype(np.uint64, copy=False)
-    base = fmix64(idx ^ key)
+    return uniforms_from(photon_hash(key, index), counter, count)
+
+
+def uniforms_from(base: np.ndarray, counter: int, count: int = 2) -> list[np.ndarray]:
+    """:func:`uniforms` from the photons' :func:`photon_hash` values (kept along the path)."""
     out: list[np.ndarray] = []
     for j in range((count + 1) // 2):
         c = np.uint64(((counter + j + 1) * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF)

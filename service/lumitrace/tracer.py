@@ -20,7 +20,8 @@ import numpy as np
 from . import rng
 from .cubemap import texel_index
 from .emission import emit
-from .materials import MaterialTable, random_polarisation, scatter
+from .materials import UNPOLARISED, MaterialTable, kind_runs, scatter
+from .sampling import cross, dot
 from .scene import Emitter, Scene
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
@@ -31,7 +32,10 @@ MAX_DEPTH = 512
 
 @dataclass
 class PreparedScene:
-    """Scene arrays in the normalised frame plus the Embree scene built from them."""
+    """Scene arrays in the normalised frame plus the Embree scene built from them.
+
+    Triangle corners ``v0``, edges ``e1``, ``e2`` and unit normals are (3, T) arrays.
+    """
 
     scene: Scene
     center: np.ndarray
@@ -41,12 +45,13 @@ class PreparedScene:
     e2: np.ndarray
     normals: np.ndarray
     material_index: np.ndarray
+    triangle_kind: np.ndarray
     table: MaterialTable | None
     embree: object = field(default=None, repr=False)
 
     @property
     def triangle_count(self) -> int:
-        return int(self.v0.shape[0])
+        return int(self.v0.shape[1])
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> dict:
         """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``u``, ``v``."""
@@ -74,14 +79,15 @@ def prepare(scene: Scene) -> PreparedScene:
     center = 0.5 * (lo + hi)
     scale = float(max(0.5 * (hi - lo).max(), 1e-12))
     tri = (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
-    v0 = tri[:, 0]
-    e1 = tri[:, 1] - v0
-    e2 = tri[:, 2] - v0
-    nrm = np.cross(e1, e2)
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    v0 = np.ascontiguousarray(tri[:, 0].T)
+    e1 = np.ascontiguousarray(tri[:, 1].T) - v0
+    e2 = np.ascontiguousarray(tri[:, 2].T) - v0
+    nrm = cross(e1, e2)
+    length = np.sqrt(dot(nrm, nrm))
     normals = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
     embree = None
     table = None
+    kind = np.zeros(tri.shape[0], np.int8)
     if tri.shape[0]:
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
@@ -89,8 +95,9 @@ def prepare(scene: Scene) -> PreparedScene:
         embree = rtcore_scene.EmbreeScene(robust=True)
         TriangleMesh(embree, np.ascontiguousarray(tri, dtype=np.float32))
         table = MaterialTable.from_materials(scene.materials)
+        kind = np.take(table.kind, np.asarray(scene.material_index))
     return PreparedScene(scene=scene, center=center, scale=scale, v0=v0, e1=e1, e2=e2,
-                         normals=normals, material_index=np.asarray(scene.material_index),
+                         normals=normals, material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          table=table, embree=embree)
 
 
@@ -122,44 +129,53 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     e: Emitter = ps.scene.emitters[emitter_number]
     key = rng.stream_key(seed, e.key)
     idx = np.arange(start, start + count, dtype=np.int64)
+    base = rng.photon_hash(key, idx)
     p, d = emit(e, key, idx)
-    pol = random_polarisation(d, rng.uniforms(key, idx, rng.EMISSION_POLARISATION, 1)[0])
-    o = (p - ps.center) / ps.scale + RAY_EPSILON * d
+    o = (p - ps.center[:, None]) / ps.scale + RAY_EPSILON * d
+    pol = np.full_like(d, UNPOLARISED)  # drawn at the first surface that depends on it
     ntex = 6 * resolution * resolution
     tally = BatchTally(emitter_number, start, count, np.zeros(ntex, np.int64),
                        rays=[] if record_rays else None)
 
     for depth in range(max_depth + 1):
-        if idx.size == 0:
+        if base.size == 0:
             break
-        o32 = o.astype(np.float32)
-        d32 = d.astype(np.float32)
+        o32 = np.ascontiguousarray(o.T, dtype=np.float32)
+        d32 = np.ascontiguousarray(d.T, dtype=np.float32)
         if record_rays:
             tally.rays.append((o32, d32))
         hit = ps.intersect(o32, d32)
-        tally.segments += idx.size
+        tally.segments += base.size
         prim = hit["primID"]
         miss = prim < 0
         if miss.any():
-            tally.counts += np.bincount(texel_index(d[miss], resolution), minlength=ntex)
-        h = np.nonzero(~miss)[0]
+            tally.counts += np.bincount(texel_index(np.compress(miss, d, axis=1).T, resolution),
+                                        minlength=ntex)
+        h = np.flatnonzero(~miss)
         if h.size == 0:
-            idx = idx[:0]
             break
         if depth == max_depth:
             tally.cut += int(h.size)
             break
-        prim = prim[h]
-        idx, d, pol = idx[h], d[h], pol[h]
-        u = hit["u"][h].astype(np.float64)[:, None]
-        v = hit["v"][h].astype(np.float64)[:, None]
-        p = ps.v0[prim] + u * ps.e1[prim] + v * ps.e2[prim]
-        ng = ps.normals[prim]
-        rnd = rng.uniforms(key, idx, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
-        d, alive, pol = scatter(ps.table, ps.material_index[prim], d, ng, rnd, pol)
-        tally.absorbed += int(idx.size - np.count_nonzero(alive))
-        keep = np.nonzero(alive)[0]
-        idx, d, p, ng, pol = idx[keep], d[keep], p[keep], ng[keep], pol[keep]
-        side = np.sign(np.einsum("ij,ij->i", d, ng))
-        o = p + (RAY_EPSILON * side)[:, None] * ng
+        prim = np.take(prim, h)
+        kind = np.take(ps.triangle_kind, prim)
+        runs = kind_runs(kind)
+        if len(runs) > 1:  # group the wave by scattering model: slices, not gathers
+            order = np.argsort(kind, kind="stable")
+            h, prim = np.take(h, order), np.take(prim, order)
+            runs = kind_runs(np.take(kind, order))
+        base, d, pol = np.take(base, h), np.take(d, h, axis=1), np.take(pol, h, axis=1)
+        u = np.take(hit["u"], h).astype(np.float64)
+        v = np.take(hit["v"], h).astype(np.float64)
+        p = np.take(ps.v0, prim, axis=1) + u * np.take(ps.e1, prim, axis=1) \
+            + v * np.take(ps.e2, prim, axis=1)
+        ng = np.take(ps.normals, prim, axis=1)
+        rnd = rng.uniforms_from(base, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
+        d, alive, pol = scatter(ps.table, np.take(ps.material_index, prim), d, ng, rnd, pol, runs)
+        n_alive = int(np.count_nonzero(alive))
+        tally.absorbed += int(base.size - n_alive)
+        if n_alive < base.size:
+            base = np.compress(alive, base)
+            d, p, ng, pol = (np.compress(alive, a, axis=1) for a in (d, p, ng, pol))
+        o = p + (RAY_EPSILON * np.sign(dot(d, ng))) * ng
     return tally
