@@ -19,7 +19,7 @@ DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
 
 def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
                   threads: int | None = None, resolution: int = 64,
-                  batch_size: int = 1 << 16) -> dict:
+                  batch_size: int = 1 << 17) -> dict:
     """Trace ``stage`` for about ``seconds``, replay its rays through bare Embree; rates."""
     from .stage.reader import read_stage
 

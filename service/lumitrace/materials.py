@@ -151,6 +151,8 @@ def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray
     arriving along ``d`` with polarisation ``pol`` at surfaces with unit geometric normals
     ``ng`` and material numbers ``mat``. ``u`` holds four uniform arrays (this bounce's).
 
+    ``pol`` may be None where the scene has no dielectric, the one model whose response
+    depends on polarisation: then nothing is spent on tracking it.
     ``runs`` (from :func:`kind_runs`) says the photons are already grouped by scattering
     model, as the tracer arranges, so every model works on slices; without it they are
     grouped here and put back in their order afterwards.
@@ -161,10 +163,11 @@ def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray
         if np.any(order != np.arange(order.size)):
             take = lambda a: np.take(a, order, axis=-1)  # noqa: E731
             o, a, p = scatter(table, take(mat), take(d), take(ng), [take(x) for x in u],
-                              take(pol), kind_runs(take(kind)))
+                              None if pol is None else take(pol), kind_runs(take(kind)))
             inv = np.empty_like(order)
             inv[order] = np.arange(order.size)
-            return np.take(o, inv, axis=1), np.take(a, inv), np.take(p, inv, axis=1)
+            return (np.take(o, inv, axis=1), np.take(a, inv),
+                    None if p is None else np.take(p, inv, axis=1))
         runs = kind_runs(kind)
     cos_d = dot(d, ng)
     front = cos_d < 0.0
@@ -172,29 +175,33 @@ def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray
     if len(runs) == 1:
         return _scatter_kind(table, runs[0][0], mat, d, nf, ng, cos_d, front, u, pol)
     out = np.empty_like(d)
-    pol_out = np.empty_like(d)
+    pol_out = None if pol is None else np.empty_like(d)
     alive = np.empty(d.shape[1], dtype=bool)
     for k, a, b in runs:
-        out[:, a:b], alive[a:b], pol_out[:, a:b] = _scatter_kind(
-            table, k, mat[a:b], d[:, a:b], nf[:, a:b], ng[:, a:b], cos_d[a:b], front[a:b],
-            [x[a:b] for x in u], pol[:, a:b])
+        o, al, p = _scatter_kind(table, k, mat[a:b], d[:, a:b], nf[:, a:b], ng[:, a:b],
+                                 cos_d[a:b], front[a:b], [x[a:b] for x in u],
+                                 None if pol is None else pol[:, a:b])
+        out[:, a:b], alive[a:b] = o, al
+        if pol is not None:
+            pol_out[:, a:b] = p
     return out, alive, pol_out
 
 
 def _scatter_kind(table, k, m, d, nf, ng, cos_d, front, u, pol):
     """:func:`scatter` for photons that all hit surfaces of scattering model ``k``."""
     u0, u1, u2, u3 = u
+    unpolarised = None if pol is None else np.full_like(d, UNPOLARISED)
     if k == DIFFUSE:
-        return (cosine_about(nf, u1, u2), u0 < np.take(table.reflectance, m),
-                np.full_like(d, UNPOLARISED))
+        return cosine_about(nf, u1, u2), u0 < np.take(table.reflectance, m), unpolarised
     if k == TRANSLUCENT:
         r = np.take(table.reflectance, m)
         side = np.where(u0 < r, 1.0, -1.0)
         return (cosine_about(nf * side, u1, u2), u0 < r + np.take(table.transmittance, m),
-                np.full_like(d, UNPOLARISED))
+                unpolarised)
     if k == MIRROR:
         out = reflect(d, ng)
-        pol = _metal_polarisation(d, ng, _polarisation(pol, d, u3), out)
+        if pol is not None:
+            pol = _metal_polarisation(d, ng, _polarisation(pol, d, u3), out)
         return out, u0 < np.take(table.specular, m), pol
     if k == GLOSSY:
         t, b = orthonormal_basis(nf)
@@ -204,15 +211,16 @@ def _scatter_kind(table, k, m, d, nf, ng, cos_d, front, u, pol):
         wo = (2.0 * dot(wi, h)) * h - wi
         survive = np.take(table.specular, m) * smith_g1(wo[2], alpha)
         out = wo[0] * t + wo[1] * b + wo[2] * nf
-        hw = h[0] * t + h[1] * b + h[2] * nf
-        pol = _metal_polarisation(d, hw, _polarisation(pol, d, u3), out)
+        if pol is not None:
+            hw = h[0] * t + h[1] * b + h[2] * nf
+            pol = _metal_polarisation(d, hw, _polarisation(pol, d, u3), out)
         return out, (u0 < survive) & (wo[2] > 0.0), pol
     if k == DIELECTRIC:
         ior = np.take(table.ior, m)
         eta = np.where(front, 1.0 / ior, ior)
         cos_i = np.abs(cos_d)
         rs, rp, ts, tp, cos_t = fresnel_amplitudes(cos_i, eta)
-        pin = _polarisation(pol, d, u3)
+        pin = _polarisation(np.full_like(d, UNPOLARISED) if pol is None else pol, d, u3)
         sv, c, sn = _s_p_basis(d, nf, pin)
         refl = u0 < rs * rs * c * c + rp * rp * sn * sn
         d_t = eta * d + (eta * cos_i - cos_t) * nf

@@ -35,7 +35,7 @@ class TraceSettings:
     threshold: float = 0.0
     seed: int = 0
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
-    batch_size: int = 1 << 16
+    batch_size: int = 1 << 17
     max_depth: int = MAX_DEPTH
 
     def budget(self) -> int | None:

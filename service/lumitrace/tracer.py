@@ -22,7 +22,7 @@ from .cubemap import texel_index
 from .emission import emit
 from .materials import UNPOLARISED, MaterialTable, kind_runs, scatter
 from .sampling import cross, dot
-from .scene import Emitter, Scene
+from .scene import DIELECTRIC, Emitter, Scene
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
 RAY_EPSILON = 1e-5
@@ -34,31 +34,28 @@ MAX_DEPTH = 512
 class PreparedScene:
     """Scene arrays in the normalised frame plus the Embree scene built from them.
 
-    Triangle corners ``v0``, edges ``e1``, ``e2`` and unit normals are (3, T) arrays.
+    Unit triangle normals (front = counter-clockwise) are a (3, T) array.
     """
 
     scene: Scene
     center: np.ndarray
     scale: float
-    v0: np.ndarray
-    e1: np.ndarray
-    e2: np.ndarray
     normals: np.ndarray
     material_index: np.ndarray
     triangle_kind: np.ndarray
+    polarised: bool
     table: MaterialTable | None
     embree: object = field(default=None, repr=False)
 
     @property
     def triangle_count(self) -> int:
-        return int(self.v0.shape[1])
+        return int(self.normals.shape[1])
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> dict:
-        """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``u``, ``v``."""
+        """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``tfar``."""
         if self.embree is None:
             n = origins.shape[0]
-            return {"primID": np.full(n, -1, np.int32), "u": np.zeros(n, np.float32),
-                    "v": np.zeros(n, np.float32)}
+            return {"primID": np.full(n, -1, np.int32), "tfar": np.full(n, np.inf, np.float32)}
         return self.embree.run(origins, directions, output=1)
 
 
@@ -96,8 +93,9 @@ def prepare(scene: Scene) -> PreparedScene:
         TriangleMesh(embree, np.ascontiguousarray(tri, dtype=np.float32))
         table = MaterialTable.from_materials(scene.materials)
         kind = np.take(table.kind, np.asarray(scene.material_index))
-    return PreparedScene(scene=scene, center=center, scale=scale, v0=v0, e1=e1, e2=e2,
+    return PreparedScene(scene=scene, center=center, scale=scale,
                          normals=normals, material_index=np.asarray(scene.material_index), triangle_kind=kind,
+                         polarised=bool(np.any(kind == DIELECTRIC)),
                          table=table, embree=embree)
 
 
@@ -132,7 +130,8 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     base = rng.photon_hash(key, idx)
     p, d = emit(e, key, idx)
     o = (p - ps.center[:, None]) / ps.scale + RAY_EPSILON * d
-    pol = np.full_like(d, UNPOLARISED)  # drawn at the first surface that depends on it
+    # polarisation matters only where a dielectric can see it; drawn at first need
+    pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
     tally = BatchTally(emitter_number, start, count, np.zeros(ntex, np.int64),
                        rays=[] if record_rays else None)
@@ -164,11 +163,10 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
             order = np.argsort(kind, kind="stable")
             h, prim = np.take(h, order), np.take(prim, order)
             runs = kind_runs(np.take(kind, order))
-        base, d, pol = np.take(base, h), np.take(d, h, axis=1), np.take(pol, h, axis=1)
-        u = np.take(hit["u"], h).astype(np.float64)
-        v = np.take(hit["v"], h).astype(np.float64)
-        p = np.take(ps.v0, prim, axis=1) + u * np.take(ps.e1, prim, axis=1) \
-            + v * np.take(ps.e2, prim, axis=1)
+        base, o, d = np.take(base, h), np.take(o, h, axis=1), np.take(d, h, axis=1)
+        if pol is not None:
+            pol = np.take(pol, h, axis=1)
+        p = o + np.take(hit["tfar"], h).astype(np.float64) * d
         ng = np.take(ps.normals, prim, axis=1)
         rnd = rng.uniforms_from(base, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
         d, alive, pol = scatter(ps.table, np.take(ps.material_index, prim), d, ng, rnd, pol, runs)
@@ -176,6 +174,8 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
         tally.absorbed += int(base.size - n_alive)
         if n_alive < base.size:
             base = np.compress(alive, base)
-            d, p, ng, pol = (np.compress(alive, a, axis=1) for a in (d, p, ng, pol))
+            d, p, ng = (np.compress(alive, a, axis=1) for a in (d, p, ng))
+            if pol is not None:
+                pol = np.compress(alive, pol, axis=1)
         o = p + (RAY_EPSILON * np.sign(dot(d, ng))) * ng
     return tally
