@@ -25,7 +25,14 @@ from pathlib import Path
 from .scene import SCATTERING_MODELS
 
 #: Folder holding plugInfo.json and generatedSchema.usda (``schemas/`` of the source tree).
-SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schemas"
+def _schema_dir() -> Path:
+    """``schemas/`` of the source tree, or its copy inside an installed (wheel) package."""
+    here = Path(__file__).resolve().parent
+    packaged = here / "schemas"
+    return packaged if (packaged / "plugInfo.json").exists() else here.parents[1] / "schemas"
+
+
+SCHEMA_DIR = _schema_dir()
 
 #: API schema type names, as written in ``schemas/schema.usda``.
 MATERIAL_API = "LumitraceMaterialAPI"

@@ -1,0 +1,23 @@
+#!/bin/sh
+# Install lumitrace into ./.venv (created if missing). With --test, also the test
+# dependencies: the Python ones, and the OpenEXR C++ headers the cube-map tests compile
+# OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++).
+set -e
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+if [ "$1" = "--test" ]; then
+    .venv/bin/python -m pip install -q -e '.[test]'
+    if ! pkg-config --exists OpenEXR 2>/dev/null || ! command -v g++ >/dev/null 2>&1; then
+        if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+            echo "installing libopenexr-dev, pkg-config and g++ for the ImfEnvmap oracle tests"
+            apt-get update -qq >/dev/null
+            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libopenexr-dev pkg-config g++ >/dev/null
+        else
+            echo "note: install libopenexr-dev, pkg-config and g++ (or set LUMITRACE_SKIP_NATIVE=1)" >&2
+        fi
+    fi
+else
+    .venv/bin/python -m pip install -q -e .
+fi
