@@ -1,4 +1,47 @@
+"""Shared fixtures: the test helpers on sys.path and OpenEXR's own ImfEnvmap as an oracle."""
+import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+INSTALL_HINT = "apt-get install -y libopenexr-dev pkg-config g++"
+
+
+@pytest.fixture(scope="session")
+def imf_probe(tmp_path_factory):
+    """Compile tests/imf_envmap_probe.cpp against the system OpenEXR; return a runner."""
+    if os.environ.get("LUMITRACE_SKIP_NATIVE") == "1":
+        pytest.skip("LUMITRACE_SKIP_NATIVE=1: OpenEXR C++ oracle tests skipped")
+    missing = [tool for tool in ("g++", "pkg-config") if shutil.which(tool) is None]
+    if missing:
+        pytest.fail(f"{', '.join(missing)} not found: the ImfEnvmap oracle test needs "
+                    f"`{INSTALL_HINT}` (or set LUMITRACE_SKIP_NATIVE=1 to skip it)")
+    flags = subprocess.run(["pkg-config", "--cflags", "--libs", "OpenEXR"],
+                           capture_output=True, text=True)
+    if flags.returncode != 0:
+        pytest.fail("pkg-config finds no OpenEXR development files: run "
+                    f"`{INSTALL_HINT}` (or set LUMITRACE_SKIP_NATIVE=1 to skip): "
+                    + flags.stderr.strip())
+    exe = tmp_path_factory.mktemp("imf_probe") / "imf_envmap_probe"
+    build = subprocess.run(["g++", "-O1", "-std=c++14", "-o", str(exe),
+                            str(HERE / "imf_envmap_probe.cpp"), *flags.stdout.split()],
+                           capture_output=True, text=True)
+    if build.returncode != 0:
+        pytest.fail("cannot compile the ImfEnvmap probe (are the OpenEXR headers installed? "
+                    f"`{INSTALL_HINT}`, or set LUMITRACE_SKIP_NATIVE=1 to skip):\n"
+                    + build.stderr[-2000:])
+
+    def run(lines: list[str]) -> np.ndarray:
+        out = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True,
+                             text=True, check=True)
+        return np.array([[float(v) for v in line.split()] for line in out.stdout.splitlines()])
+
+    return run
+
+
