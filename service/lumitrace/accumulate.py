@@ -44,7 +44,7 @@ class Accumulator:
     def __init__(self, scene: Scene, resolution: int):
         self.resolution = int(resolution)
         ntex = 6 * self.resolution * self.resolution
-        self.emitters = [EmitterTally(e.path, e.flux, counts=np.zeros(ntex, np.int64))
+        self.emitters = [EmitterTally(e.path, e.flux, counts=np.zeros((2, ntex), np.int64))
                          for e in scene.emitters]
         self._solid_angles = texel_solid_angles(self.resolution)
 
@@ -68,17 +68,36 @@ class Accumulator:
     def shape(self) -> tuple[int, int]:
         return (6 * self.resolution, self.resolution)
 
-    def counts(self) -> np.ndarray:
-        """Photons that escaped into each texel, all emitters, (6R, R) int64."""
-        return sum(t.counts for t in self.emitters).reshape(self.shape)
+    def counts(self, half: int | None = None) -> np.ndarray:
+        """Photons that escaped into each texel, all emitters, (6R, R) int64; ``half`` 0 or
+        1 counts only that pseudo-random half of the photons."""
+        c = sum(t.counts for t in self.emitters)
+        return (c.sum(axis=0) if half is None else c[half]).reshape(self.shape)
 
-    def texel_flux(self) -> np.ndarray:
-        """Flux (lm) that left the luminaire through each texel's solid angle, (6R, R)."""
+    def texel_flux(self, half: int | None = None) -> np.ndarray:
+        """Flux (lm) that left the luminaire through each texel's solid angle, (6R, R).
+
+        With ``half`` (0 or 1): the estimate from that half of the photons alone (each
+        photon then carries twice its flux), an independent estimate of the same map.
+        """
         flux = np.zeros(self.shape[0] * self.shape[1])
         for t in self.emitters:
             if t.photons:
-                flux += t.counts * t.photon_flux
+                if half is None:
+                    flux += t.counts.sum(axis=0) * t.photon_flux
+                else:
+                    flux += t.counts[half] * (2.0 * t.photon_flux)
         return flux.reshape(self.shape)
+
+    def flux_variance(self) -> np.ndarray:
+        """Variance (lm^2) of each texel's flux estimate, (6R, R): photons are analog, so a
+        texel's count is binomial, var = sum over emitters of w^2 n (1 - n / N)."""
+        var = np.zeros(self.shape[0] * self.shape[1])
+        for t in self.emitters:
+            if t.photons:
+                n = t.counts.sum(axis=0).astype(np.float64)
+                var += t.photon_flux ** 2 * n * (1.0 - n / t.photons)
+        return var.reshape(self.shape)
 
     def intensity(self) -> np.ndarray:
         """Raw luminous intensity estimate (cd) per texel: texel flux / texel solid angle."""
@@ -98,15 +117,7 @@ class Accumulator:
         return out
 
     def relative_error(self) -> float:
-        """Flux-weighted relative standard error of the raw texel intensities.
+        """Estimated relative RMS error of the raw intensity map (see :mod:`convergence`)."""
+        from .convergence import raw_relative_error
 
-        Each texel's count is a Poisson-like variable, so its relative standard error is
-        1/sqrt(count); weighting by texel flux tells how uncertain the light that matters is.
-        """
-        counts = self.counts().ravel().astype(np.float64)
-        flux = self.texel_flux().ravel()
-        total = flux.sum()
-        if total <= 0:
-            return float("inf")
-        lit = counts > 0
-        return float((flux[lit] / np.sqrt(counts[lit])).sum() / total)
+        return raw_relative_error(self)

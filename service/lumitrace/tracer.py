@@ -101,7 +101,10 @@ def prepare(scene: Scene) -> PreparedScene:
 
 @dataclass
 class BatchTally:
-    """What one batch of photons did: escapes per texel and where the rest went."""
+    """What one batch of photons did: escapes per texel and where the rest went.
+
+    ``counts`` is (2, texels): escapes of the photons in each of two pseudo-random halves.
+    """
 
     emitter: int
     start: int
@@ -133,7 +136,7 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     # polarisation matters only where a dielectric can see it; drawn at first need
     pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
-    tally = BatchTally(emitter_number, start, count, np.zeros(ntex, np.int64),
+    tally = BatchTally(emitter_number, start, count, np.zeros((2, ntex), np.int64),
                        rays=[] if record_rays else None)
 
     for depth in range(max_depth + 1):
@@ -148,8 +151,11 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
         prim = hit["primID"]
         miss = prim < 0
         if miss.any():
-            tally.counts += np.bincount(texel_index(np.compress(miss, d, axis=1).T, resolution),
-                                        minlength=ntex)
+            # escapes per texel, in two halves split by the photon hash's lowest bit: two
+            # independent estimates of the same map, for the error estimate
+            half = (np.compress(miss, base) & np.uint64(1)).astype(np.int64)
+            texel = texel_index(np.compress(miss, d, axis=1).T, resolution)
+            tally.counts += np.bincount(texel + ntex * half, minlength=2 * ntex).reshape(2, ntex)
         h = np.flatnonzero(~miss)
         if h.size == 0:
             break

@@ -1,0 +1,99 @@
+"""How far a map is from the truth: measured against a reference, estimated without one.
+
+The error of a map is its relative RMS error over the sphere,
+``sqrt(sum(Omega (I - I_true)^2) / sum(Omega I_true^2))``: the solid-angle weighted L2
+distance, relative to the distribution's own size, so dark texels do not dominate it.
+
+Without a reference it is estimated from the photons themselves. Raw maps: every texel's
+count is binomial, so its variance is known. Filtered maps: the photons are split into two
+pseudo-random halves (by the photon hash), each half is filtered on its own, and their
+difference measures the filtered map's variance; its bias is what remains of the distance between one half's
+filtered map and the other half's raw map (independent of it) once both noises are taken out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .accumulate import Accumulator
+from .cubemap import texel_solid_angles
+from .filter import pull_push
+
+
+def norm2(image: np.ndarray, omega: np.ndarray) -> float:
+    """Solid-angle weighted squared L2 norm of a map (cd^2 sr)."""
+    return float((omega * image * image).sum())
+
+
+def relative_rms(image: np.ndarray, reference: np.ndarray, omega: np.ndarray | None = None) -> float:
+    """Relative RMS error of ``image`` against ``reference`` (both cd, (6R, R))."""
+    omega = texel_solid_angles(image.shape[1]) if omega is None else omega
+    ref = norm2(reference, omega)
+    return float(np.sqrt(norm2(image - reference, omega) / ref)) if ref > 0 else float("inf")
+
+
+def _raw_noise2(acc: Accumulator, omega: np.ndarray) -> float:
+    """Expected squared norm of the raw map's noise: sum of Var(I) Omega = Var(F) / Omega."""
+    return float((acc.flux_variance() / omega).sum())
+
+
+def raw_relative_error(acc: Accumulator) -> float:
+    """Estimated relative RMS error of the raw map, from binomial texel variances."""
+    omega = texel_solid_angles(acc.resolution)
+    raw = acc.intensity()
+    noise2 = _raw_noise2(acc, omega)
+    signal2 = norm2(raw, omega) - noise2  # E|I|^2 = |I_true|^2 + noise
+    if signal2 <= 0:
+        return float("inf")
+    return float(np.sqrt(noise2 / signal2))
+
+
+@dataclass(frozen=True)
+class MapEstimate:
+    """The raw and filtered maps of an accumulator and their estimated errors."""
+
+    raw: np.ndarray
+    filtered: np.ndarray
+    threshold: float
+    raw_error: float
+    filtered_error: float
+    filtered_variance_error: float
+    texel_error: np.ndarray
+
+    @property
+    def error(self) -> float:
+        """The estimated error of the map written as ``Y`` (filtered, or raw at threshold 0)."""
+        return self.filtered_error if self.threshold > 0 else self.raw_error
+
+
+def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
+    """Raw and pull-push filtered maps (cd) with their estimated relative RMS errors and the
+    filtered map's per-texel relative standard error."""
+    omega = texel_solid_angles(acc.resolution)
+    flux, counts = acc.texel_flux(), acc.counts()
+    raw = flux / omega
+    noise_raw2 = _raw_noise2(acc, omega)
+    raw_err = raw_relative_error(acc)
+    if threshold <= 0:
+        texel = np.sqrt(acc.flux_variance()) / np.maximum(flux, 1e-300)
+        return MapEstimate(raw, raw, threshold, raw_err, raw_err, raw_err,
+                           np.where(flux > 0, texel, np.inf))
+    filtered = pull_push(flux, counts, threshold, omega)
+    # each half holds half the photons: the same threshold in photons per estimate is half
+    halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold / 2.0, omega) for h in (0, 1)]
+    raw_halves = [acc.texel_flux(h) / omega for h in (0, 1)]
+    diff = halves[0] - halves[1]
+    var_f2 = norm2(diff, omega) / 4.0  # Var(f_a - f_b) = 2 Var(f_half) = 4 Var(f_all)
+    # bias: a half's filtered map against the other half's raw map, which is independent
+    # of it: E|f_a - r_b|^2 = |bias|^2 + Var(f_half) + Var(r_half), halves' variances twice
+    # the whole's
+    cross = 0.5 * sum(norm2(halves[i] - raw_halves[1 - i], omega) for i in (0, 1))
+    bias2 = max(0.0, cross - 2.0 * noise_raw2 - 2.0 * var_f2)
+    total2 = var_f2 + bias2
+    signal2 = max(norm2(filtered, omega) - var_f2, 1e-300)
+    # per texel: the split-half variance, smoothed by the same filter
+    local_var = pull_push(diff * diff / 4.0 * omega, counts, threshold, omega)
+    texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
+    return MapEstimate(raw, filtered, threshold, raw_err, float(np.sqrt(total2 / signal2)),
+                       float(np.sqrt(var_f2 / signal2)), np.where(filtered > 0, texel, np.inf))

@@ -1,0 +1,98 @@
+"""Pull-push filtering of a noisy cube-map intensity map.
+
+A photon map at low counts is mostly empty or noisy texels. Pull: photon counts and flux
+are summed into coarser and coarser cube maps, down to the whole sphere. Push: from the
+coarsest level back to the finest, each texel keeps its own intensity in proportion to its
+photon count and takes the rest from the coarser level, interpolated bilinearly at its
+direction: ``I = w I_own + (1 - w) I_coarse`` with ``w = min(1, c / threshold)``, where the
+confidence ``c`` is the larger of the texel's photon count and the count the coarser level
+predicts for it: a texel left empty where many photons were expected is dark, not unknown.
+Intensities (flux per solid angle), not fluxes, are blended, because texel solid angles
+differ across a face. The pixel positions of the ImfEnvmap layout reach the cube's edges,
+so bilinear lookups never cross a face and, with shared edge texels welded, the result is
+seamless. The total flux is restored exactly at the end, a threshold of 0 returns the raw
+map, and as counts grow every weight reaches 1: the filtered map converges to the raw one.
+Cost is linear in the number of texels.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cubemap import texel_directions, texel_index, texel_solid_angles, sample_map, weld_seams
+
+FOUR_PI = 4.0 * np.pi
+
+
+@dataclass(frozen=True)
+class _Level:
+    """One pyramid level: its face size and, for every texel of the finer level below it,
+    the index of the coarse texel its direction falls in."""
+
+    res: int
+    parent: np.ndarray
+    directions: np.ndarray
+
+
+@functools.lru_cache(maxsize=8)
+def _pyramid(res: int) -> tuple[_Level, ...]:
+    """Face sizes res, ~res/2, ..., 2 and the fine-to-coarse texel maps between them."""
+    levels = []
+    fine = res
+    while fine > 2:
+        coarse = max(2, (fine + 1) // 2)
+        d = texel_directions(fine).reshape(-1, 3)
+        levels.append(_Level(res=coarse, parent=texel_index(d, coarse), directions=d))
+        fine = coarse
+    levels.append(_Level(res=fine, parent=np.zeros(6 * fine * fine, np.int64),
+                         directions=texel_directions(fine).reshape(-1, 3)))
+    return tuple(levels)
+
+
+def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
+              solid_angles: np.ndarray | None = None) -> np.ndarray:
+    """Filtered intensity (cd), (6R, R), from texel fluxes (lm) and photon counts.
+
+    ``threshold`` is the photon count from which a texel trusts its own estimate fully.
+    """
+    shape = flux.shape
+    res = shape[1]
+    omega = texel_solid_angles(res) if solid_angles is None else solid_angles
+    total = float(flux.sum())
+    raw = flux / omega
+    if threshold <= 0 or total <= 0:
+        return raw
+
+    # pull: flux, counts and solid angle of every level, finest first
+    f, n, w = [flux.ravel()], [counts.ravel().astype(np.float64)], [omega.ravel()]
+    levels = _pyramid(res)
+    for lv in levels[:-1]:
+        size = 6 * lv.res * lv.res
+        f.append(np.bincount(lv.parent, weights=f[-1], minlength=size))
+        n.append(np.bincount(lv.parent, weights=n[-1], minlength=size))
+        w.append(np.bincount(lv.parent, weights=w[-1], minlength=size))
+
+    photons_per_lumen = float(n[0].sum()) / total
+
+    # push: the whole sphere, then every level from coarse to fine
+    coarse = np.full(6 * levels[-1].res ** 2, total / FOUR_PI)
+    coarse_res = levels[-1].res
+    for depth in range(len(levels) - 1, -1, -1):
+        lv_res = res if depth == 0 else levels[depth - 1].res
+        dirs = levels[depth].directions
+        own = np.divide(f[depth], w[depth], out=np.zeros_like(f[depth]), where=w[depth] > 0)
+        below = sample_map(coarse.reshape(6 * coarse_res, coarse_res), dirs)
+        # confidence in the texel's own estimate: the photons it holds, or the photons the
+        # coarser level predicts for it; an empty texel where many were expected is dark
+        expected = below * w[depth] * photons_per_lumen
+        weight = np.minimum(1.0, np.maximum(n[depth], expected) / threshold)
+        value = weight * own + (1.0 - weight) * below
+        value = weld_seams(value.reshape(6 * lv_res, lv_res),
+                           w[depth].reshape(6 * lv_res, lv_res)).ravel()
+        coarse, coarse_res = value, lv_res
+
+    out = coarse.reshape(shape)
+    kept = float((out * omega).sum())
+    return out * (total / kept) if kept > 0 else out
