@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import LumitraceError
+from .session import DEFAULT_THRESHOLD
 
 
 def _positive_int(text: str) -> int:
@@ -49,8 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="stop at this flux-weighted relative standard error, e.g. 0.02")
     t.add_argument("--resolution", type=_positive_int, default=64,
                    help="cube-map face size in texels (default 64)")
-    t.add_argument("--threshold", type=_non_negative_float, default=0.0,
-                   help="filter photon-count threshold; 0 writes the raw estimate (default 0)")
+    t.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD,
+                   help="pull-push filter threshold: photons from which a texel trusts its own "
+                        f"estimate; 0 writes the raw estimate (default {DEFAULT_THRESHOLD:g})")
     t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     t.add_argument("--threads", type=_positive_int, default=None,
                    help="tracing threads (default: all cores); the map does not depend on it")
@@ -118,9 +120,7 @@ def cmd_trace(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    raw = result.accumulator.intensity()
-    filtered = raw  # the pull-push filter replaces this when threshold > 0
-    written = write_outputs(result, filtered, args.out, args.target_error)
+    written = write_outputs(result, args.out)
     fig = written["figures"]
     summary = {
         "stage": str(args.stage), "luminaire": scene.luminaire_path,
@@ -148,7 +148,9 @@ def cmd_trace(args) -> int:
         if fig.cut_lm:
             print(f"  cut (depth)     {fig.cut_lm:10.4f} lm")
         print(f"  peak intensity  {fig.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})")
-        print(f"  relative error  {fig.relative_error:.2%} (flux-weighted, per texel)")
+        est = result.estimate
+        print(f"  relative error  {fig.relative_error:.2%} estimated RMS over the sphere "
+              f"(raw map {est.raw_error:.2%}){', converged' if fig.converged else ''}")
         print(f"  intensity map   {written['intensity_map']}")
         print(f"  result layer    {written['result_layer']}")
     return 0

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .cubemap import texel_solid_angles
+from .cubemap import texel_directions
 from .session import TraceResult
 
 
@@ -53,28 +53,24 @@ def input_hash(result: TraceResult) -> str:
     return h.hexdigest()
 
 
-def figures(result: TraceResult, filtered: np.ndarray, target_error: float | None) -> ResultFigures:
-    """Summary figures of a result; ``filtered`` is the map the user sees (cd)."""
+def figures(result: TraceResult) -> ResultFigures:
+    """Summary figures of a result, from the map the user sees (``Y``, cd)."""
     acc = result.accumulator
     f = acc.fluxes()
-    from .cubemap import texel_directions
-
-    k = int(np.argmax(filtered))
+    shown = result.estimate.filtered
+    k = int(np.argmax(shown))
     peak_dir = texel_directions(acc.resolution).reshape(-1, 3)[k]
-    err = acc.relative_error()
     secs = max(result.seconds, 1e-9)
     return ResultFigures(
         photons=acc.photons, iterations=result.iterations, seconds=result.seconds,
         emitted_lm=f["emitted"], escaped_lm=f["escaped"], absorbed_lm=f["absorbed"],
         cut_lm=f["cut"], light_output_ratio=f["escaped"] / f["emitted"] if f["emitted"] else 0.0,
-        peak_cd=float(filtered.ravel()[k]), peak_direction=tuple(float(x) for x in peak_dir),
-        relative_error=err,
-        converged=bool(target_error is not None and err <= target_error),
+        peak_cd=float(shown.ravel()[k]), peak_direction=tuple(float(x) for x in peak_dir),
+        relative_error=result.relative_error, converged=result.converged,
         photons_per_second=acc.photons / secs, segments_per_second=acc.segments / secs)
 
 
-def write_outputs(result: TraceResult, filtered: np.ndarray, out_dir: str | os.PathLike | None,
-                  target_error: float | None = None) -> dict:
+def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dict:
     """Write the EXR and the result layer; return the paths and figures as a dict."""
     from .exr import write_intensity_exr
     from .stage.writer import write_result_layer
@@ -84,20 +80,27 @@ def write_outputs(result: TraceResult, filtered: np.ndarray, out_dir: str | os.P
     out = Path(out_dir) if out_dir is not None else stage_path.parent
     name = stage_name(stage_path)
     exr_path = out / f"{name}.intensity.exr"
-    fig = figures(result, filtered, target_error)
+    fig = figures(result)
+    est = result.estimate
     acc = result.accumulator
     digest = input_hash(result)
     meta = {
         "software": f"lumitrace {__version__}",
         "stage": stage_path.name,
         "luminaire": scene.luminaire_path,
-        "units": {"Y": "cd", "raw.Y": "cd", "count": "photons"},
+        "units": {"Y": "cd", "raw.Y": "cd", "count": "photons",
+                  "relativeError": "relative standard error of Y per texel"},
         "axes": f"stage axes, up {scene.up_axis}",
         "photons": fig.photons,
         "iterations": fig.iterations,
         "elapsedSeconds": fig.seconds,
         "relativeError": fig.relative_error,
+        "rawRelativeError": est.raw_error,
+        "filteredRelativeError": est.filtered_error,
+        "errorDefinition": "estimated relative RMS error of Y over the sphere: "
+                           "sqrt(sum(dOmega (Y - Y_true)^2) / sum(dOmega Y_true^2))",
         "converged": fig.converged,
+        "targetError": result.settings.target_error,
         "threshold": result.settings.threshold,
         "resolution": acc.resolution,
         "seed": result.settings.seed,
@@ -110,7 +113,8 @@ def write_outputs(result: TraceResult, filtered: np.ndarray, out_dir: str | os.P
         "emitters": [{"path": t.path, "flux": t.flux, "photons": t.photons}
                      for t in acc.emitters],
     }
-    channels = {"Y": filtered, "raw.Y": acc.intensity(), "count": acc.counts().astype(np.float64)}
+    channels = {"Y": est.filtered, "raw.Y": est.raw, "count": acc.counts().astype(np.float64),
+                "relativeError": np.minimum(est.texel_error, 1e30)}
     write_intensity_exr(exr_path, channels, meta)
     layer_dir = stage_path.parent
     layer_path = write_result_layer(stage_path, scene.luminaire_path, {
@@ -127,5 +131,4 @@ def write_outputs(result: TraceResult, filtered: np.ndarray, out_dir: str | os.P
         "converged": fig.converged,
         "inputHash": digest,
     })
-    return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig,
-            "solid_angle_check": float((filtered * texel_solid_angles(acc.resolution)).sum())}
+    return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig}

@@ -13,14 +13,19 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
-import numpy as np
-
 from .accumulate import Accumulator
+from .convergence import MapEstimate, estimate
 from .scene import Scene
 from .tracer import MAX_DEPTH, PreparedScene, prepare, trace_batch
 
 DEFAULT_PHOTONS = 2_000_000
 DEFAULT_RESOLUTION = 64
+#: Photon count from which a texel trusts its own estimate (pull-push threshold).
+DEFAULT_THRESHOLD = 32.0
+#: Error below which a result counts as converged when no target is given.
+DEFAULT_TARGET_ERROR = 0.02
+#: Photons in the first iteration; later iterations double up to a full round of batches.
+FIRST_ITERATION = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -32,7 +37,7 @@ class TraceSettings:
     seconds: float | None = None
     target_error: float | None = None
     resolution: int = DEFAULT_RESOLUTION
-    threshold: float = 0.0
+    threshold: float = DEFAULT_THRESHOLD
     seed: int = 0
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
     batch_size: int = 1 << 17
@@ -47,23 +52,29 @@ class TraceSettings:
 
 @dataclass
 class Progress:
-    """One iteration's state, passed to progress callbacks."""
+    """One iteration's state, passed to progress callbacks: the map estimate holds the raw
+    and filtered maps (cd) and their estimated errors."""
 
     iteration: int
     photons: int
     seconds: float
     relative_error: float
     budget: int | None
+    estimate: MapEstimate | None = None
+    accumulator: Accumulator | None = None
 
 
 @dataclass
 class TraceResult:
+    """The accumulated photons of a session and the maps estimated from them."""
+
     scene: Scene
     settings: TraceSettings
     accumulator: Accumulator
     iterations: int
     seconds: float
     prepare_seconds: float
+    estimate: MapEstimate
 
     @property
     def photons(self) -> int:
@@ -71,7 +82,13 @@ class TraceResult:
 
     @property
     def relative_error(self) -> float:
-        return self.accumulator.relative_error()
+        """Estimated relative RMS error of the map written as ``Y``."""
+        return self.estimate.error
+
+    @property
+    def converged(self) -> bool:
+        target = self.settings.target_error or DEFAULT_TARGET_ERROR
+        return self.relative_error <= target
 
 
 def allocate(fluxes: list[float], photons: int) -> list[int]:
@@ -114,8 +131,10 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     targets = allocate(fluxes, budget) if budget is not None else [math.inf] * len(fluxes)
     done = [0] * len(fluxes)
     threads = max(1, int(settings.threads))
-    round_photons = threads * settings.batch_size * 2
+    full_round = threads * settings.batch_size * 2
+    round_photons = min(FIRST_ITERATION, full_round)
     iteration = 0
+    est = None
     start = time.perf_counter()
 
     def job(j):
@@ -132,18 +151,17 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 acc.add(tally)
                 done[tally.emitter] += tally.photons
             iteration += 1
+            round_photons = min(2 * round_photons, full_round)
+            est = estimate(acc, settings.threshold)
             elapsed = time.perf_counter() - start
-            err = acc.relative_error()
+            err = est.error
             if progress is not None:
-                progress(Progress(iteration, acc.photons, elapsed, err, budget))
+                progress(Progress(iteration, acc.photons, elapsed, err, budget, est, acc))
             if settings.seconds is not None and elapsed >= settings.seconds:
                 break
             if settings.target_error is not None and err <= settings.target_error:
                 break
+    if est is None:
+        est = estimate(acc, settings.threshold)
     return TraceResult(scene=scene, settings=settings, accumulator=acc, iterations=iteration,
-                       seconds=time.perf_counter() - start, prepare_seconds=t_prep)
-
-
-def intensity_map(result: TraceResult) -> np.ndarray:
-    """The raw intensity map (cd), (6R, R) float64."""
-    return result.accumulator.intensity()
+                       seconds=time.perf_counter() - start, prepare_seconds=t_prep, estimate=est)
