@@ -1,0 +1,105 @@
+"""The pull-push filter and the error estimates, against closed forms."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lumitrace.convergence import estimate, relative_rms
+from lumitrace.cubemap import canonical_texels, texel_directions, texel_solid_angles
+from lumitrace.filter import pull_push
+from test_reference_stages import expected_counts, trace
+
+RES = 32
+
+
+def _counts(seed, lam=0.7):
+    return np.random.default_rng(seed).poisson(lam, size=(6 * RES, RES)).astype(np.int64)
+
+
+def test_threshold_zero_returns_the_raw_map():
+    omega = texel_solid_angles(RES)
+    counts = _counts(1)
+    flux = counts * 0.01
+    assert np.array_equal(pull_push(flux, counts, 0.0), flux / omega)
+
+
+def test_total_flux_is_kept():
+    omega = texel_solid_angles(RES)
+    counts = _counts(2, 0.3)
+    flux = counts * 0.013
+    out = pull_push(flux, counts, 40.0)
+    assert (out * omega).sum() == pytest.approx(flux.sum(), rel=1e-12)
+    assert np.all(out >= 0)
+
+
+def test_constant_map_stays_constant_everywhere_including_seams():
+    omega = texel_solid_angles(RES)
+    counts = _counts(3, 0.2)  # mostly empty texels: values come from coarse levels
+    out = pull_push(5.0 * omega, counts, 16.0)
+    np.testing.assert_allclose(out, 5.0, rtol=1e-12)
+
+
+def test_shared_edge_texels_agree_and_smooth_maps_have_no_seams():
+    omega = texel_solid_angles(RES)
+    d = texel_directions(RES)
+    truth = 100.0 * (1.2 + d[..., 0] + 0.5 * d[..., 2])  # smooth, positive
+    counts = _counts(4, 3.0)
+    rng = np.random.default_rng(5)
+    flux = truth * omega * rng.gamma(4.0, 0.25, size=truth.shape)  # noisy texels
+    out = pull_push(flux, counts, 32.0)
+    canon = canonical_texels(RES).ravel()
+    flat = out.ravel()
+    assert np.array_equal(flat, flat[canon])  # one value per shared position
+    # the edge texels are shared by the faces they join, so a seam would show as a jump
+    # between an edge texel and its inward neighbour: no larger than steps inside a face
+    faces = out.reshape(6, RES, RES)
+    steps = np.abs(np.diff(faces, axis=2))
+    at_edges = np.concatenate([steps[:, :, 0], steps[:, :, -1]]).max()
+    inside = steps[:, :, 2:-2].max()
+    assert at_edges <= 1.5 * inside
+
+
+def test_converges_to_the_raw_map_as_counts_grow():
+    omega = texel_solid_angles(RES)
+    counts = np.full((6 * RES, RES), 1000, np.int64)
+    rng = np.random.default_rng(6)
+    flux = omega * rng.uniform(50, 150, size=counts.shape)
+    out = pull_push(flux, counts, 32.0)
+    interior = canonical_texels(RES) == np.arange(6 * RES * RES).reshape(6 * RES, RES)
+    edge = np.zeros_like(interior)
+    for f in range(6):
+        block = np.zeros((RES, RES), bool)
+        block[1:-1, 1:-1] = True
+        edge[f * RES:(f + 1) * RES] = block
+    raw = flux / omega
+    # every texel trusts itself: interior texels keep their raw value (up to the flux
+    # renormalisation, which the welded seams change by a hair)
+    np.testing.assert_allclose(out[edge], raw[edge], rtol=2e-3)
+    assert interior.sum() > edge.sum()
+
+
+@pytest.fixture(scope="module")
+def disc_low():
+    scene, result, exp = trace("lambertian_disc", 20_000, res=RES, seed=11)
+    ref = expected_counts(exp, RES, 20_000) * 1000.0 / 20_000 / texel_solid_angles(RES)
+    return result.accumulator, ref
+
+
+def test_filtered_lambertian_disc_beats_raw_by_two_at_low_counts(disc_low):
+    acc, ref = disc_low
+    e = estimate(acc, 64.0)
+    raw_err, filt_err = relative_rms(e.raw, ref), relative_rms(e.filtered, ref)
+    assert filt_err * 2 <= raw_err, (raw_err, filt_err)
+
+
+@pytest.mark.parametrize("name,photons,threshold", [
+    ("lambertian_disc", 100_000, 0.0), ("lambertian_disc", 100_000, 32.0),
+    ("lambertian_disc", 100_000, 128.0), ("isotropic", 100_000, 32.0),
+    ("fresnel_slab", 100_000, 64.0), ("lambertian_disc", 400_000, 32.0)])
+def test_estimated_error_is_honest(name, photons, threshold):
+    _, result, exp = trace(name, photons, res=RES, seed=21)
+    ref = expected_counts(exp, RES, photons) * 1000.0 / photons / texel_solid_angles(RES)
+    e = estimate(result.accumulator, threshold)
+    true = relative_rms(e.filtered, ref)
+    assert true / 1.5 <= e.error <= true * 1.5, (true, e.error)
+    assert relative_rms(e.raw, ref) / 1.5 <= e.raw_error <= relative_rms(e.raw, ref) * 1.5
