@@ -63,6 +63,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print one JSON summary object as the last line of stdout")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
 
+    r = sub.add_parser("report", help="convergence report: error against time, raw against filtered",
+                       description="Trace the stage and record after every iteration the elapsed "
+                                   "time, photons, estimated error and, with a reference (the "
+                                   "stage's closed form or --reference EXR), the true relative RMS "
+                                   "error, PSNR and SSIM of the raw and filtered maps. Writes "
+                                   "report.json, PNG plots and index.html.")
+    r.add_argument("stage", type=Path)
+    r.add_argument("--reference", type=Path, default=None,
+                   help="a long run's NAME.intensity.exr taken as the truth (default: the "
+                        "stage's closed form, where it has one)")
+    r.add_argument("--out", type=Path, default=None, help="report folder (default NAME.report/ "
+                                                          "beside the stage)")
+    rstop = r.add_mutually_exclusive_group()
+    rstop.add_argument("--photons", type=_positive_int)
+    rstop.add_argument("--time", type=_positive_float, default=None, metavar="SECONDS",
+                       help="trace for this long (default 30 s)")
+    r.add_argument("--resolution", type=_positive_int, default=64)
+    r.add_argument("--thresholds", default="0,8,32,128",
+                   help="comma-separated filter thresholds to compare; 0 is the raw map")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--threads", type=_positive_int, default=None)
+    r.add_argument("--no-progress", action="store_true")
+
     b = sub.add_parser("bench", help="tracer throughput against bare Embree on the same rays",
                        description="Trace the demo stage, replay every traced ray through bare "
                                    "embreex run() and report both rates and their ratio.")
@@ -156,6 +179,47 @@ def cmd_trace(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    import os
+
+    from .outputs import stage_name
+    from .report import ReportSettings, run_report
+
+    try:
+        thresholds = tuple(sorted({float(x) for x in args.thresholds.split(",") if x.strip()}))
+    except ValueError:
+        raise LumitraceError(f"--thresholds must be numbers separated by commas, got "
+                             f"{args.thresholds!r}")
+    if not thresholds or min(thresholds) < 0:
+        raise LumitraceError("--thresholds must be zero or positive")
+    if 0.0 not in thresholds:
+        thresholds = (0.0,) + thresholds
+    seconds = args.time if args.time is not None else (None if args.photons else 30.0)
+    settings = ReportSettings(photons=args.photons, seconds=seconds, resolution=args.resolution,
+                              thresholds=thresholds, seed=args.seed,
+                              threads=args.threads or os.cpu_count() or 1)
+    out = args.out or args.stage.parent / f"{stage_name(args.stage)}.report"
+    bar, update = _progress_bar(args.photons, seconds, not args.no_progress)
+    try:
+        written = run_report(args.stage, out, settings, args.reference, progress=update)
+    finally:
+        if bar is not None:
+            bar.close()
+    data = written["data"]
+    print(f"report     {written['html']}")
+    print(f"photons    {data['photons']:,} in {data['iterations']} iterations, {data['seconds']:.1f} s")
+    print(f"reference  {data['reference'] or 'none (estimated errors only)'}")
+    for key, c in data["time_to_error"].items():
+        label = "raw" if key == "0" else f"threshold {key}"
+        cells = ", ".join(f"{float(lv):.0%} at {t:.3g} s" if t else f"{float(lv):.0%} not reached"
+                          for lv, t in c.items())
+        sp = {lv: v for lv, v in (data["speedup_filtered_over_raw"].get(key) or {}).items() if v}
+        extra = "" if not sp else "  (" + ", ".join(
+            f"{v:.1f}x faster to {float(lv):.0%}" for lv, v in sp.items()) + ")"
+        print(f"  {label:14s} {cells}{extra}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from .bench import run_benchmark
 
@@ -178,6 +242,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "trace":
             return cmd_trace(args)
+        if args.command == "report":
+            return cmd_report(args)
         if args.command == "bench":
             return cmd_bench(args)
     except LumitraceError as exc:
