@@ -7,6 +7,10 @@ photon count and takes the rest from the coarser level, interpolated bilinearly 
 direction: ``I = w I_own + (1 - w) I_coarse`` with ``w = min(1, c / threshold)``, where the
 confidence ``c`` is the larger of the texel's photon count and the count the coarser level
 predicts for it: a texel left empty where many photons were expected is dark, not unknown.
+Where the texels of a region differ from the coarser level by more than their photon noise
+explains (an edge, a narrow beam), the coarser level is biased there and the texels get the
+weight that minimises the expected squared error, ``bias^2 / (bias^2 + noise^2)``, so edges
+and peaks stay sharp while flat regions are smoothed.
 Intensities (flux per solid angle), not fluxes, are blended, because texel solid angles
 differ across a face. The pixel positions of the ImfEnvmap layout reach the cube's edges,
 so bilinear lookups never cross a face and, with shared edge texels welded, the result is
@@ -52,7 +56,7 @@ def _pyramid(res: int) -> tuple[_Level, ...]:
 
 
 def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
-              solid_angles: np.ndarray | None = None) -> np.ndarray:
+              solid_angles: np.ndarray | None = None, adaptive: bool = True) -> np.ndarray:
     """Filtered intensity (cd), (6R, R), from texel fluxes (lm) and photon counts.
 
     ``threshold`` is the photon count from which a texel trusts its own estimate fully.
@@ -88,6 +92,25 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
         # coarser level predicts for it; an empty texel where many were expected is dark
         expected = below * w[depth] * photons_per_lumen
         weight = np.minimum(1.0, np.maximum(n[depth], expected) / threshold)
+        if adaptive and depth < len(levels) - 1:
+            # where the coarse level disagrees with the texels by more than their noise
+            # explains, it is biased there (an edge, a peak): trust the texels more
+            var_own = below * below / np.maximum(expected, 1.0)
+            excess = (own - below) ** 2 - var_own
+            lv = levels[depth]
+            size = 6 * lv.res * lv.res
+            area = np.bincount(lv.parent, weights=w[depth], minlength=size)
+            members = np.maximum(np.bincount(lv.parent, minlength=size), 1)
+            local = np.bincount(lv.parent, weights=excess * w[depth], minlength=size)
+            noise = np.bincount(lv.parent, weights=var_own * w[depth], minlength=size)
+            local = np.divide(local, area, out=np.zeros_like(local), where=area > 0)
+            noise = np.divide(noise, area, out=np.zeros_like(noise), where=area > 0)
+            # an excess the texels' noise could produce by chance (two standard deviations
+            # of a mean of squared deviations) is not evidence of bias
+            local = local - 2.0 * np.sqrt(2.0 / members) * noise
+            local = weld_seams(local.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
+            bias2 = np.maximum(sample_map(local, dirs), 0.0)
+            weight = np.maximum(weight, bias2 / np.maximum(bias2 + var_own, 1e-300))
         value = weight * own + (1.0 - weight) * below
         value = weld_seams(value.reshape(6 * lv_res, lv_res),
                            w[depth].reshape(6 * lv_res, lv_res)).ravel()

@@ -20,8 +20,9 @@ from .tracer import MAX_DEPTH, PreparedScene, prepare, trace_batch
 
 DEFAULT_PHOTONS = 2_000_000
 DEFAULT_RESOLUTION = 64
-#: Photon count from which a texel trusts its own estimate (pull-push threshold).
-DEFAULT_THRESHOLD = 32.0
+#: Photon count from which a texel trusts its own estimate whatever its neighbours say
+#: (pull-push threshold): 1 / 0.02**2, the count at which its own noise is 2%.
+DEFAULT_THRESHOLD = 2500.0
 #: Error below which a result counts as converged when no target is given.
 DEFAULT_TARGET_ERROR = 0.02
 #: Photons in the first iteration; later iterations double up to a full round of batches.
