@@ -127,6 +127,7 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
                 row["true"][key] = relative_rms(img, ref.intensity, omega)
                 row["psnr"][key] = psnr(img, ref.intensity)
                 row["ssim"][key] = ssim(img, ref.intensity)
+                row["peak_ratio"][key] = float(img.max() / ref.intensity.max())
             if t in (0.0, main_t):
                 snapshots.setdefault(p.iteration, {})[key] = e.filtered
         rows.append(row)
