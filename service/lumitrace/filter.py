@@ -96,19 +96,21 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
             # where the coarse level disagrees with the texels by more than their noise
             # explains, it is biased there (an edge, a peak): trust the texels more
             var_own = below * below / np.maximum(expected, 1.0)
-            excess = (own - below) ** 2 - var_own
             lv = levels[depth]
             size = 6 * lv.res * lv.res
-            area = np.bincount(lv.parent, weights=w[depth], minlength=size)
-            members = np.maximum(np.bincount(lv.parent, minlength=size), 1)
-            local = np.bincount(lv.parent, weights=excess * w[depth], minlength=size)
-            noise = np.bincount(lv.parent, weights=var_own * w[depth], minlength=size)
-            local = np.divide(local, area, out=np.zeros_like(local), where=area > 0)
-            noise = np.divide(noise, area, out=np.zeros_like(noise), where=area > 0)
-            # an excess the texels' noise could produce by chance (two standard deviations
-            # of a mean of squared deviations) is not evidence of bias
-            local = local - 2.0 * np.sqrt(2.0 / members) * noise
-            local = weld_seams(local.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
+            group = lambda x: np.bincount(lv.parent, weights=x, minlength=size)  # noqa: E731
+            area = group(w[depth])
+            own_g = np.divide(group(f[depth]), area, out=np.zeros(size), where=area > 0)
+            pred_g = np.divide(group(below * w[depth]), area, out=np.zeros(size), where=area > 0)
+            lam_g = group(expected)
+            var_g = pred_g * pred_g / np.maximum(lam_g, 1.0)
+            dev2 = (own_g - pred_g) ** 2
+            # a group of texels whose photon count departs from the coarse prediction by
+            # more than Poisson noise allows (3 sigma, plus 3 photons for the skewed tails of
+            # small counts) shows where the prediction is biased
+            significant = np.abs(group(n[depth]) - lam_g) > 3.0 * np.sqrt(lam_g) + 3.0
+            bias2_g = np.where(significant, np.maximum(dev2 - var_g, 0.0), 0.0)
+            local = weld_seams(bias2_g.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
             bias2 = np.maximum(sample_map(local, dirs), 0.0)
             weight = np.maximum(weight, bias2 / np.maximum(bias2 + var_own, 1e-300))
         value = weight * own + (1.0 - weight) * below
