@@ -117,7 +117,7 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
         t0 = time.perf_counter()
         row = {"iteration": p.iteration, "photons": p.photons,
                "seconds": p.seconds - overhead[0], "estimated": {}, "true": {}, "psnr": {},
-               "ssim": {}}
+               "ssim": {}, "peak_ratio": {}}
         for t in settings.thresholds:
             e = p.estimate if t == main_t else estimate(p.accumulator, t)
             key = f"{t:g}"
