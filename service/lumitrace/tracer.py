@@ -26,6 +26,8 @@ from .scene import DIELECTRIC, Emitter, Scene
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
 RAY_EPSILON = 1e-5
+#: Hit points are taken this far (normalised units) before Embree's float32 hit distance.
+RAY_BACKOFF = 0.5 * RAY_EPSILON
 #: Default maximum number of surface interactions; photons still alive then are cut.
 MAX_DEPTH = 512
 
@@ -59,12 +61,28 @@ class PreparedScene:
         return self.embree.run(origins, directions, output=1)
 
 
+def _emitter_reach(e: Emitter) -> float:
+    """Distance (local units) from the light's origin that its emitting surface reaches.
+
+    Only the sizes of the light's own kind count: the others keep their dataclass defaults
+    (1 stage unit), which would make a 1 mm LED modelled in metres a metre wide and the
+    normalised frame, hence float rounding and ray offsets, depend on the stage's unit.
+    """
+    if e.kind == "sphere":
+        return 0.0 if e.treat_as_point else e.radius  # a point light has no surface
+    if e.kind == "disk":
+        return e.radius
+    if e.kind == "rect":
+        return 0.5 * float(np.hypot(e.width, e.height))
+    return float(np.hypot(0.5 * e.length, e.radius))
+
+
 def _bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned bounds (world m) of the triangles and the emitters' origins."""
+    """Axis-aligned bounds (world m) of the triangles and the emitters' surfaces."""
     pts = [scene.triangles.reshape(-1, 3)] if scene.triangles.size else []
     for e in scene.emitters:
         m = np.asarray(e.to_world, dtype=np.float64)
-        reach = np.linalg.norm(m[:3, :3], axis=0).max() * max(e.radius, e.width, e.height, e.length)
+        reach = np.linalg.norm(m[:3, :3], 2) * _emitter_reach(e)
         pts.append(m[:3, 3][None, :] + reach * np.array([[-1.0, -1, -1], [1, 1, 1]]))
     allp = np.concatenate(pts, axis=0)
     return allp.min(axis=0), allp.max(axis=0)
@@ -74,7 +92,9 @@ def prepare(scene: Scene) -> PreparedScene:
     """Normalise the scene and build the Embree acceleration structure."""
     lo, hi = _bounds(scene)
     center = 0.5 * (lo + hi)
-    scale = float(max(0.5 * (hi - lo).max(), 1e-12))
+    scale = float(0.5 * (hi - lo).max())
+    if not scale > 0.0:  # a lone point light: any scale will do
+        scale = 1.0
     tri = (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
     v0 = np.ascontiguousarray(tri[:, 0].T)
     e1 = np.ascontiguousarray(tri[:, 1].T) - v0
@@ -131,8 +151,10 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     key = rng.stream_key(seed, e.key)
     idx = np.arange(start, start + count, dtype=np.int64)
     base = rng.photon_hash(key, idx)
-    p, d = emit(e, key, idx)
-    o = (p - ps.center[:, None]) / ps.scale + RAY_EPSILON * d
+    p, d, n_emit = emit(e, key, idx, normals=True)
+    # off the emitting surface along its normal, as off any surface: an offset along d would
+    # vanish for grazing photons and start them inside a part the light lies on
+    o = (p - ps.center[:, None]) / ps.scale + RAY_EPSILON * n_emit
     # polarisation matters only where a dielectric can see it; drawn at first need
     pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
@@ -172,7 +194,13 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
         base, o, d = np.take(base, h), np.take(o, h, axis=1), np.take(d, h, axis=1)
         if pol is not None:
             pol = np.take(pol, h, axis=1)
-        p = o + np.take(hit["tfar"], h).astype(np.float64) * d
+        # Embree's float32 tfar puts the hit point up to a few ulps beyond the surface, along
+        # the ray; near an edge that can be behind the adjoining face, and the normal offset
+        # below does not undo it (light leaked out of closed boxes at their edges). Backing
+        # up along the ray, by more than that error but never beyond the origin, keeps the
+        # point in the space the ray crossed.
+        t = np.take(hit["tfar"], h).astype(np.float64)
+        p = o + (t - np.minimum(RAY_BACKOFF, 0.5 * t)) * d
         ng = np.take(ps.normals, prim, axis=1)
         rnd = rng.uniforms_from(base, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
         d, alive, pol = scatter(ps.table, np.take(ps.material_index, prim), d, ng, rnd, pol, runs)
