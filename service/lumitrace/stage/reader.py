@@ -15,7 +15,13 @@ What is read, and how:
   purposes other than ``default`` and ``render`` are skipped. Front faces are made
   counter-clockwise in the right-handed world: a ``leftHanded`` orientation and a mirroring
   transform (negative determinant) each flip the winding. Zero-area triangles are dropped
-  with a warning.
+  with a warning. The dielectric faces of a gprim that form a closed surface facing inward
+  (negative volume: flipped normals) are flipped to face the air, with a warning.
+- **The file and its composition.** A file named ``.usda``, ``.usdc``, ``.usd`` or
+  ``.usdz`` must start like one (a huge bogus file is refused without reading it). A
+  missing layer, a composition cycle or a reference to a missing prim is an error within
+  the luminaire, a warning elsewhere. USD's own warnings become scene warnings instead of
+  being printed.
 - **Materials.** The bound material (``full`` purpose, else all-purpose; ``GeomSubset``
   bindings per face) is read in three layers, each overriding the previous one:
   its ``UsdPreviewSurface`` (see :func:`preview_surface_values`), the ``LumitraceMaterialAPI``
@@ -37,13 +43,14 @@ from pathlib import Path
 from typing import Iterable
 
 import numpy as np
-from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
+from pxr import Pcp, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from .. import schema
 from ..errors import StageError
 from ..scene import Emitter, Material, Scene
 from . import validate
 from .validate import Sourced
+from .writer import RESULT_LAYER_SUFFIX
 
 #: Rec.709 / sRGB luminance weights (linear RGB -> relative luminance Y).
 REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -71,6 +78,11 @@ _LIGHT_TYPES = (
 )
 _IMPLICIT_GPRIMS = ("Cube", "Sphere", "Cylinder", "Cone", "Plane")
 _RENDERED_PURPOSES = (UsdGeom.Tokens.default_, UsdGeom.Tokens.render)
+_PURPOSES = (UsdGeom.Tokens.default_, UsdGeom.Tokens.render, UsdGeom.Tokens.proxy,
+             UsdGeom.Tokens.guide)
+_VISIBILITIES = (UsdGeom.Tokens.inherited, UsdGeom.Tokens.invisible)
+_ORIENTATIONS = (UsdGeom.Tokens.rightHanded, UsdGeom.Tokens.leftHanded)
+_AXES = ("X", "Y", "Z")
 _EMITTER_FIELDS = {f.name for f in fields(Emitter)}
 
 
@@ -103,13 +115,16 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
     if file.is_dir():
         raise StageError("is a folder, not a USD stage file", str(file))
     file = file.resolve()
-    try:
-        stage = Usd.Stage.Open(str(file), Usd.Stage.LoadAll)
-    except Tf.ErrorException as exc:
-        raise StageError(f"cannot open as a USD stage: {_tf_message(exc)}", str(file)) from exc
-    if stage is None:
-        raise StageError("cannot open as a USD stage", str(file))
-    return scene_from_stage(stage, luminaire, time=time)
+    validate.check_layer_file(file)
+    with _UsdDiagnostics() as diagnostics:
+        try:
+            stage = Usd.Stage.Open(str(file), Usd.Stage.LoadAll)
+        except Tf.ErrorException as exc:
+            raise StageError(f"cannot open as a USD stage: {_tf_message(exc)}",
+                             str(file)) from exc
+        if stage is None:
+            raise StageError("cannot open as a USD stage", str(file))
+        return _read(stage, luminaire, time, diagnostics)
 
 
 def scene_from_stage(stage: Usd.Stage, luminaire: str | None = None, *,
@@ -118,14 +133,41 @@ def scene_from_stage(stage: Usd.Stage, luminaire: str | None = None, *,
 
     The stage's composed state is read as it is, unsaved edits included.
     """
+    with _UsdDiagnostics() as diagnostics:
+        return _read(stage, luminaire, time, diagnostics)
+
+
+def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: "_UsdDiagnostics") -> Scene:
     layer = stage.GetRootLayer()
     stage_file = str(Path(layer.realPath).resolve()) if layer.realPath else ""
     label = stage_file or layer.identifier
     try:
-        return _Reader(stage, _timecode(time), stage_file, label).read(luminaire)
+        return _Reader(stage, _timecode(time), stage_file, label, diagnostics).read(luminaire)
     except Tf.ErrorException as exc:
         raise StageError(f"USD error while reading the stage: {_tf_message(exc)}",
                          label) from exc
+
+
+class _UsdDiagnostics:
+    """While in use, USD's warnings and status messages are collected instead of printed
+    (bad input must give one clear error, and nothing else, on stderr); the reader reports
+    them as scene warnings, and composition errors itself."""
+
+    def __enter__(self) -> "_UsdDiagnostics":
+        self._delegate = UsdUtils.CoalescingDiagnosticDelegate()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._delegate = None  # unregisters it
+
+    def take(self) -> list[str]:
+        """The messages collected so far (composition errors left out)."""
+        notes = []
+        for d in self._delegate.TakeUncoalescedDiagnostics():
+            if d.sourceFunction.endswith("UsdStage::_ReportErrors"):
+                continue
+            notes.append(" ".join(_NAMESPACE.sub("", d.commentary).split())[:300])
+        return notes
 
 
 def luminance(rgb: Iterable[float]) -> float:
@@ -246,8 +288,10 @@ class _LocalMesh:
 
 
 class _Reader:
-    def __init__(self, stage: Usd.Stage, time: Usd.TimeCode, stage_file: str, label: str):
+    def __init__(self, stage: Usd.Stage, time: Usd.TimeCode, stage_file: str, label: str,
+                 diagnostics: _UsdDiagnostics):
         self.stage = stage
+        self.diagnostics = diagnostics
         self.time = time
         self.stage_file = stage_file
         self.label = label
@@ -277,8 +321,7 @@ class _Reader:
         validate.check_stage_units(self.meters_per_unit, layer_where)
         up_axis = str(UsdGeom.GetStageUpAxis(self.stage))
         validate.check_up_axis(up_axis, layer_where)
-        for error in self.stage.GetCompositionErrors():
-            self._warn(f"{layer_where}: composition error: {_tf_message(error)}")
+        self._check_composition(root, layer_where)
 
         if self._visible_and_rendered(root, computed=True):
             self._walk(root, _Frame())
@@ -291,6 +334,8 @@ class _Reader:
             raise StageError("no emitter: the luminaire has no active, visible Sphere, Disk, "
                              f"Rect or Cylinder light (in {self.label})", root_path)
 
+        for note in self.diagnostics.take():
+            self._warn(f"{self.label}: USD: {note}")
         if self.triangles:
             triangles = np.concatenate(self.triangles)
             material_index = np.concatenate(self.material_index).astype(np.int32)
@@ -312,6 +357,25 @@ class _Reader:
             stage_path=self.stage_file,
             warnings=tuple(self.warnings),
         )
+
+    def _check_composition(self, root: Usd.Prim, layer_where: str) -> None:
+        """Composition errors that leave the luminaire incomplete (a missing layer, a cycle,
+        a reference to no prim) are bad input; elsewhere in the stage they are warnings, as
+        is a missing result layer of ours (the next run writes it again)."""
+        root_path = root.GetPath()
+        for error in self.stage.GetCompositionErrors():
+            message = _ANON_LAYER.sub("", _tf_message(error))
+            site = error.rootSite.path
+            what = _FATAL_COMPOSITION.get(error.errorType)
+            sublayer = error.errorType in _SUBLAYER_ERRORS
+            where = layer_where if sublayer or site.IsAbsoluteRootPath() else str(site)
+            ours = sublayer and RESULT_LAYER_SUFFIX in message
+            inside = (site.IsAbsoluteRootPath() or site.HasPrefix(root_path)
+                      or root_path.HasPrefix(site))
+            if what is not None and inside and not ours:
+                prop = "subLayers" if sublayer else _arc_property(message)
+                raise StageError(f"{what}: {message}", where, prop)
+            self._warn(f"{where}: composition error: {message}")
 
     def _luminaire_prim(self, luminaire: str | None) -> Usd.Prim:
         if luminaire is not None:
@@ -359,6 +423,10 @@ class _Reader:
                 self._point_instancer(prim, frame)
                 it.PruneChildren()
                 continue
+            if prim.GetTypeName() and prim.GetPrimTypeInfo().GetSchemaType().isUnknown:
+                self._warn(f"{prim.GetPath()}: unknown prim type {str(prim.GetTypeName())!r}: "
+                           "not a surface or light lumitrace knows; its children are read")
+                continue
             if prim.IsA(UsdGeom.Gprim):
                 if prim.HasAPI(UsdLux.LightAPI):
                     self._warn(f"{prim.GetPath()}: mesh lights are not supported: traced as "
@@ -369,10 +437,13 @@ class _Reader:
         imageable = UsdGeom.Imageable(prim)
         if not imageable:
             return True
+        path = str(prim.GetPath())
+        visibility = validate.check_token(imageable.GetVisibilityAttr().Get(self.time),
+                                          _VISIBILITIES, path, "visibility")
+        validate.check_token(imageable.GetPurposeAttr().Get(), _PURPOSES, path, "purpose")
         if computed:
             visibility = imageable.ComputeVisibility(self.time)
-        else:  # ancestors were checked on the way down
-            visibility = imageable.GetVisibilityAttr().Get(self.time)
+        # else: ancestors were checked on the way down
         if visibility == UsdGeom.Tokens.invisible:
             return False
         return imageable.ComputePurpose() in _RENDERED_PURPOSES
@@ -421,30 +492,44 @@ class _Reader:
 
     def _placements(self, prim: Usd.Prim, frame: _Frame) -> list[tuple[np.ndarray, str]]:
         """Row-vector local-to-world matrices (stage units) of ``prim``, one per placement."""
-        if frame.anchor is None:
-            local = np.array(self.xf.GetLocalToWorldTransform(prim))
-            if not np.isfinite(local).all():
-                self._raise_bad_transform(prim)
-            return [(local, "")]
-        relative, _ = self.xf.ComputeRelativeTransform(prim, frame.anchor)
+        try:
+            if frame.anchor is None:
+                local = np.array(self.xf.GetLocalToWorldTransform(prim))
+                if not np.isfinite(local).all():
+                    self._raise_bad_transform(prim)
+                return [(local, "")]
+            relative, _ = self.xf.ComputeRelativeTransform(prim, frame.anchor)
+        except Tf.ErrorException as exc:  # e.g. an op whose value has the wrong type
+            self._raise_bad_transform(prim, exc)
         relative = np.array(relative)
         if not np.isfinite(relative).all():
             self._raise_bad_transform(prim)
         return [(relative @ base, label) for base, label in frame.bases]
 
-    def _raise_bad_transform(self, prim: Usd.Prim) -> None:
-        """Name the prim and xformOp whose transform is NaN or infinite."""
+    def _raise_bad_transform(self, prim: Usd.Prim, exc: Exception | None = None,
+                             singular: bool = False) -> None:
+        """Name the prim and xformOp whose transform cannot be evaluated, is NaN or
+        infinite, or (``singular``) collapses space (a zero scale)."""
+        what = ("transform collapses a light to nothing (a scale of 0): it has no emitting "
+                "surface or direction" if singular else "transform is NaN or infinite")
         p = prim
         while p and not p.IsPseudoRoot():
             xformable = UsdGeom.Xformable(p)
             if xformable:
                 for op in xformable.GetOrderedXformOps():
-                    if not np.isfinite(np.array(op.GetOpTransform(self.time))).all():
-                        raise StageError("transform is NaN or infinite", str(p.GetPath()),
-                                         op.GetName())
+                    try:
+                        m = np.array(op.GetOpTransform(self.time))
+                    except Tf.ErrorException as op_exc:
+                        raise StageError(f"transform op cannot be evaluated: "
+                                         f"{_tf_message(op_exc)}", str(p.GetPath()),
+                                         op.GetName()) from op_exc
+                    if not np.isfinite(m).all() or (singular and not _invertible(m[:3, :3])):
+                        raise StageError(what, str(p.GetPath()), op.GetName())
             p = p.GetParent()
-        raise StageError("world transform is NaN or infinite", str(prim.GetPath()),
-                         "xformOpOrder")
+        if exc is not None:
+            raise StageError(f"transform cannot be evaluated: {_tf_message(exc)}",
+                             str(prim.GetPath()), "xformOpOrder") from exc
+        raise StageError("world " + what, str(prim.GetPath()), "xformOpOrder")
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -485,14 +570,45 @@ class _Reader:
             return None
         points, counts, indices, keep_face = polygons
         triangles, face_of_triangle = _triangulate(points, counts, indices, keep_face)
-        orientation = UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time)
+        orientation = validate.check_token(UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time),
+                                           _ORIENTATIONS, path, "orientation")
         if orientation == UsdGeom.Tokens.leftHanded:
             triangles = triangles[:, [0, 2, 1]]
         if len(triangles) == 0:
             self._warn(f"{path}: no faces: skipped")
             return None
         face_material = self._face_materials(prim, counts.size)
-        return _LocalMesh(triangles, face_material[face_of_triangle].astype(np.int32))
+        material_index = face_material[face_of_triangle].astype(np.int32)
+        dielectric = np.array([m.scattering == "dielectric" for m in self.material_list],
+                              dtype=bool)[material_index]
+        if dielectric.any():
+            triangles = self._orient_dielectric(path, triangles, dielectric)
+        return _LocalMesh(triangles, material_index)
+
+    def _orient_dielectric(self, path: str, triangles: np.ndarray,
+                           dielectric: np.ndarray) -> np.ndarray:
+        """Make the dielectric faces of a gprim face the air.
+
+        The tracer tells the inside of a dielectric from the winding (front = outside). When
+        the dielectric faces form a closed, consistently wound surface, its signed volume
+        says which way they face: a negative volume means they all point inward (a mesh
+        exported with flipped normals), and they are flipped, with a warning. The volume of
+        the whole surface is used, so a hollow part, whose inner surface rightly faces its
+        cavity, keeps its orientation. A surface that is open or inconsistently wound cannot
+        be judged: a warning says its winding is taken as it is.
+        """
+        faces = triangles[dielectric]
+        closed, volume = _closed_surface_volume(faces)
+        if not closed:
+            self._warn(f"{path}: dielectric faces do not form a closed, consistently wound "
+                       "surface: their inside is taken from the winding (counter-clockwise "
+                       "= outside)")
+        elif volume < 0.0:
+            self._warn(f"{path}: the closed dielectric surface faces inward (negative "
+                       "volume, normals flipped): its faces are flipped to face the air")
+            triangles = triangles.copy()
+            triangles[dielectric] = faces[:, [0, 2, 1]]
+        return triangles
 
     def _mesh_polygons(self, prim: Usd.Prim):
         path = str(prim.GetPath())
@@ -687,6 +803,8 @@ class _Reader:
 
         for matrix, label in self._placements(prim, frame):
             to_world = np.diag([self.meters_per_unit] * 3 + [1.0]) @ matrix.T
+            if not _invertible(matrix[:3, :3]):
+                self._raise_bad_transform(prim, singular=True)
             if authored_flux is not None:
                 flux = authored_flux
             else:
@@ -750,6 +868,34 @@ def _timecode(time) -> Usd.TimeCode:
 
 
 _NAMESPACE = re.compile(r"pxrInternal_v\d+_\d+(?:_\d+)?__pxrReserved__::")
+#: The session layer USD adds to layer stacks in messages: ",@anon:0x...:NAME-session.usda@".
+_ANON_LAYER = re.compile(r",@anon:[^@]*@")
+
+#: Composition errors that leave the luminaire incomplete or undefined, with what to say.
+_FATAL_COMPOSITION = {
+    Pcp.ErrorType_InvalidAssetPath: "cannot open a referenced layer",
+    Pcp.ErrorType_InvalidSublayerPath: "cannot open a sublayer",
+    Pcp.ErrorType_ArcCycle: "composition cycle",
+    Pcp.ErrorType_SublayerCycle: "sublayer cycle",
+    Pcp.ErrorType_UnresolvedPrimPath: "reference to a prim that does not exist",
+    Pcp.ErrorType_InvalidPrimPath: "reference to an invalid prim path",
+    Pcp.ErrorType_ArcCapacityExceeded: "composition too deep",
+    Pcp.ErrorType_ArcNamespaceDepthCapacityExceeded: "composition too deep",
+    Pcp.ErrorType_IndexCapacityExceeded: "composition too large",
+}
+_SUBLAYER_ERRORS = {Pcp.ErrorType_InvalidSublayerPath, Pcp.ErrorType_SublayerCycle,
+                    Pcp.ErrorType_InvalidSublayerOffset,
+                    Pcp.ErrorType_InvalidSublayerOwnership}
+
+
+def _arc_property(message: str) -> str:
+    """The composition arc a Pcp message is about, as the metadata field that authors it."""
+    text = message.lower()
+    for word, field_name in (("payload", "payload"), ("inherit", "inherits"),
+                             ("specializ", "specializes"), ("variant", "variantSets")):
+        if word in text:
+            return field_name
+    return "references"
 
 
 def _tf_message(error) -> str:
@@ -817,14 +963,54 @@ def _triangulate(points: np.ndarray, counts: np.ndarray, indices: np.ndarray,
     return points[corners], face
 
 
+def _closed_surface_volume(triangles: np.ndarray) -> tuple[bool, float]:
+    """Whether triangles (T, 3, 3) form closed, consistently wound surfaces, and their
+    signed volume (positive when the counter-clockwise fronts face outward).
+
+    Corners are matched by position (exports often split vertices along seams). Closed and
+    consistent: every directed edge occurs exactly once, and so does its reverse; triangles
+    with a repeated corner have no area and are ignored.
+    """
+    corners = np.ascontiguousarray(triangles.reshape(-1, 3), dtype=np.float64) + 0.0  # -0 -> 0
+    keys = corners.view(np.dtype((np.void, corners.dtype.itemsize * 3))).ravel()
+    _, vertex = np.unique(keys, return_inverse=True)
+    vertex = vertex.reshape(-1, 3).astype(np.int64)
+    a, b, c = vertex.T
+    proper = (a != b) & (b != c) & (c != a)
+    a, b, c = a[proper], b[proper], c[proper]
+    if a.size == 0:
+        return False, 0.0
+    n = int(vertex.max()) + 1
+    edges = np.concatenate([a * n + b, b * n + c, c * n + a])
+    reverse = np.concatenate([b * n + a, c * n + b, a * n + c])
+    edges.sort()
+    reverse.sort()
+    closed = bool(np.all(edges[1:] != edges[:-1]) and np.array_equal(edges, reverse))
+    tri = triangles[proper] - corners.mean(axis=0)
+    volume = float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()) / 6.0
+    return closed, volume
+
+
+def _invertible(linear: np.ndarray) -> bool:
+    """Whether a 3x3 map is far from singular (condition number below 1e12)."""
+    sv = np.linalg.svd(np.asarray(linear, dtype=np.float64), compute_uv=False)
+    return bool(sv[0] > 0.0 and sv[-1] > 1e-12 * sv[0])
+
+
 def _non_degenerate(triangles: np.ndarray) -> np.ndarray:
-    """Mask of triangles with a non-zero area (relative to their longest edge)."""
+    """Mask of triangles with a non-zero area (relative to their longest edge), at any
+    scale: edges are divided by their largest coordinate before squaring, so that
+    triangles of 1e-200 m do not underflow nor those of 1e200 m overflow."""
     e1 = triangles[:, 1] - triangles[:, 0]
     e2 = triangles[:, 2] - triangles[:, 0]
-    e3 = triangles[:, 2] - triangles[:, 1]
+    size = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1))
+    ok = (size > 0.0) & np.isfinite(size)
+    inv = np.divide(1.0, size, out=np.zeros_like(size), where=ok)[:, None]
+    e1, e2 = e1 * inv, e2 * inv
+    e3 = e2 - e1
     cross = np.linalg.norm(np.cross(e1, e2), axis=1)
     longest = np.max(np.stack([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e3)]), axis=0)
-    return cross > DEGENERATE_TOLERANCE * longest
+    return ok & (cross > DEGENERATE_TOLERANCE * longest)
 
 
 def _cofactor(a: np.ndarray) -> np.ndarray:
@@ -901,7 +1087,7 @@ def _implicit_polygons(prim: Usd.Prim, time: Usd.TimeCode):
         schema_ = UsdGeom.Cylinder(prim) if type_name == "Cylinder" else UsdGeom.Cone(prim)
         r = validate.check_positive(schema_.GetRadiusAttr().Get(time), path, "radius")
         height = validate.check_positive(schema_.GetHeightAttr().Get(time), path, "height")
-        axis = str(schema_.GetAxisAttr().Get(time))
+        axis = validate.check_token(schema_.GetAxisAttr().Get(time), _AXES, path, "axis")
         circle = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
         bottom = np.column_stack([circle, np.full(n, -0.5 * height)])
         if type_name == "Cylinder":
@@ -918,7 +1104,7 @@ def _implicit_polygons(prim: Usd.Prim, time: Usd.TimeCode):
     plane = UsdGeom.Plane(prim)
     width = validate.check_positive(plane.GetWidthAttr().Get(time), path, "width")
     length = validate.check_positive(plane.GetLengthAttr().Get(time), path, "length")
-    axis = str(plane.GetAxisAttr().Get(time))
+    axis = validate.check_token(plane.GetAxisAttr().Get(time), _AXES, path, "axis")
     # UsdGeomPlane: width along x (z when axis is X), length along y (z when axis is Y).
     w, l = 0.5 * width, 0.5 * length
     corners = {"X": [[0, -l, -w], [0, l, -w], [0, l, w], [0, -l, w]],

@@ -32,6 +32,56 @@ class Sourced:
     prop: str
 
 
+#: First bytes of USD files: text, binary (crate), zip package.
+USDA_SIGNATURE = b"#usda"
+USDC_SIGNATURE = b"PXR-USDC"
+USDZ_SIGNATURE = b"PK\x03\x04"
+_SIGNATURES = {".usda": (USDA_SIGNATURE,), ".usdc": (USDC_SIGNATURE,),
+               ".usd": (USDA_SIGNATURE, USDC_SIGNATURE), ".usdz": (USDZ_SIGNATURE,)}
+#: Text layers larger than this are refused: USD's text parser holds all of the file in
+#: memory, twice, before it finds anything wrong (a bogus 2 GiB file took 4 GiB and 6 s).
+MAX_TEXT_LAYER_BYTES = 1 << 30
+_SAMPLE_BYTES = 1 << 16
+
+
+def check_layer_file(path) -> None:
+    """A file named as a USD layer must start like one; a text layer must look like text
+    (no NUL bytes in its first and last 64 KiB) and be at most :data:`MAX_TEXT_LAYER_BYTES`.
+
+    Decided from the size and a few kilobytes, so that a huge bogus file is refused at
+    once, without USD reading all of it. Other extensions are left to USD's file formats.
+    """
+    from pathlib import Path
+
+    file = Path(path)
+    signatures = _SIGNATURES.get(file.suffix.lower())
+    if signatures is None:
+        return
+    where = str(file)
+    try:
+        size = file.stat().st_size
+        with open(file, "rb") as fh:
+            head = fh.read(_SAMPLE_BYTES)
+            tail = b""
+            if head.startswith(USDA_SIGNATURE) and size > _SAMPLE_BYTES:
+                fh.seek(max(size - _SAMPLE_BYTES, _SAMPLE_BYTES))
+                tail = fh.read(_SAMPLE_BYTES)
+    except OSError as exc:
+        raise StageError(f"cannot read: {exc.strerror or exc}", where) from exc
+    if size == 0:
+        raise StageError("empty file, not a USD stage", where)
+    if not head.startswith(signatures):
+        expected = " or ".join(repr(sig.decode("latin-1")) for sig in signatures)
+        raise StageError(f"not a USD file: a {file.suffix} file starts with {expected}", where)
+    if head.startswith(USDA_SIGNATURE):
+        if b"\0" in head or b"\0" in tail:
+            raise StageError("not a USD text layer: it holds binary data (NUL bytes)", where)
+        if size > MAX_TEXT_LAYER_BYTES:
+            raise StageError(f"text layer of {size / 2**30:.1f} GiB is larger than the "
+                             f"{MAX_TEXT_LAYER_BYTES / 2**30:g} GiB a text layer may have: "
+                             "save it as binary .usdc", where)
+
+
 def check_stage_units(meters_per_unit: float, where: str) -> None:
     """``metersPerUnit`` must be a finite number > 0."""
     if not _is_number(meters_per_unit) or not math.isfinite(meters_per_unit) \
@@ -44,6 +94,14 @@ def check_up_axis(up_axis: str, where: str) -> None:
     """``upAxis`` must be Y or Z."""
     if up_axis not in ("Y", "Z"):
         raise StageError(f"must be 'Y' or 'Z', got {up_axis!r}", where, "upAxis")
+
+
+def check_token(value: Any, allowed, where: str, prop: str) -> str:
+    """A token must be one of ``allowed`` (USD does not enforce ``allowedTokens``)."""
+    if not isinstance(value, str) or value not in allowed:
+        raise StageError(f"unknown token {value!r}: allowed are {', '.join(allowed)}",
+                         where, prop)
+    return value
 
 
 def check_finite_points(points: np.ndarray, where: str, prop: str = "points",
