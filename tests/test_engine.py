@@ -86,3 +86,10 @@ def test_millimetres_and_metres_give_the_same_map(tmp_path):
     moved = np.abs(a.counts() - b.counts()).sum()
     assert moved <= 1e-4 * n
     assert abs(a.fluxes()["escaped"] - b.fluxes()["escaped"]) <= 1e-4 * 1200
+
+
+def test_worker_processes_give_the_same_map_as_threads(downlight):
+    a = _run(downlight, photons=200_000, workers="threads").accumulator
+    b = _run(downlight, photons=200_000, workers="processes").accumulator
+    assert np.array_equal(a.counts(), b.counts())
+    assert [t.absorbed for t in a.emitters] == [t.absorbed for t in b.emitters]

@@ -19,9 +19,10 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--stage", default=None)
+    p.add_argument("--workers", choices=("processes", "threads"), default="processes")
     a = p.parse_args()
-    r = run_benchmark(stage=a.stage, seconds=a.seconds, threads=a.threads)
-    print(f"{r['stage']}: {r['triangles']} triangles, {r['threads']} threads, "
+    r = run_benchmark(stage=a.stage, seconds=a.seconds, threads=a.threads, workers=a.workers)
+    print(f"{r['stage']}: {r['triangles']} triangles, {r['threads']} {r['workers']}, "
           f"{r['photons']:,} photons, {r['segments']:,} segments")
     print(f"tracer   {r['segments_per_second']:>14,.0f} segments/s")
     print(f"embreex  {r['raw_rays_per_second']:>14,.0f} rays/s (same rays)")

@@ -1,61 +1,78 @@
 """Throughput benchmark: tracer path segments per second against bare Embree on the same rays.
 
-The tracer runs for a while recording every ray it casts; then the very same rays are cast
-again through embreex ``run()`` alone, on the same number of threads, in the same process.
-The ratio says how much of the machine's raw intersection rate the photon tracer keeps.
+Every worker traces a batch of photons recording each ray it casts, then casts the very
+same rays again through embreex ``run()`` alone, and times both. With all workers busy the
+whole time, rates are total segments over the summed times per worker. The ratio says how
+much of the machine's raw intersection rate the photon tracer keeps.
 """
 from __future__ import annotations
 
+import multiprocessing
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 from .schema import SCHEMA_DIR
-from .tracer import prepare, trace_batch
+from .tracer import PreparedScene, prepare, trace_batch
 
 DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
+_worker_scene: PreparedScene | None = None
+
+
+def _init(stage: str) -> None:
+    global _worker_scene
+    from .stage.reader import read_stage
+
+    _worker_scene = prepare(read_stage(stage))
+
+
+def _job(args) -> tuple[int, int, float, float]:
+    """(photons, segments, trace seconds, bare-Embree seconds) of one batch."""
+    emitter, start, count, resolution = args
+    ps = _worker_scene
+    t0 = time.perf_counter()
+    tally = trace_batch(ps, emitter, 0, start, count, resolution, record_rays=True)
+    t1 = time.perf_counter()
+    for o, d in tally.rays:
+        ps.intersect(o, d)
+    t2 = time.perf_counter()
+    return count, tally.segments, t1 - t0, t2 - t1
 
 
 def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
                   threads: int | None = None, resolution: int = 64,
-                  batch_size: int = 1 << 17) -> dict:
-    """Trace ``stage`` for about ``seconds``, replay its rays through bare Embree; rates."""
+                  batch_size: int = 1 << 17, workers: str = "processes") -> dict:
+    """Trace ``stage`` for about ``seconds`` on ``threads`` workers; rates and their ratio."""
     from .stage.reader import read_stage
 
     path = Path(stage) if stage is not None else DEMO_STAGE
     scene = read_stage(path)
-    ps = prepare(scene)
     threads = threads or os.cpu_count() or 1
     flux = [e.flux for e in scene.emitters]
     emitter = max(range(len(flux)), key=flux.__getitem__)
-
-    tallies = []
-    start = 0
-    t0 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    if workers == "processes":
+        pool = ProcessPoolExecutor(threads, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_init, initargs=(str(path),))
+    else:
+        _init(str(path))
+        pool = ThreadPoolExecutor(threads)
+    results = []
+    with pool:
+        list(pool.map(_job, [(emitter, 0, 1024, resolution)] * threads))  # warm up
+        start, t0 = 0, time.perf_counter()
         while time.perf_counter() - t0 < seconds:
-            jobs = [(start + k * batch_size) for k in range(threads)]
+            jobs = [(emitter, start + k * batch_size, batch_size, resolution)
+                    for k in range(threads)]
             start += threads * batch_size
-            tallies += list(pool.map(
-                lambda s: trace_batch(ps, emitter, 0, s, batch_size, resolution, record_rays=True),
-                jobs))
-    t_trace = time.perf_counter() - t0
-    segments = sum(t.segments for t in tallies)
-    photons = sum(t.photons for t in tallies)
-    # the same rays, one wavefront at a time, as the tracer cast them
-    waves = [ray for t in tallies for ray in t.rays]
-    t1 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in pool.map(lambda od: ps.intersect(od[0], od[1]), waves):
-            pass
-    t_raw = time.perf_counter() - t1
-    rays = sum(o.shape[0] for o, _ in waves)
-    assert rays == segments
-    seg_rate = segments / t_trace
-    raw_rate = rays / t_raw
+            results += list(pool.map(_job, jobs))
+    photons = sum(r[0] for r in results)
+    segments = sum(r[1] for r in results)
+    t_trace = sum(r[2] for r in results) / threads
+    t_raw = sum(r[3] for r in results) / threads
+    ps = prepare(scene)
     return {"stage": str(path), "triangles": ps.triangle_count, "threads": threads,
-            "photons": photons, "segments": segments, "trace_seconds": t_trace,
-            "raw_seconds": t_raw, "photons_per_second": photons / t_trace,
-            "segments_per_second": seg_rate, "raw_rays_per_second": raw_rate,
-            "ratio": seg_rate / raw_rate}
+            "workers": workers, "photons": photons, "segments": segments,
+            "trace_seconds": t_trace, "raw_seconds": t_raw,
+            "photons_per_second": photons / t_trace, "segments_per_second": segments / t_trace,
+            "raw_rays_per_second": segments / t_raw, "ratio": t_raw / t_trace}

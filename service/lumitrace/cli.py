@@ -55,7 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
                         f"estimate; 0 writes the raw estimate (default {DEFAULT_THRESHOLD:g})")
     t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     t.add_argument("--threads", type=_positive_int, default=None,
-                   help="tracing threads (default: all cores); the map does not depend on it")
+                   help="tracing workers (default: all cores); the map does not depend on it")
+    t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
+                   help="run batches in threads or worker processes; auto uses processes "
+                        "for long runs (the map does not depend on it)")
     t.add_argument("--out", type=Path, default=None,
                    help="folder for the EXR (default: beside the stage); the result layer is "
                         "always written beside the stage")
@@ -93,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seconds", type=_positive_float, default=10.0,
                    help="approximate tracing time (default 10)")
     b.add_argument("--threads", type=_positive_int, default=None)
+    b.add_argument("--workers", choices=("processes", "threads"), default="processes",
+                   help="run batches in worker processes (as long traces do) or threads")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
@@ -136,7 +141,7 @@ def cmd_trace(args) -> int:
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed,
-                             threads=args.threads or os.cpu_count() or 1)
+                             threads=args.threads or os.cpu_count() or 1, workers=args.workers)
     bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
     try:
         result = run(scene, settings, progress=update)
@@ -223,13 +228,15 @@ def cmd_report(args) -> int:
 def cmd_bench(args) -> int:
     from .bench import run_benchmark
 
-    report = run_benchmark(stage=args.stage, seconds=args.seconds, threads=args.threads)
+    report = run_benchmark(stage=args.stage, seconds=args.seconds, threads=args.threads,
+                           workers=args.workers)
     if args.json:
         print(json.dumps(report))
     else:
         print(f"stage                {report['stage']}")
         print(f"triangles            {report['triangles']:,}")
         print(f"photons              {report['photons']:,}")
+        print(f"workers              {report['threads']} {report['workers']}")
         print(f"tracer               {report['segments_per_second']:,.0f} segments/s "
               f"({report['photons_per_second']:,.0f} photons/s)")
         print(f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays")

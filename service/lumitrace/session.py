@@ -9,14 +9,14 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
 from .accumulate import Accumulator
 from .convergence import MapEstimate, estimate
 from .scene import Scene
-from .tracer import MAX_DEPTH, PreparedScene, prepare, trace_batch
+from . import workers
+from .tracer import MAX_DEPTH, PreparedScene, prepare
 
 DEFAULT_PHOTONS = 2_000_000
 DEFAULT_RESOLUTION = 64
@@ -43,6 +43,7 @@ class TraceSettings:
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
     batch_size: int = 1 << 17
     max_depth: int = MAX_DEPTH
+    workers: str = "auto"
 
     def budget(self) -> int | None:
         """Total photons to trace, or None when only time or error stops the session."""
@@ -136,19 +137,16 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     round_photons = min(FIRST_ITERATION, full_round)
     iteration = 0
     est = None
-    start = time.perf_counter()
 
-    def job(j):
-        e, first, count = j
-        return trace_batch(ps, e, settings.seed, first, count, settings.resolution,
-                           settings.max_depth)
-
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    mode = workers.choose(settings.workers, threads, budget)
+    with workers.batch_runner(scene, ps, mode, threads, settings.seed, settings.resolution,
+                              settings.max_depth) as trace_jobs:
+        start = time.perf_counter()
         while True:
             jobs = _round_jobs(done, targets, shares, round_photons, settings.batch_size)
             if not jobs:
                 break
-            for tally in pool.map(job, jobs):
+            for tally in trace_jobs(jobs):
                 acc.add(tally)
                 done[tally.emitter] += tally.photons
             iteration += 1
