@@ -159,8 +159,9 @@ def cmd_trace(args) -> int:
         "peak_direction": fig.peak_direction, "relative_error": fig.relative_error,
         "converged": fig.converged, "photons_per_second": fig.photons_per_second,
         "segments_per_second": fig.segments_per_second,
-        "outputs": {"intensity_map": written["intensity_map"],
-                    "result_layer": written["result_layer"]},
+        "photometry": {**written["photometry"].as_dict(), "symmetry": written["symmetry"]},
+        "outputs": {k: written[k] for k in ("intensity_map", "ies", "ldt", "polar_diagram",
+                                            "photometric_solid", "result_layer")},
     }
     if args.json:
         print(json.dumps(summary))
@@ -179,7 +180,17 @@ def cmd_trace(args) -> int:
         est = result.estimate
         print(f"  relative error  {fig.relative_error:.2%} estimated RMS over the sphere "
               f"(raw map {est.raw_error:.2%}){', converged' if fig.converged else ''}")
+        p = written["photometry"]
+        ang = lambda v: "-" if v is None else f"{v:.1f} deg"  # noqa: E731
+        print(f"  downward flux   {p.downward_flux_fraction:.1%}   CIE flux code {p.cie_flux_code}")
+        print(f"  beam angle      {ang(p.beam_angle_c0_c180)} (C0-C180), "
+              f"{ang(p.beam_angle_c90_c270)} (C90-C270)")
+        print(f"  field angle     {ang(p.field_angle_c0_c180)} (C0-C180), "
+              f"{ang(p.field_angle_c90_c270)} (C90-C270)")
+        print(f"  symmetry        {written['symmetry']}")
         print(f"  intensity map   {written['intensity_map']}")
+        print(f"  IES / LDT       {written['ies']}  {written['ldt']}")
+        print(f"  pictures        {written['polar_diagram']}  {written['photometric_solid']}")
         print(f"  result layer    {written['result_layer']}")
     return 0
 

@@ -113,12 +113,23 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dic
         "emitters": [{"path": t.path, "flux": t.flux, "photons": t.photons}
                      for t in acc.emitters],
     }
+    from .photometry.files import figures_for_layer, write_photometry
+
+    photometry = write_photometry(scene, est.filtered, fig.escaped_lm, out, name,
+                                  result.relative_error)
+    pfig = photometry["figures"]
+    meta["photometry"] = {**pfig.as_dict(), "symmetry": photometry["grid"].symmetry}
     channels = {"Y": est.filtered, "raw.Y": est.raw, "count": acc.counts().astype(np.float64),
                 "relativeError": np.minimum(est.texel_error, 1e30)}
     write_intensity_exr(exr_path, channels, meta)
     layer_dir = stage_path.parent
     layer_path = write_result_layer(stage_path, scene.luminaire_path, {
         "intensityMap": os.path.relpath(exr_path, layer_dir),
+        "iesFile": os.path.relpath(photometry["ies"], layer_dir),
+        "ldtFile": os.path.relpath(photometry["ldt"], layer_dir),
+        "polarDiagram": os.path.relpath(photometry["polar"], layer_dir),
+        "photometricSolid": os.path.relpath(photometry["solid"], layer_dir),
+        **figures_for_layer(pfig),
         "photons": fig.photons,
         "iterations": fig.iterations,
         "elapsedSeconds": fig.seconds,
@@ -131,4 +142,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dic
         "converged": fig.converged,
         "inputHash": digest,
     })
-    return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig}
+    return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig,
+            "ies": str(photometry["ies"]), "ldt": str(photometry["ldt"]),
+            "polar_diagram": str(photometry["polar"]),
+            "photometric_solid": str(photometry["solid"]),
+            "photometry": pfig, "symmetry": photometry["grid"].symmetry}

@@ -53,6 +53,15 @@ RESULT_ATTRIBUTES: dict[str, str] = {
     "seed": "int",
     "converged": "bool",
     "inputHash": "string",
+    "downwardFluxFraction": "double",
+    "peakIntensity": "double",
+    "beamAngleC0": "double",
+    "beamAngleC90": "double",
+    "fieldAngleC0": "double",
+    "fieldAngleC90": "double",
+    "cieFluxCode": "string",
+    "polarDiagram": "asset",
+    "photometricSolid": "asset",
 }
 
 _NON_NEGATIVE = {"photons", "iterations", "resolution"}

@@ -1,0 +1,121 @@
+"""Pictures of a distribution: the polar light distribution curve and the photometric solid.
+
+The polar curve is the classic datasheet diagram: intensities in cd/klm of lamp flux in the
+C0-C180 plane (solid) and the C90-C270 plane (dashed), nadir (gamma = 0) at the bottom,
+C0 and C90 on the right. The photometric solid is the surface r = I(direction) drawn
+around the luminaire's own geometry, rendered offscreen with pyvista.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_path
+from ..scene import Scene
+from . import frame
+from .grid import CGammaGrid
+
+
+def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
+                  title: str = "") -> Path:
+    """Write the polar light distribution curve (PNG) of ``grid`` (cd)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    per_klm = 1000.0 / lamp_lumens
+    g = grid.gamma
+    fig = plt.figure(figsize=(6, 6.4), dpi=120)
+    ax = fig.add_subplot(projection="polar")
+    ax.set_theta_zero_location("S")
+    ax.set_theta_direction(1)
+    for c, style, label in ((0.0, "-", "C0 - C180"), (90.0, "--", "C90 - C270")):
+        right = grid.at(np.array([c]))[0] * per_klm
+        left = grid.at(np.array([c + 180.0]))[0] * per_klm
+        theta = np.concatenate([np.radians(g), 2 * np.pi - np.radians(g[::-1])])
+        r = np.concatenate([right, left[::-1]])
+        ax.plot(theta, r, style, lw=1.6, color="#c0392b" if c == 0 else "#2c5aa0", label=label)
+    ax.set_thetagrids(np.arange(0, 360, 30),
+                      [f"{int(a if a <= 180 else 360 - a)}°" for a in range(0, 360, 30)])
+    ax.set_rlabel_position(100)
+    ax.grid(True, lw=0.4, alpha=0.6)
+    ax.set_title((title + "\n" if title else "") + "cd/klm", fontsize=10)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.1), fontsize=8, frameon=False)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
+                      title: str = "") -> Path:
+    """Write a picture (PNG) of the photometric solid around the luminaire geometry."""
+    full = grid.full()
+    cs = np.append(full.c, 360.0)
+    cd = np.vstack([full.candela, full.candela[:1]])
+    cc, gg = np.meshgrid(cs, full.gamma, indexing="ij")
+    d = frame.directions(cc, gg, scene.up_axis)
+    tri = np.asarray(scene.triangles)
+    if tri.size:
+        lo, hi = tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)
+        center, size = 0.5 * (lo + hi), float((hi - lo).max())
+    else:
+        center, size = np.zeros(3), 0.1
+    peak = float(cd.max()) or 1.0
+    pts = center + d * (cd / peak * 1.5 * size)[..., None]
+    try:
+        return _solid_pyvista(path, pts, tri, scene.up_axis, title)
+    except Exception:  # no working offscreen OpenGL: draw it with matplotlib instead
+        return _solid_matplotlib(path, pts, tri, title)
+
+
+def _solid_pyvista(path, pts, tri, up_axis, title) -> Path:
+    import pyvista as pv
+    import vtk
+
+    vtk.vtkLogger.SetStderrVerbosity(vtk.vtkLogger.VERBOSITY_OFF)  # no X server: not news
+    vtk.vtkObject.GlobalWarningDisplayOff()
+    pv.OFF_SCREEN = True
+    grid = pv.StructuredGrid(pts[..., 0], pts[..., 1], pts[..., 2])
+    plotter = pv.Plotter(off_screen=True, window_size=(900, 800))
+    plotter.set_background("white")
+    plotter.add_mesh(grid, color="#f5b041", opacity=0.55, smooth_shading=True,
+                     show_edges=True, edge_color="#b9770e", line_width=0.3)
+    if tri.size:
+        faces = np.hstack([np.full((len(tri), 1), 3), np.arange(3 * len(tri)).reshape(-1, 3)])
+        mesh = pv.PolyData(tri.reshape(-1, 3), faces.ravel())
+        plotter.add_mesh(mesh, color="#7f8c8d", smooth_shading=False)
+    if title:
+        plotter.add_text(title, font_size=10, color="black")
+    plotter.view_vector((1.0, -1.4, 0.8) if up_axis == "Z" else (1.0, 0.8, 1.4),
+                        viewup=(0, 0, 1) if up_axis == "Z" else (0, 1, 0))
+    plotter.add_axes(color="black")
+    with atomic_path(path) as tmp:
+        plotter.screenshot(str(tmp))
+    plotter.close()
+    return Path(path)
+
+
+def _solid_matplotlib(path, pts, tri, title) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(6, 6), dpi=120)
+    ax = fig.add_subplot(projection="3d")
+    ax.plot_surface(pts[..., 0], pts[..., 1], pts[..., 2], color="#f5b041", alpha=0.5,
+                    edgecolor="#b9770e", linewidth=0.2)
+    if tri.size:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        ax.add_collection3d(Poly3DCollection(tri, facecolor="#7f8c8d", edgecolor="none"))
+    ax.set_title(title, fontsize=9)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
