@@ -1,0 +1,201 @@
+"""Type C photometry: frame, grid, figures, IES and EULUMDAT files, third-party readers."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lumitrace.cubemap import texel_solid_angles
+from lumitrace.photometry import frame
+from lumitrace.photometry.eulumdat import format_ldt, parse_ldt, plane_angles, read_ldt
+from lumitrace.photometry.grid import CGammaGrid, apply_symmetry, resample
+from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
+from lumitrace.photometry.quantities import figures
+from lumitrace.references import expected_intensity, read_expectation
+from lumitrace.texel_quadrature import texel_integrals
+
+ROOT = Path(__file__).resolve().parents[1]
+RES = 64
+
+
+def exact_map(fn, res=RES):
+    """The noise-free cube map of a closed-form intensity (texel averages, cd)."""
+    return texel_integrals(fn, res) / texel_solid_angles(res)
+
+
+@pytest.fixture(scope="module")
+def lambertian():
+    exp = read_expectation(ROOT / "stages" / "reference" / "lambertian_disc.usda")
+    return exact_map(lambda d: expected_intensity(exp, d))
+
+
+def test_frame_is_right_handed_with_nadir_down():
+    for up in ("Z", "Y"):
+        c0, c90, u = frame.axes(up)
+        assert np.allclose(np.cross(c0, c90), u)
+        d = frame.directions(np.array([0.0, 90.0, 0.0]), np.array([0.0, 90.0, 90.0]), up)
+        assert np.allclose(d[0], -u) and np.allclose(d[1], c90) and np.allclose(d[2], c0)
+        c, g = frame.angles(d, up)
+        assert np.allclose(g, [0, 90, 90]) and np.allclose(c[1:], [90, 0])
+    assert np.allclose(frame.axes("Y")[1], [0, 0, -1])  # C90 of a Y-up stage
+
+
+def test_lambertian_grid_candela_and_flux(lambertian):
+    grid = resample(lambertian, "Z", 1000.0)
+    assert grid.flux() == pytest.approx(1000.0, rel=1e-12)
+    for gamma in (0.0, 30.0, 60.0, 80.0):
+        j = int(np.argmin(np.abs(grid.gamma - gamma)))
+        want = 1000.0 / np.pi * np.cos(np.radians(gamma))
+        assert grid.candela[:, j] == pytest.approx(want, rel=0.01)
+    assert grid.candela[:, grid.gamma > 92.0].max() < 1e-9
+    assert apply_symmetry(grid, 0.01).symmetry == "rotational"
+
+
+def test_figures_of_the_lambertian_disc(lambertian):
+    f = figures(lambertian, "Z", 1000.0, 1000.0)
+    assert f.luminous_flux == pytest.approx(1000.0, rel=1e-9)
+    assert f.light_output_ratio == pytest.approx(1.0)
+    assert f.downward_flux_fraction == pytest.approx(1.0, abs=5e-4)  # texels on the horizon
+    assert f.peak_intensity == pytest.approx(1000 / np.pi, rel=0.01)
+    assert f.beam_angle_c0_c180 == pytest.approx(120.0, abs=0.5)  # cos = 0.5 at 60 deg
+    assert f.field_angle_c90_c270 == pytest.approx(2 * np.degrees(np.arccos(0.1)), abs=0.5)
+    # sin^2 of 41.4, 60, 75.5 deg: 43.7, 75.0, 93.7 percent
+    assert f.cie_flux_code == "44 75 94 100 100"
+
+
+def _asymmetric(d):
+    """Brighter toward +X (C0), a little toward +Y (C90), nothing upward."""
+    down = np.maximum(-d[:, 2], 0.0)
+    return down * (100.0 + 80.0 * np.maximum(d[:, 0], 0.0) + 30.0 * np.maximum(d[:, 1], 0.0))
+
+
+def test_asymmetric_profile_fixes_the_orientation_in_ies():
+    m = exact_map(_asymmetric, 32)
+    grid = apply_symmetry(resample(m, "Z", c_step=5.0), 0.01)
+    assert grid.symmetry == "none"
+    ies = parse_ies(format_ies(grid, 1000.0, 0.1, 0.1, 0.0))
+    back = ies.grid()
+    j = int(np.argmin(np.abs(back.gamma - 60.0)))
+    at = lambda c: back.at(np.array([c]))[0, j]  # noqa: E731
+    assert at(0.0) > at(90.0) > at(180.0)  # C0 = +X brightest, then C90 = +Y
+    assert at(180.0) == pytest.approx(at(270.0), rel=0.02)
+
+
+def test_ies_round_trip_and_keywords(lambertian):
+    grid = apply_symmetry(resample(lambertian, "Z", 1000.0), 0.01)
+    text = format_ies(grid, 1000.0, 0.1, 0.1, 0.0, {"MANUFAC": "ACME", "LUMCAT": "X1"})
+    lines = text.split("\r\n")
+    assert lines[0] == "IES:LM-63-2019"
+    for kw in ("[TEST]", "[TESTLAB]", "[ISSUEDATE]", "[MANUFAC] ACME", "[LUMCAT] X1"):
+        assert any(ln.startswith(kw) for ln in lines), kw
+    assert "TILT=NONE" in lines and max(len(ln) for ln in lines) <= 256
+    ies = parse_ies(text)
+    assert ies.version == "LM-63-2019" and ies.photometric_type == 1 and ies.units == 2
+    assert ies.file_generation == pytest.approx(1.01)
+    back = ies.grid()
+    np.testing.assert_allclose(back.candela, grid.candela, rtol=1e-5)
+    assert back.flux() == pytest.approx(grid.flux(), rel=1e-5)
+
+
+OLD_FILES = {
+    "1986": "Old lamp label\nTILT=NONE\n1 1000 1 3 1 1 2 0 0 0\n1 1 100\n0 45 90\n0\n100 50 0\n",
+    "1991": "IESNA91\n[TEST] 1\n[MANUFAC] M\nTILT=NONE\n1 1000 2 3 1 1 2 0 0 0\n1 1 100\n"
+            "0 45 90\n0\n50 25 0\n",
+    "1995": "IESNA:LM-63-1995\n[TEST] 2\nTILT=NONE\n1 1000 1 3 2 1 1 0 0 0\n1 1 100\n"
+            "0,45,90\n0,180\n100,50,0\n100,50,0\n",
+    "2002": "IESNA:LM-63-2002\n[TEST] 3\n[MORE] continued\nTILT=INCLUDE\n1\n3\n0 45 90\n"
+            "1 0.9 0.8\n1 1000 1 3 1 1 2 0 0 0\n0.5 1 100\n0 45 90\n0\n200 100 0\n",
+}
+
+
+@pytest.mark.parametrize("version", sorted(OLD_FILES))
+def test_reads_every_lm63_version(version):
+    ies = parse_ies(OLD_FILES[version])
+    assert ies.version == f"LM-63-{version}"
+    g = ies.grid()
+    assert g.candela[0, 0] == pytest.approx(100.0)  # multiplier and ballast factor applied
+    assert g.candela[0, 1] == pytest.approx(50.0)
+    if version == "2002":
+        assert ies.keywords["TEST"] == "3 continued"
+
+
+def test_ldt_symmetry_3_follows_the_standard_plane_order():
+    # Mc = 24 planes of 15 deg: Mc1 = 3 * 24 / 4 + 1 = 19 (C270), Mc2 = 31 (C90)
+    cs = plane_angles(3, 24, 15.0)
+    assert cs[0] == 270.0 and cs[-1] == 90.0 and len(cs) == 13 and 0.0 in cs
+    c = np.arange(90.0, 270.0 + 1e-9, 15.0)
+    gam = np.arange(0.0, 181.0, 10.0)
+    # symmetric about the C90-C270 plane, brighter toward C180 than toward C0
+    cd = np.array([[100.0 + 50.0 * np.cos(np.radians(ci - 180.0)) * np.cos(np.radians(g)) ** 2
+                    for g in gam] for ci in c])
+    grid = CGammaGrid(c, gam, cd, "C90-C270")
+    dims = dict(length=100, width=100, height=10, lum_length=100, lum_width=100, lum_height=0)
+    text = format_ldt(grid, 1000.0, "test", dims, 1.0, 1.0, dc=15.0)
+    ldt = parse_ldt(text)
+    first = ldt.cd_per_klm[0]  # the file's first data plane is C270
+    np.testing.assert_allclose(first, grid.at(np.array([270.0]))[0], rtol=1e-3)
+    np.testing.assert_allclose(ldt.grid.at(c), cd, rtol=1e-3)
+
+
+def test_ldt_round_trip_with_our_reader_and_eulumdat_py(lambertian, tmp_path):
+    pyldt = pytest.importorskip("pyldt")
+    grid = apply_symmetry(resample(lambertian, "Z", 1000.0, c_step=15.0), 0.01)
+    dims = dict(length=100, width=100, height=0, lum_length=100, lum_width=100, lum_height=0)
+    path = tmp_path / "disc.ldt"
+    path.write_text(format_ldt(grid, 1000.0, "disc", dims, 1.0, 1.0, dc=15.0), encoding="latin-1")
+    ours = read_ldt(path)
+    np.testing.assert_allclose(ours.grid.candela, grid.candela, rtol=1e-3, atol=1e-3)
+    theirs = pyldt.LdtReader.read(str(path))
+    h = theirs.header
+    assert h.isym == 1 and h.mc == 24 and h.ng == len(grid.gamma)
+    assert h.lamp_flux == [1000.0] and h.lorl == pytest.approx(100.0)
+    cd_klm = np.asarray(theirs.intensities, dtype=float)
+    np.testing.assert_allclose(cd_klm[0], grid.candela[0], rtol=1e-3, atol=1e-3)
+
+
+def test_third_party_eulumdat_reads_our_ies_and_ldt(tmp_path):
+    eulumdat = pytest.importorskip("eulumdat")
+    stage = tmp_path / "disc.usda"
+    shutil.copy(ROOT / "stages" / "reference" / "lambertian_disc.usda", stage)
+    from lumitrace.outputs import write_outputs
+    from lumitrace.session import TraceSettings, run
+    from lumitrace.stage.reader import read_stage
+
+    result = run(read_stage(stage), TraceSettings(photons=1_000_000, resolution=32, threads=2))
+    written = write_outputs(result, tmp_path)
+    ours = written["photometry"]
+    ldt = eulumdat.Eulumdat.from_file(written["ldt"])
+    ies = eulumdat.Eulumdat.from_ies_file(written["ies"])
+    assert ldt.light_output_ratio == pytest.approx(100.0 * ours.light_output_ratio, abs=0.01)
+    assert ldt.downward_flux_fraction == pytest.approx(100.0 * ours.downward_flux_fraction,
+                                                       abs=0.01)
+    for other in (ldt, ies):
+        # our peak is the maximum of the fine, unsymmetrised map: noise lifts it a little
+        assert other.max_intensity() == pytest.approx(ours.peak_intensity, rel=0.04)
+        codes = [int(x) for x in str(other.cie_flux_codes()).split()]
+        mine = [int(x) for x in ours.cie_flux_code.split()]
+        assert all(abs(a - b) <= 1 for a, b in zip(codes[:4], mine[:4])), (codes, mine)
+    assert ldt.beam_angle() == pytest.approx(ours.beam_angle_c0_c180, abs=3.0)
+
+
+def test_reference_stage_ies_matches_closed_form_and_escaped_flux(tmp_path):
+    stage = tmp_path / "slab.usda"
+    shutil.copy(ROOT / "stages" / "reference" / "fresnel_slab.usda", stage)
+    from lumitrace.outputs import write_outputs
+    from lumitrace.session import TraceSettings, run
+    from lumitrace.stage.reader import read_stage
+
+    result = run(read_stage(stage), TraceSettings(photons=2_000_000, resolution=32, threads=2))
+    written = write_outputs(result, tmp_path)
+    grid = read_ies(written["ies"]).grid()
+    escaped = result.accumulator.fluxes()["escaped"]
+    assert grid.flux() == pytest.approx(escaped, rel=0.01)
+    exp = read_expectation(stage)
+    full = grid.full()
+    for gamma in (0.0, 20.0, 40.0, 60.0):
+        j = int(np.argmin(np.abs(full.gamma - gamma)))
+        d = frame.directions(np.zeros(1), np.array([full.gamma[j]]), "Z")
+        want = expected_intensity(exp, d)[0]
+        assert full.candela[:, j].mean() == pytest.approx(want, rel=0.03)
