@@ -26,7 +26,8 @@ TYPES = {"asset": "asset", "int64": "int64", "int": "int", "double": "double",
 def full_results(folder: Path, photons: int = 1_000_000) -> dict:
     out = folder / "out"
     out.mkdir(exist_ok=True)
-    for name in ("stage.intensity.exr", "stage.ies", "stage.ldt"):
+    for name in ("stage.intensity.exr", "stage.ies", "stage.ldt", "stage.polar.png",
+                 "stage.solid.png"):
         (out / name).write_bytes(b"x")
     return {
         "intensityMap": out / "stage.intensity.exr",      # absolute paths are made relative
@@ -43,6 +44,15 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "seed": 42,
         "converged": True,
         "inputHash": "0123abcd",
+        "downwardFluxFraction": 0.75,
+        "peakIntensity": 321.5,
+        "beamAngleC0": 60.5,
+        "beamAngleC90": float("nan"),
+        "fieldAngleC0": 100.25,
+        "fieldAngleC90": 101.0,
+        "cieFluxCode": "44 75 94 75 99",
+        "polarDiagram": out / "stage.polar.png",
+        "photometricSolid": out / "stage.solid.png",
     }
 
 
