@@ -85,22 +85,33 @@ LUMINOUS_FLUX = "lumitrace:luminousFlux"
 # -- LumitraceLuminaireAPI ------------------------------------------------------------
 RESULT_PREFIX = "lumitrace:result:"
 #: Result attribute name -> Sdf value type name, as in ``schemas/schema.usda``.
-RESULT_ATTRIBUTES = {
-    RESULT_PREFIX + "intensityMap": "asset",
-    RESULT_PREFIX + "iesFile": "asset",
-    RESULT_PREFIX + "ldtFile": "asset",
-    RESULT_PREFIX + "photons": "int64",
-    RESULT_PREFIX + "iterations": "int",
-    RESULT_PREFIX + "elapsedSeconds": "double",
-    RESULT_PREFIX + "relativeError": "double",
-    RESULT_PREFIX + "luminousFlux": "double",
-    RESULT_PREFIX + "lightOutputRatio": "double",
-    RESULT_PREFIX + "threshold": "double",
-    RESULT_PREFIX + "resolution": "int",
-    RESULT_PREFIX + "seed": "int",
-    RESULT_PREFIX + "converged": "bool",
-    RESULT_PREFIX + "inputHash": "string",
+#: The luminaire API's result attributes: name after ``lumitrace:result:`` -> value kind.
+RESULT_FIELDS = {
+    "intensityMap": "asset",
+    "iesFile": "asset",
+    "ldtFile": "asset",
+    "photons": "int64",
+    "iterations": "int",
+    "elapsedSeconds": "double",
+    "relativeError": "double",
+    "luminousFlux": "double",
+    "lightOutputRatio": "double",
+    "threshold": "double",
+    "resolution": "int",
+    "seed": "int",
+    "converged": "bool",
+    "inputHash": "string",
+    "downwardFluxFraction": "double",
+    "peakIntensity": "double",
+    "beamAngleC0": "double",
+    "beamAngleC90": "double",
+    "fieldAngleC0": "double",
+    "fieldAngleC90": "double",
+    "cieFluxCode": "string",
+    "polarDiagram": "asset",
+    "photometricSolid": "asset",
 }
+RESULT_ATTRIBUTES = {RESULT_PREFIX + k: v for k, v in RESULT_FIELDS.items()}
 
 _registered = False
 

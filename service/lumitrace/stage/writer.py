@@ -27,6 +27,7 @@ from typing import Any, Mapping
 
 from ..atomic import atomic_path
 from ..errors import OutputError
+from ..schema import RESULT_FIELDS
 
 #: Applied API schema of the luminaire prim holding the result.
 LUMINAIRE_API = "LumitraceLuminaireAPI"
@@ -38,31 +39,7 @@ RESULT_LAYER_SUFFIX = ".lumitrace.usda"
 #: Result attributes: key (attribute name after ``lumitrace:result:``) -> value kind.
 #: Kinds map to Sdf value types: asset -> Asset, int64 -> Int64, int -> Int,
 #: double -> Double, bool -> Bool, string -> String.
-RESULT_ATTRIBUTES: dict[str, str] = {
-    "intensityMap": "asset",
-    "iesFile": "asset",
-    "ldtFile": "asset",
-    "photons": "int64",
-    "iterations": "int",
-    "elapsedSeconds": "double",
-    "relativeError": "double",
-    "luminousFlux": "double",
-    "lightOutputRatio": "double",
-    "threshold": "double",
-    "resolution": "int",
-    "seed": "int",
-    "converged": "bool",
-    "inputHash": "string",
-    "downwardFluxFraction": "double",
-    "peakIntensity": "double",
-    "beamAngleC0": "double",
-    "beamAngleC90": "double",
-    "fieldAngleC0": "double",
-    "fieldAngleC90": "double",
-    "cieFluxCode": "string",
-    "polarDiagram": "asset",
-    "photometricSolid": "asset",
-}
+RESULT_ATTRIBUTES: dict[str, str] = RESULT_FIELDS
 
 _NON_NEGATIVE = {"photons", "iterations", "resolution"}
 _INT_RANGE = {"int": (-2 ** 31, 2 ** 31 - 1), "int64": (-2 ** 63, 2 ** 63 - 1)}
