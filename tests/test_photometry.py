@@ -199,3 +199,33 @@ def test_reference_stage_ies_matches_closed_form_and_escaped_flux(tmp_path):
         d = frame.directions(np.zeros(1), np.array([full.gamma[j]]), "Z")
         want = expected_intensity(exp, d)[0]
         assert full.candela[:, j].mean() == pytest.approx(want, rel=0.03)
+
+
+def test_result_layer_offers_an_ies_shaped_light_instead_of_the_emitters(tmp_path):
+    from pxr import Usd, UsdLux
+
+    from lumitrace.outputs import write_outputs
+    from lumitrace.session import TraceSettings, run
+    from lumitrace.stage.reader import read_stage
+
+    stage_path = tmp_path / "downlight.usda"
+    shutil.copy(ROOT / "stages" / "downlight.usda", stage_path)
+    scene = read_stage(stage_path)
+    result = run(scene, TraceSettings(photons=200_000, resolution=16, threads=2))
+    written = write_outputs(result, None)
+    stage = Usd.Stage.Open(str(stage_path))
+    lum = stage.GetDefaultPrim()
+    vset = lum.GetVariantSets().GetVariantSet("lumitraceRepresentation")
+    assert vset.GetVariantSelection() == "geometry"
+    led = stage.GetPrimAtPath("/Luminaire/LED")
+    assert led.IsActive() and not stage.GetPrimAtPath("/Luminaire/lumitracePhotometricLight")
+    vset.SetVariantSelection("photometric")
+    assert not stage.GetPrimAtPath("/Luminaire/LED").IsActive()
+    light = UsdLux.DiskLight(stage.GetPrimAtPath("/Luminaire/lumitracePhotometricLight"))
+    assert light
+    ies = UsdLux.ShapingAPI(light.GetPrim()).GetShapingIesFileAttr().Get()
+    assert Path(ies.resolvedPath) == Path(written["ies"]).resolve()
+    flux = light.GetPrim().GetAttribute("lumitrace:luminousFlux").Get()
+    assert flux == pytest.approx(written["photometry"].luminous_flux, rel=1e-6)
+    # the light emits along its -Z: down in this Z-up stage, like the IES nadir
+    assert light.GetRadiusAttr().Get() > 0

@@ -70,6 +70,29 @@ def figures(result: TraceResult) -> ResultFigures:
         photons_per_second=acc.photons / secs, segments_per_second=acc.segments / secs)
 
 
+def photometric_light(scene, photometry: dict, layer_dir: Path) -> dict:
+    """The UsdLux light standing in for the luminaire: an IES-shaped disk the size of its
+    luminous opening (equal area), at the opening's centre, with the luminaire's flux."""
+    from .photometry import frame
+
+    opening = photometry["opening"]
+    _, _, up = frame.axes(scene.up_axis)
+    mpu = scene.meters_per_unit
+    tri = np.asarray(scene.triangles).reshape(-1, 3)
+    if tri.size:
+        lo, hi = tri.min(axis=0), tri.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        if photometry["figures"].downward_flux_fraction > 0.5:  # opening at the bottom
+            centre = centre - up * (0.5 * float((hi - lo) @ up))
+    else:
+        centre = np.mean([np.asarray(e.to_world)[:3, 3] for e in scene.emitters], axis=0)
+    radius = float(np.sqrt(max(opening.length * opening.width, 1e-12) / np.pi))
+    return {"ies": os.path.relpath(photometry["ies"], layer_dir),
+            "flux": photometry["figures"].luminous_flux, "radius": radius / mpu,
+            "position": tuple(float(x) / mpu for x in centre), "up_axis": scene.up_axis,
+            "emitters": [e.path for e in scene.emitters if "[" not in e.path]}
+
+
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dict:
     """Write the EXR and the result layer; return the paths and figures as a dict."""
     from .exr import write_intensity_exr
@@ -141,7 +164,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dic
         "seed": result.settings.seed,
         "converged": fig.converged,
         "inputHash": digest,
-    })
+    }, light=photometric_light(scene, photometry, layer_dir))
     return {"intensity_map": str(exr_path), "result_layer": str(layer_path), "figures": fig,
             "ies": str(photometry["ies"]), "ldt": str(photometry["ldt"]),
             "polar_diagram": str(photometry["polar"]),

@@ -99,14 +99,11 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
     stage = Path(stage_path).absolute()
     if not stage.is_file():
         raise OutputError("no such stage file", str(stage))
-    if light is not None:
-        raise NotImplementedError("the result light (UsdLux light with the computed IES "
-                                  "file) is not written yet")
     layer_path = result_layer_path(stage)
     values = convert_results(results, layer_path.parent)
     prim_path = _luminaire_path(stage, luminaire_path)
 
-    text = _result_layer_text(stage, prim_path, values)
+    text = _result_layer_text(stage, prim_path, values, light)
     # Read the root layer before writing anything: a stage Sdf cannot read fails here.
     root = None if stage.suffix.lower() == ".usdz" else _open_copy(stage)
     mode = _file_mode(layer_path if layer_path.exists() else stage)
@@ -221,7 +218,7 @@ def _luminaire_path(stage: Path, luminaire_path: str | None):
     return path
 
 
-def _result_layer_text(stage: Path, prim_path, values: dict) -> str:
+def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | None = None) -> str:
     from pxr import Sdf
 
     type_names = {"asset": Sdf.ValueTypeNames.Asset, "int64": Sdf.ValueTypeNames.Int64,
@@ -238,7 +235,52 @@ def _result_layer_text(stage: Path, prim_path, values: dict) -> str:
                                  type_names[RESULT_ATTRIBUTES[key]],
                                  Sdf.VariabilityVarying, declaresCustom=False)
         attr.default = value
+    if light is not None:
+        _photometric_variant(layer, prim_path, light)
     return layer.ExportToString()
+
+
+#: Variant set on the luminaire: "geometry" (its own emitters, the default) or
+#: "photometric" (one UsdLux light shaped by the computed IES file, emitters off).
+REPRESENTATION = "lumitraceRepresentation"
+PHOTOMETRIC_LIGHT = "lumitracePhotometricLight"
+
+
+def _photometric_variant(layer, prim_path, light: Mapping) -> None:
+    """Author the ``photometric`` variant: a DiskLight the size of the luminous opening at
+    its centre, emitting down (local -Z to nadir, local +X to C0), shaped by the IES file,
+    with the luminaire's flux; the traced emitters deactivated in that variant.
+
+    ``light`` holds ``ies`` (asset path relative to the layer), ``flux`` (lm), ``radius``
+    and ``position`` (stage units, luminaire space), ``up_axis`` and ``emitters`` (paths).
+    """
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
+
+    stage = Usd.Stage.Open(layer)
+    prim = stage.OverridePrim(prim_path)
+    vset = prim.GetVariantSets().AddVariantSet(REPRESENTATION)
+    vset.AddVariant("geometry")
+    vset.AddVariant("photometric")
+    vset.SetVariantSelection("photometric")
+    with vset.GetVariantEditContext():
+        disk = UsdLux.DiskLight.Define(stage, prim_path.AppendChild(PHOTOMETRIC_LIGHT))
+        disk.CreateRadiusAttr(float(light["radius"]))
+        flux = float(light["flux"])
+        disk.CreateNormalizeAttr(True)
+        disk.CreateIntensityAttr(flux / math.pi)  # normalised: flux = pi * luminance
+        p = disk.GetPrim()
+        p.AddAppliedSchema("LumitraceEmitterAPI")
+        p.CreateAttribute("lumitrace:luminousFlux", Sdf.ValueTypeNames.Float).Set(flux)
+        shaping = UsdLux.ShapingAPI.Apply(p)
+        shaping.CreateShapingIesFileAttr(Sdf.AssetPath(str(light["ies"])))
+        shaping.CreateShapingIesNormalizeAttr(True)
+        xf = UsdGeom.Xformable(p)
+        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*light["position"]))
+        if light.get("up_axis", "Z") == "Y":
+            xf.AddRotateXOp().Set(-90.0)  # local -Z to -Y (nadir), local +X stays C0
+        for path in light.get("emitters", ()):
+            stage.OverridePrim(path).SetActive(False)
+    vset.SetVariantSelection("geometry")
 
 
 def _open_copy(path: Path, metadata_only: bool = False):
