@@ -257,7 +257,7 @@ def test_failing_first_write_writes_nothing(stage_copy):
         write_result_layer(stage_path, "/Luminaire", {"bogus": 1})
     with pytest.raises(ValueError, match="prim path"):
         write_result_layer(stage_path, "Luminaire", {"photons": 1})
-    with pytest.raises(NotImplementedError):
+    with pytest.raises(ValueError, match="radius"):
         write_result_layer(stage_path, "/Luminaire", {"photons": 1}, light={"ies": "x.ies"})
     with pytest.raises(OutputError):
         write_result_layer(stage_path.with_name("missing.usda"), "/Luminaire", {"photons": 1})

@@ -79,8 +79,9 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
         take real numbers (stored as double; inf and nan are kept as such);
         ``converged`` takes a bool, ``inputHash`` a string.
     light : mapping, optional
-        Reserved for the UsdLux light that will carry the computed IES file; not
-        implemented yet (passing it raises ``NotImplementedError``).
+        The IES-shaped UsdLux light standing in for the luminaire, authored in the
+        ``photometric`` variant of the ``lumitraceRepresentation`` variant set (see
+        :func:`_photometric_variant` for its keys); missing keys raise ``ValueError``.
 
     Returns
     -------
@@ -101,6 +102,10 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
         raise OutputError("no such stage file", str(stage))
     layer_path = result_layer_path(stage)
     values = convert_results(results, layer_path.parent)
+    if light is not None:
+        missing = sorted({"ies", "flux", "radius", "position"} - set(light))
+        if missing:
+            raise ValueError(f"the result light needs {', '.join(missing)}")
     prim_path = _luminaire_path(stage, luminaire_path)
 
     text = _result_layer_text(stage, prim_path, values, light)
