@@ -55,6 +55,17 @@ def _profile_table(base_cos_power: int, angle_deg: float, softness: float, focus
     return theta, cdf / cdf[-1]
 
 
+def shaping_emits(kind: str, cone_angle: float, cone_softness: float, focus: float) -> bool:
+    """Whether a light of ``kind`` shaped so still has directions to emit in, as the sampler
+    resolves them (an extreme focus can leave none)."""
+    try:
+        _profile_table(1 if kind in ("disk", "rect") else 0, float(cone_angle),
+                       float(cone_softness), float(focus))
+    except ValueError:
+        return False
+    return True
+
+
 def _shaped_directions(u1, u2, base_cos_power: int, e: Emitter) -> np.ndarray:
     """Local directions (3, N) about +z distributed as the shaped profile (table inversion)."""
     theta_tab, cdf = _profile_table(base_cos_power, float(e.cone_angle), float(e.cone_softness),

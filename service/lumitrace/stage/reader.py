@@ -46,6 +46,7 @@ import numpy as np
 from pxr import Pcp, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from .. import schema
+from ..emission import shaping_emits
 from ..errors import StageError
 from ..scene import Emitter, Material, Scene
 from . import validate
@@ -142,7 +143,10 @@ def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: "_UsdDiagn
     stage_file = str(Path(layer.realPath).resolve()) if layer.realPath else ""
     label = stage_file or layer.identifier
     try:
-        return _Reader(stage, _timecode(time), stage_file, label, diagnostics).read(luminaire)
+        # every value read is checked explicitly: numpy's warnings about the NaN, Inf or
+        # overflow those checks catch would only add lines to the one error a user sees
+        with np.errstate(all="ignore"):
+            return _Reader(stage, _timecode(time), stage_file, label, diagnostics).read(luminaire)
     except Tf.ErrorException as exc:
         raise StageError(f"USD error while reading the stage: {_tf_message(exc)}",
                          label) from exc
@@ -258,7 +262,8 @@ def light_flux(kind: str, intensity: float, exposure: float = 0.0,
     normalised to luminance 1.
     """
     del kind  # same formula for every kind once the area is known
-    lum = intensity * 2.0 ** exposure * luminance(color)
+    with np.errstate(over="ignore"):  # a huge exposure is an infinite flux, refused later
+        lum = intensity * float(np.exp2(exposure)) * luminance(color)
     return math.pi * lum * (1.0 if normalize else area) * fraction
 
 
@@ -452,17 +457,16 @@ class _Reader:
         path = str(prim.GetPath())
         instancer = UsdGeom.PointInstancer(prim)
         prototypes = instancer.GetPrototypesRel().GetForwardedTargets()
-        proto_indices = np.asarray(instancer.GetProtoIndicesAttr().Get(self.time) or [],
-                                   dtype=np.int64)
+        proto_indices = _array(instancer.GetProtoIndicesAttr().Get(self.time), path,
+                               "protoIndices", np.int64)
         if proto_indices.size == 0:
             self._warn(f"{path}: point instancer has no instances")
             return
         for name, size in (("positions", 3), ("orientations", 4), ("orientationsf", 4),
                            ("scales", 3)):
             attr = prim.GetAttribute(name)
-            value = attr.Get(self.time) if attr else None
-            if value is not None and len(value):
-                arr = _as_array(value, size)
+            arr = _array(attr.Get(self.time) if attr else None, path, name, width=size)
+            if len(arr):
                 validate.check_finite_points(arr, path, name, what=name)
         if proto_indices.min() < 0 or proto_indices.max() >= len(prototypes):
             raise StageError(f"indexes prototype {int(proto_indices.max())} but there are "
@@ -545,6 +549,7 @@ class _Reader:
         for matrix, _ in self._placements(prim, frame):
             world = (flat @ matrix[:3, :3] + matrix[3, :3]) * self.meters_per_unit
             world = world.reshape(-1, 3, 3)
+            validate.check_extent(world, path, "points")
             if np.linalg.det(matrix[:3, :3]) < 0.0:  # a mirroring transform flips winding
                 world = world[:, [0, 2, 1]]
             keep = _non_degenerate(world)
@@ -613,21 +618,21 @@ class _Reader:
     def _mesh_polygons(self, prim: Usd.Prim):
         path = str(prim.GetPath())
         mesh = UsdGeom.Mesh(prim)
-        raw_points = mesh.GetPointsAttr().Get(self.time)
-        if raw_points is None or len(raw_points) == 0:
+        points = _array(mesh.GetPointsAttr().Get(self.time), path, "points", width=3)
+        if len(points) == 0:
             self._warn(f"{path}: mesh has no points: skipped")
             return None
-        points = _as_array(raw_points, 3)
         validate.check_finite_points(points, path, "points")
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(self.time) or [], dtype=np.int64)
-        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(self.time) or [],
-                             dtype=np.int64)
+        counts = _array(mesh.GetFaceVertexCountsAttr().Get(self.time), path,
+                        "faceVertexCounts", np.int64)
+        indices = _array(mesh.GetFaceVertexIndicesAttr().Get(self.time), path,
+                         "faceVertexIndices", np.int64)
         validate.check_face_topology(counts, indices, len(points), path)
         keep_face = counts >= 3
         small = int(counts.size - np.count_nonzero(keep_face))
         if small:
             self._warn(f"{path}: {small} face(s) with fewer than 3 vertices ignored")
-        holes = np.asarray(mesh.GetHoleIndicesAttr().Get(self.time) or [], dtype=np.int64)
+        holes = _array(mesh.GetHoleIndicesAttr().Get(self.time), path, "holeIndices", np.int64)
         if holes.size:
             valid = holes[(holes >= 0) & (holes < counts.size)]
             keep_face[valid] = False
@@ -642,7 +647,8 @@ class _Reader:
             subset_prim = subset.GetPrim()
             if not subset_prim.IsActive():
                 continue
-            faces = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], dtype=np.int64)
+            faces = _array(subset.GetIndicesAttr().Get(self.time), str(subset_prim.GetPath()),
+                           "indices", np.int64)
             inside = faces[(faces >= 0) & (faces < n_faces)]
             if inside.size != faces.size:
                 self._warn(f"{subset_prim.GetPath()}: {faces.size - inside.size} indices "
@@ -794,8 +800,9 @@ class _Reader:
                                                     path, "inputs:intensity")
             exposure = validate.check_finite(light.GetExposureAttr().Get(self.time), path,
                                              "inputs:exposure")
-            color = np.asarray(light.GetColorAttr().Get(self.time), dtype=np.float64)
-            if not np.isfinite(color).all() or (color < 0).any():
+            color = _array(light.GetColorAttr().Get(self.time), path, "inputs:color",
+                           width=3).ravel()
+            if color.size != 3 or not np.isfinite(color).all() or (color < 0).any():
                 raise StageError(f"must be finite and >= 0, got {tuple(color)}", path,
                                  "inputs:color")
             normalize = bool(light.GetNormalizeAttr().Get(self.time))
@@ -803,6 +810,9 @@ class _Reader:
 
         for matrix, label in self._placements(prim, frame):
             to_world = np.diag([self.meters_per_unit] * 3 + [1.0]) @ matrix.T
+            validate.check_extent(to_world[:3, 3], path, "xformOpOrder")
+            validate.check_extent(np.abs(to_world[:3, :3]).sum(axis=0) * max(
+                v for v in dims.values() if not isinstance(v, bool)), path, "xformOpOrder")
             if not _invertible(matrix[:3, :3]):
                 self._raise_bad_transform(prim, singular=True)
             if authored_flux is not None:
@@ -811,7 +821,8 @@ class _Reader:
                 area = _world_area(kind, dims, to_world[:3, :3])
                 flux = light_flux(kind, intensity, exposure, color, normalize, area, fraction)
                 if not (math.isfinite(flux) and flux > 0.0):
-                    raise StageError(f"light emits no flux ({flux:g} lm from intensity "
+                    raise StageError(f"light emits no {'finite ' if flux else ''}flux "
+                                     f"({flux:g} lm from intensity "
                                      f"{intensity:g}, exposure {exposure:g}, world area "
                                      f"{area:g} m^2)", path, "inputs:intensity")
             extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
@@ -849,6 +860,10 @@ class _Reader:
         if focus > 0.0 and "focus" not in _EMITTER_FIELDS:
             self._warn(f"{path}.inputs:shaping:focus: focus is not supported: ignored")
             focus = 0.0
+        if not shaping_emits(kind, angle, softness, focus):
+            raise StageError("shaping leaves no direction to emit in (cone angle, softness and "
+                             "focus together)", path,
+                             "inputs:shaping:focus" if focus > 0.0 else "inputs:shaping:cone:angle")
         return angle, softness, focus
 
     def _warn(self, message: str) -> None:
@@ -919,8 +934,23 @@ def _light_kind(prim: Usd.Prim) -> str | None:
     return None
 
 
-def _as_array(value, width: int) -> np.ndarray:
-    return np.asarray(value, dtype=np.float64).reshape(-1, width)
+def _array(value, where: str, prop: str, dtype=np.float64, width: int | None = None
+           ) -> np.ndarray:
+    """An array attribute's value as a numpy array ((N,) or (N, width)); no value gives an
+    empty one. A value of another type (an unknown type name in the file, text) is a
+    StageError naming the prim and property."""
+    if value is None:
+        return np.zeros((0, width) if width else 0, dtype=dtype)
+    try:
+        arr = np.asarray(value, dtype=dtype)
+        arr = arr.reshape(-1, width) if width else arr.reshape(-1)
+        if not width and np.ndim(value) != 1:
+            raise ValueError(value)
+    except (TypeError, ValueError, OverflowError):
+        kind = f"{width}-component vectors" if width else "numbers"
+        raise StageError(f"expected an array of {kind}, got {type(value).__name__}",
+                         where, prop) from None
+    return arr
 
 
 def _has_api(prim: Usd.Prim, name: str) -> bool:
@@ -999,14 +1029,15 @@ def _invertible(linear: np.ndarray) -> bool:
 
 def _non_degenerate(triangles: np.ndarray) -> np.ndarray:
     """Mask of triangles with a non-zero area (relative to their longest edge), at any
-    scale: edges are divided by their largest coordinate before squaring, so that
-    triangles of 1e-200 m do not underflow nor those of 1e200 m overflow."""
+    scale: edges are scaled by a power of two to a largest coordinate near 1 before squaring,
+    so that triangles of 1e-200 m do not underflow nor those of 1e200 m overflow."""
     e1 = triangles[:, 1] - triangles[:, 0]
     e2 = triangles[:, 2] - triangles[:, 0]
     size = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1))
     ok = (size > 0.0) & np.isfinite(size)
-    inv = np.divide(1.0, size, out=np.zeros_like(size), where=ok)[:, None]
-    e1, e2 = e1 * inv, e2 * inv
+    _, exponent = np.frexp(np.where(ok, size, 1.0))
+    e1 = np.ldexp(np.where(ok[:, None], e1, 0.0), -exponent[:, None])  # exact powers of 2
+    e2 = np.ldexp(np.where(ok[:, None], e2, 0.0), -exponent[:, None])
     e3 = e2 - e1
     cross = np.linalg.norm(np.cross(e1, e2), axis=1)
     longest = np.max(np.stack([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e3)]), axis=0)

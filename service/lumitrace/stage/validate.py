@@ -115,6 +115,22 @@ def check_finite_points(points: np.ndarray, where: str, prop: str = "points",
         raise StageError(f"{count} {noun} {verb} NaN or infinite", where, prop)
 
 
+#: Largest distance from the origin, in metres, of anything the tracer is given: far
+#: beyond any luminaire, and small enough that differences and squares of coordinates stay
+#: finite in float64.
+MAX_EXTENT_METRES = 1e150
+
+
+def check_extent(values: np.ndarray, where: str, prop: str) -> None:
+    """World coordinates (m) must be finite and within :data:`MAX_EXTENT_METRES`."""
+    with np.errstate(invalid="ignore"):
+        worst = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    if not worst <= MAX_EXTENT_METRES:  # also NaN and Inf
+        raise StageError(f"reaches {worst:g} m from the origin in world metres, beyond the "
+                         f"{MAX_EXTENT_METRES:g} m lumitrace traces (metersPerUnit or the "
+                         "transforms are too large)", where, prop)
+
+
 def check_finite_matrix(matrix: np.ndarray, where: str, prop: str) -> None:
     """A transform must have finite entries."""
     if not np.isfinite(matrix).all():
