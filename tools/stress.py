@@ -36,7 +36,7 @@ TRACED = [
     (sc.case_scales, 1.0, {}),
     (sc.case_far_offset, 1.0, {}),
     (sc.case_die_in_2m_luminaire, 1.0, {}),
-    (sc.case_edge_aimed, 1.0, {}),
+    (sc.case_edge_aimed, 5.0, {}),
     (sc.case_white_closed_box, 0.25, {"max_depth": sc.MAX_DEPTH}),
     (sc.case_coincident_faces, 1.0, {}),
     (sc.case_overlapping_faces, 1.0, {}),

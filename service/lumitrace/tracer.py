@@ -28,6 +28,10 @@ from .scene import DIELECTRIC, Emitter, Scene
 RAY_EPSILON = 1e-5
 #: Hit points are taken this far (normalised units) before Embree's float32 hit distance.
 RAY_BACKOFF = 0.5 * RAY_EPSILON
+#: A hit closer to the ray's plane crossing than this (normalised units, along the normal)
+#: is checked against the float64 origin: float32 rounding can put an origin that is just
+#: off one face onto another one near an edge (see :func:`trace_batch`).
+NEAR_HIT = 1e-6
 #: Default maximum number of surface interactions; photons still alive then are cut.
 MAX_DEPTH = 512
 
@@ -36,13 +40,14 @@ MAX_DEPTH = 512
 class PreparedScene:
     """Scene arrays in the normalised frame plus the Embree scene built from them.
 
-    Unit triangle normals (front = counter-clockwise) are a (3, T) array.
+    Unit triangle normals (front = counter-clockwise) and first corners are (3, T) arrays.
     """
 
     scene: Scene
     center: np.ndarray
     scale: float
     normals: np.ndarray
+    corners: np.ndarray  # (3, T) first corner of every triangle, normalised
     material_index: np.ndarray
     triangle_kind: np.ndarray
     polarised: bool
@@ -114,7 +119,7 @@ def prepare(scene: Scene) -> PreparedScene:
         table = MaterialTable.from_materials(scene.materials)
         kind = np.take(table.kind, np.asarray(scene.material_index))
     return PreparedScene(scene=scene, center=center, scale=scale,
-                         normals=normals, material_index=np.asarray(scene.material_index), triangle_kind=kind,
+                         normals=normals, corners=v0, material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          polarised=bool(np.any(kind == DIELECTRIC)),
                          table=table, embree=embree)
 
@@ -202,8 +207,27 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
         t = np.take(hit["tfar"], h).astype(np.float64)
         p = o + (t - np.minimum(RAY_BACKOFF, 0.5 * t)) * d
         ng = np.take(ps.normals, prim, axis=1)
+        # A hit at about the ray's origin, on a face the float64 origin lies in front of
+        # while the ray moves away from it, is no hit: the origin was just off this face
+        # (an edge or corner away from the face it left) and float32 rounding put it on
+        # it. The photon goes on unchanged (escaped out of a corner of a closed box
+        # otherwise). Only hits within float32 rounding of the origin need the test.
+        cos_in = dot(d, ng)
+        near = np.flatnonzero(t * np.abs(cos_in) < NEAR_HIT)
+        stay = None
+        if near.size:
+            rel = np.take(o, near, axis=1) - np.take(ps.corners, np.take(prim, near), axis=1)
+            away = dot(rel, np.take(ng, near, axis=1)) * np.take(cos_in, near) > 0.0
+            if away.any():
+                stay = near[away]
         rnd = rng.uniforms_from(base, (depth + 1) * rng.DIMS_PER_BOUNCE, 4)
+        d_in, pol_in = d, pol
         d, alive, pol = scatter(ps.table, np.take(ps.material_index, prim), d, ng, rnd, pol, runs)
+        if stay is not None:
+            d[:, stay] = d_in[:, stay]
+            alive[stay] = True
+            if pol is not None:
+                pol[:, stay] = pol_in[:, stay]
         n_alive = int(np.count_nonzero(alive))
         tally.absorbed += int(base.size - n_alive)
         if n_alive < base.size:
