@@ -25,8 +25,8 @@ class Material:
 
     ``reflectance`` is the diffuse (Lambertian) reflectance, ``specular_reflectance`` the
     mirror/glossy albedo, ``transmittance`` the diffuse transmittance of a translucent
-    material or the internal transmittance per crossing of a dielectric, ``ior`` the
-    refractive index of a dielectric (outside is air, n = 1), ``roughness`` the GGX
+    material (dielectrics are clear and do not use it), ``ior`` the refractive index of a
+    dielectric (outside is air, n = 1), ``roughness`` the GGX
     roughness (alpha = roughness**2) of a glossy one.
     """
 
