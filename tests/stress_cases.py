@@ -347,52 +347,43 @@ def _sound(*traced: Traced) -> bool:
 MOVED_PER_PHOTON = 1e-4
 
 
-def case_units(folder: Path, photons: int) -> CaseResult:
-    """The same downlight modelled in m, mm, cm and inches gives the same map."""
+def _same_map_case(folder: Path, photons: int, label: str, stem: str,
+                   variants: list[tuple[str, dict]], what: str) -> CaseResult:
+    """Trace the mini downlight as modelled and in each variant (keyword arguments of
+    :func:`mini_downlight`): every variant must give the same map, balanced and finite."""
     t0 = time.perf_counter()
-    ref = trace(mini_downlight(folder / "units_m.usda"), photons)
+    ref = trace(mini_downlight(folder / f"{stem}_ref.usda"), photons)
     moved, runs = {}, [ref]
-    for name in ("mm", "cm", "in"):
-        r = trace(mini_downlight(folder / f"units_{name}.usda", UNITS[name]), photons)
+    for i, (name, kw) in enumerate(variants):
+        r = trace(mini_downlight(folder / f"{stem}_{i}.usda", **kw), photons)
         moved[name] = _moved(ref, r)
         runs.append(r)
     worst = max(moved.values())
-    return _result("units m/mm/cm/in", _sound(*runs) and worst <= MOVED_PER_PHOTON * photons,
-                   "photons on another path vs m: " + ", ".join(f"{k} {v}" for k, v in moved.items()),
+    return _result(label, _sound(*runs) and worst <= MOVED_PER_PHOTON * photons,
+                   f"photons on another path vs {what}: "
+                   + ", ".join(f"{k} {v}" for k, v in moved.items()),
                    f"<= {MOVED_PER_PHOTON:g} per photon, balanced, finite", runs, t0, moved=moved)
+
+
+def case_units(folder: Path, photons: int) -> CaseResult:
+    """The same downlight modelled in m, mm, cm and inches gives the same map."""
+    return _same_map_case(folder, photons, "units m/mm/cm/in", "units",
+                          [(u, {"unit": UNITS[u]}) for u in ("mm", "cm", "in")], "m")
 
 
 def case_scales(folder: Path, photons: int) -> CaseResult:
     """The same downlight scaled by 1e-3 and 1e3 (a double scale op) gives the same map."""
-    t0 = time.perf_counter()
-    ref = trace(mini_downlight(folder / "scale_1.usda"), photons)
-    moved, runs = {}, [ref]
-    for s in (1e-3, 1e3):
-        r = trace(mini_downlight(folder / f"scale_{s:g}.usda", scale=s), photons)
-        moved[f"{s:g}"] = _moved(ref, r)
-        runs.append(r)
-    worst = max(moved.values())
-    return _result("scale 1e-3/1/1e3", _sound(*runs) and worst <= MOVED_PER_PHOTON * photons,
-                   "photons on another path vs 1: " + ", ".join(f"x{k} {v}" for k, v in moved.items()),
-                   f"<= {MOVED_PER_PHOTON:g} per photon", runs, t0, moved=moved)
+    return _same_map_case(folder, photons, "scale 1e-3/1/1e3", "scale",
+                          [(f"x{s:g}", {"scale": s}) for s in (1e-3, 1e3)], "x1")
 
 
 def case_far_offset(folder: Path, photons: int) -> CaseResult:
     """The downlight 1 km and 10 km from the origin (double translate op) gives the same
     map; in mm, the 1 km offset is 1e6 units."""
-    t0 = time.perf_counter()
-    ref = trace(mini_downlight(folder / "origin.usda"), photons)
-    moved, runs = {}, [ref]
-    for name, unit, off in (("1 km", 1.0, (1000.0, 1000.0, 1000.0)),
-                            ("10 km", 1.0, (1e4, -1e4, 1e4)),
-                            ("1 km in mm", 0.001, (1e6, 1e6, 1e6))):
-        r = trace(mini_downlight(folder / f"offset_{len(moved)}.usda", unit, offset=off), photons)
-        moved[name] = _moved(ref, r)
-        runs.append(r)
-    worst = max(moved.values())
-    return _result("far from the origin", _sound(*runs) and worst <= MOVED_PER_PHOTON * photons,
-                   "photons on another path: " + ", ".join(f"{k} {v}" for k, v in moved.items()),
-                   f"<= {MOVED_PER_PHOTON:g} per photon", runs, t0, moved=moved)
+    return _same_map_case(folder, photons, "far from the origin", "offset", [
+        ("1 km", {"offset": (1000.0, 1000.0, 1000.0)}),
+        ("10 km", {"offset": (1e4, -1e4, 1e4)}),
+        ("1 km in mm", {"unit": 0.001, "offset": (1e6, 1e6, 1e6)})], "the origin")
 
 
 def case_die_in_2m_luminaire(folder: Path, photons: int) -> CaseResult:
