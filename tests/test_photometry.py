@@ -93,7 +93,8 @@ def test_ies_round_trip_and_keywords(lambertian):
     assert "TILT=NONE" in lines and max(len(ln) for ln in lines) <= 256
     ies = parse_ies(text)
     assert ies.version == "LM-63-2019" and ies.photometric_type == 1 and ies.units == 2
-    assert ies.file_generation == pytest.approx(1.01)
+    assert ies.file_generation == pytest.approx(1.0001)
+    assert "1.0 1.00010 0" in lines  # LM-63-2019 Table 2: computer simulation
     back = ies.grid()
     np.testing.assert_allclose(back.candela, grid.candela, rtol=1e-5)
     assert back.flux() == pytest.approx(grid.flux(), rel=1e-5)

@@ -19,8 +19,10 @@ from ..atomic import write_text
 from ..errors import LumitraceError
 from .grid import CGammaGrid
 
-#: LM-63-2019 file generation type: computer simulation (digit 2 of 1.ABCDE set).
-FILE_GENERATION_SIMULATION = 1.01
+#: LM-63-2019 file generation type (Table 2, ``1.ABCDE``: A accredited lab, B interpolated
+#: angle set, C lumen scaled, D computer simulation, E undefined): 1.00010 is a computer
+#: simulation (1.01000 would claim an unaccredited lab test with interpolated angles).
+FILE_GENERATION_SIMULATION = 1.0001
 _LINE = 240  # keep lines well inside the 256-character limit
 
 
