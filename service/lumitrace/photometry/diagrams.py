@@ -41,6 +41,13 @@ def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
     ax.set_thetagrids(np.arange(0, 360, 30),
                       [f"{int(a if a <= 180 else 360 - a)}°" for a in range(0, 360, 30)])
     ax.set_rlabel_position(100)
+    # few rings, labelled with thousands separators: a narrow beam's 100000 cd/klm
+    # must not run into its neighbours
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(4))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
+    ax.tick_params(axis="y", labelsize=8)
     ax.grid(True, lw=0.4, alpha=0.6)
     ax.set_title((title + "\n" if title else "") + "cd/klm", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.1), fontsize=8, frameon=False)
