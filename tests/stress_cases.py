@@ -22,10 +22,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
-from lumitrace.cubemap import texel_directions
+from lumitrace.film.cubemap import texel_directions
 from lumitrace.scene import Scene
 from lumitrace.stage.reader import read_stage
-from lumitrace.tracer import MAX_DEPTH, prepare, trace_batch
+from lumitrace.trace.tracer import MAX_DEPTH, prepare, trace_batch
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
 
 #: metersPerUnit of the units luminaires are modelled in.
@@ -83,7 +83,7 @@ def trace(scene: Scene, photons: int, resolution: int = 16, seed: int = 1,
           max_depth: int = MAX_DEPTH, batch: int = 1 << 16, check_rays: bool = True) -> Traced:
     """Trace ``photons`` photons of every emitter (split by flux, as a session does) in
     batches on this thread; with ``check_rays`` every traced ray is checked to be finite."""
-    from lumitrace.session import allocate
+    from lumitrace.run.session import allocate
 
     ps = prepare(scene)
     ntex = 6 * resolution * resolution
@@ -389,7 +389,7 @@ def case_far_offset(folder: Path, photons: int) -> CaseResult:
 def case_die_in_2m_luminaire(folder: Path, photons: int) -> CaseResult:
     """A 1 mm LED die 0.5 mm above a 2 m x 2 m x 4 mm clear glass slab (n = 1.5): the slab
     transmits the closed-form fraction of a Lambertian source, in mm and in m alike."""
-    from lumitrace.references import lambertian_slab_flux
+    from lumitrace.report.references import lambertian_slab_flux
 
     t0 = time.perf_counter()
     expected, _ = lambertian_slab_flux(1.5)
@@ -568,7 +568,7 @@ def case_flipped_normals(folder: Path, photons: int) -> CaseResult:
     """Flipped windings: on two-sided parts (diffuse reflector, board) the map is
     unchanged; a glass slab with every face flipped is detected by its negative volume,
     flipped back with a warning, and transmits the closed-form fraction."""
-    from lumitrace.references import lambertian_slab_flux
+    from lumitrace.report.references import lambertian_slab_flux
 
     t0 = time.perf_counter()
     ref = trace(mini_downlight(folder / "normals_ref.usda"), photons)
@@ -654,7 +654,7 @@ def case_facing_mirrors(folder: Path, photons: int, n: int = 100) -> CaseResult:
     makes exactly n reflections before it walks off them, then leaves in the direction the
     reflections predict; and one perpendicular to them, which never leaves: cut at the depth
     limit, in bounded time."""
-    from lumitrace.cubemap import texel_index
+    from lumitrace.film.cubemap import texel_index
 
     t0 = time.perf_counter()
     gap, half = 0.01, 0.6
@@ -816,9 +816,9 @@ def case_accumulator_at_scale(folder: Path, photons: int, batches: int = 1000) -
     map."""
     from fractions import Fraction
 
-    from lumitrace.accumulate import Accumulator
-    from lumitrace.cubemap import texel_solid_angles
-    from lumitrace.tracer import BatchTally
+    from lumitrace.film.accumulate import Accumulator
+    from lumitrace.film.cubemap import texel_solid_angles
+    from lumitrace.trace.tracer import BatchTally
 
     t0 = time.perf_counter()
     res = 64
@@ -861,7 +861,7 @@ def case_accumulator_at_scale(folder: Path, photons: int, batches: int = 1000) -
 def case_exr_dynamic_range(folder: Path, photons: int) -> CaseResult:
     """A map whose texels span 1e-6 to 1e6 cd round-trips through the float32 EXR to
     within float32 rounding of each texel (relative 2^-24)."""
-    from lumitrace.exr import read_intensity_exr, write_intensity_exr
+    from lumitrace.publish.exr import read_intensity_exr, write_intensity_exr
 
     t0 = time.perf_counter()
     res = 32

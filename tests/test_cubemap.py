@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from lumitrace import cubemap as cm
+from lumitrace.film import cubemap as cm
 
 HERE = Path(__file__).resolve().parent
 FOUR_PI = 4.0 * np.pi

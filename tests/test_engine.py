@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from pxr import Usd, UsdGeom
 
-from lumitrace.cubemap import texel_solid_angles
-from lumitrace.session import TraceSettings, run
+from lumitrace.film.cubemap import texel_solid_angles
+from lumitrace.run.session import TraceSettings, run
 from lumitrace.stage.reader import read_stage
 
 ROOT = Path(__file__).resolve().parents[1]

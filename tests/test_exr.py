@@ -9,8 +9,8 @@ import OpenEXR
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from lumitrace import cubemap as cm
-from lumitrace import exr
+from lumitrace.film import cubemap as cm
+from lumitrace.publish import exr
 from lumitrace.errors import LumitraceError, OutputError
 
 RES = 8

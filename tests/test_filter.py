@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lumitrace.convergence import estimate, relative_rms
-from lumitrace.cubemap import canonical_texels, texel_directions, texel_solid_angles
-from lumitrace.filter import pull_push
+from lumitrace.film.convergence import estimate, relative_rms
+from lumitrace.film.cubemap import canonical_texels, texel_directions, texel_solid_angles
+from lumitrace.film.pullpush import pull_push
 from test_reference_stages import expected_counts, trace
 
 RES = 32

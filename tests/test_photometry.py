@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lumitrace.cubemap import texel_solid_angles
+from lumitrace.film.cubemap import texel_solid_angles
 from lumitrace.photometry import frame
 from lumitrace.photometry.eulumdat import format_ldt, parse_ldt, plane_angles, read_ldt
 from lumitrace.photometry.grid import CGammaGrid, apply_symmetry, resample
 from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
 from lumitrace.photometry.quantities import figures
-from lumitrace.references import expected_intensity, read_expectation
-from lumitrace.texel_quadrature import texel_integrals
+from lumitrace.report.references import expected_intensity, read_expectation
+from lumitrace.film.texel_quadrature import texel_integrals
 
 ROOT = Path(__file__).resolve().parents[1]
 RES = 64
@@ -160,8 +160,8 @@ def test_third_party_eulumdat_reads_our_ies_and_ldt(tmp_path):
     eulumdat = pytest.importorskip("eulumdat")
     stage = tmp_path / "disc.usda"
     shutil.copy(ROOT / "stages" / "reference" / "lambertian_disc.usda", stage)
-    from lumitrace.outputs import write_outputs
-    from lumitrace.session import TraceSettings, run
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
     from lumitrace.stage.reader import read_stage
 
     result = run(read_stage(stage), TraceSettings(photons=1_000_000, resolution=32, threads=2))
@@ -184,8 +184,8 @@ def test_third_party_eulumdat_reads_our_ies_and_ldt(tmp_path):
 def test_reference_stage_ies_matches_closed_form_and_escaped_flux(tmp_path):
     stage = tmp_path / "slab.usda"
     shutil.copy(ROOT / "stages" / "reference" / "fresnel_slab.usda", stage)
-    from lumitrace.outputs import write_outputs
-    from lumitrace.session import TraceSettings, run
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
     from lumitrace.stage.reader import read_stage
 
     result = run(read_stage(stage), TraceSettings(photons=2_000_000, resolution=32, threads=2))
@@ -205,8 +205,8 @@ def test_reference_stage_ies_matches_closed_form_and_escaped_flux(tmp_path):
 def test_result_layer_offers_an_ies_shaped_light_instead_of_the_emitters(tmp_path):
     from pxr import Usd, UsdLux
 
-    from lumitrace.outputs import write_outputs
-    from lumitrace.session import TraceSettings, run
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
     from lumitrace.stage.reader import read_stage
 
     stage_path = tmp_path / "downlight.usda"

@@ -32,8 +32,8 @@ def _y_up_disc(tmp_path: Path) -> Path:
 def test_result_light_axes_in_a_y_up_stage(tmp_path):
     from pxr import Gf, Usd, UsdGeom, UsdLux
 
-    from lumitrace.outputs import write_outputs
-    from lumitrace.session import TraceSettings, run
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
     from lumitrace.stage.reader import read_stage
 
     stage_path = _y_up_disc(tmp_path)

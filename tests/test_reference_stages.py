@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from lumitrace.cubemap import texel_directions, texel_solid_angles
-from lumitrace.references import expected_figures, expected_intensity, read_expectation
-from lumitrace.session import TraceSettings, run
+from lumitrace.film.cubemap import texel_directions, texel_solid_angles
+from lumitrace.report.references import expected_figures, expected_intensity, read_expectation
+from lumitrace.run.session import TraceSettings, run
 from lumitrace.stage.reader import read_stage
-from lumitrace.texel_quadrature import texel_integrals
+from lumitrace.film.texel_quadrature import texel_integrals
 
 STAGES = Path(__file__).resolve().parents[1] / "stages" / "reference"
 ALPHA = 1e-4

@@ -1,4 +1,4 @@
-"""Closed-form references (lumitrace.references) and the expectations stored in the stages."""
+"""Closed-form references (lumitrace.report.references) and the expectations stored in the stages."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from lumitrace.references import (expected_figures, expected_intensity, fresnel_reflectance_sp,
+from lumitrace.report.references import (expected_figures, expected_intensity, fresnel_reflectance_sp,
                                   fresnel_unpolarised, lambertian_slab_flux, read_expectation,
                                   slab_transmittance)
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lumitrace.metrics import psnr, ssim
-from lumitrace.report import ReportSettings, _crossing_time, run_report
+from lumitrace.report.metrics import psnr, ssim
+from lumitrace.report.convergence_report import ReportSettings, _crossing_time, run_report
 
 ROOT = Path(__file__).resolve().parents[1]
 

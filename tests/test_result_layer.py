@@ -1,4 +1,4 @@
-"""The result layer beside the stage (lumitrace.stage.writer)."""
+"""The result layer beside the stage (lumitrace.publish.result_layer)."""
 from __future__ import annotations
 
 import os
@@ -11,9 +11,9 @@ import pytest
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 from lumitrace import atomic
 from lumitrace.errors import OutputError
-from lumitrace.references import read_expectation
-from lumitrace.stage import writer
-from lumitrace.stage.writer import (RESULT_ATTRIBUTES, ResultLayerWarning, result_layer_path,
+from lumitrace.report.references import read_expectation
+from lumitrace.publish import result_layer as writer
+from lumitrace.publish.result_layer import (RESULT_ATTRIBUTES, ResultLayerWarning, result_layer_path,
                                     write_result_layer)
 from pxr import Sdf, Usd, UsdGeom, UsdUtils
 

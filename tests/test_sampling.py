@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from chi2 import sphere_chi2_pvalue, sphere_integral
-from lumitrace import rng
-from lumitrace.emission import emit, shaping_window
-from lumitrace.materials import MaterialTable, random_polarisation, scatter, smith_g1
+from lumitrace.trace import rng
+from lumitrace.trace.emission import emit, shaping_window
+from lumitrace.trace.scattering import MaterialTable, random_polarisation, scatter, smith_g1
 from lumitrace.scene import Emitter, Material
-from lumitrace.sampling import cosine_hemisphere, uniform_cone
+from lumitrace.trace.sampling import cosine_hemisphere, uniform_cone
 
 N = 200_000
 ALPHA = 1e-3

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
-from lumitrace.exr import read_intensity_exr
-from lumitrace.references import expected_intensity, read_expectation
-from lumitrace.texel_quadrature import texel_integrals
+from lumitrace.publish.exr import read_intensity_exr
+from lumitrace.report.references import expected_intensity, read_expectation
+from lumitrace.film.texel_quadrature import texel_integrals
 from test_reference_stages import chi2_pvalue
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from lumitrace.bench import run_benchmark
+from lumitrace.run.bench import run_benchmark
 
 
 def main() -> None:

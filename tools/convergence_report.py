@@ -15,7 +15,7 @@ import os
 import shutil
 from pathlib import Path
 
-from lumitrace.report import ReportSettings, run_report
+from lumitrace.report.convergence_report import ReportSettings, run_report
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("isotropic", "lambertian_disc", "fresnel_slab", "paraboloid")
@@ -23,8 +23,8 @@ STAGES = ("isotropic", "lambertian_disc", "fresnel_slab", "paraboloid")
 
 def long_run_reference(stage: Path, folder: Path, photons: int, resolution: int) -> Path:
     """Trace a copy of ``stage`` with many photons, unfiltered; return its EXR."""
-    from lumitrace.outputs import write_outputs
-    from lumitrace.session import TraceSettings, run
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
     from lumitrace.stage.reader import read_stage
 
     copy = folder / f"{stage.stem}_reference.usda"

@@ -3,7 +3,7 @@
 (``stages/downlight.usda``).
 
 Every reference stage stores its analytic expectation in its root layer's customLayerData
-under ``lumitrace:expectation`` (read it with ``lumitrace.references.read_expectation``).
+under ``lumitrace:expectation`` (read it with ``lumitrace.report.references.read_expectation``).
 Geometric figures that depend on the tessellation (port area fraction, mirror solid angle,
 beam spread) are computed here from the very triangles written to the stage.
 
@@ -31,7 +31,7 @@ try:
 except ImportError:  # running from a source checkout without installing the package
     sys.path.insert(0, str(ROOT / "service"))
 from lumitrace.atomic import write_text  # noqa: E402
-from lumitrace.references import EXPECTATION_KEY, lambertian_slab_flux  # noqa: E402
+from lumitrace.report.references import EXPECTATION_KEY, lambertian_slab_flux  # noqa: E402
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt  # noqa: E402
 
 FLUX = 1000.0  # lm, every reference emitter

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import LumitraceError
-from .session import DEFAULT_THRESHOLD
+from .run.session import DEFAULT_THRESHOLD
 
 
 def _positive_int(text: str) -> int:
@@ -131,8 +131,8 @@ def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
 def cmd_trace(args) -> int:
     import os
 
-    from .outputs import write_outputs
-    from .session import TraceSettings, run
+    from .publish.outputs import write_outputs
+    from .run.session import TraceSettings, run
     from .stage.reader import read_stage
 
     scene = read_stage(args.stage)
@@ -198,8 +198,8 @@ def cmd_trace(args) -> int:
 def cmd_report(args) -> int:
     import os
 
-    from .outputs import stage_name
-    from .report import ReportSettings, run_report
+    from .publish.outputs import stage_name
+    from .report.convergence_report import ReportSettings, run_report
 
     try:
         thresholds = tuple(sorted({float(x) for x in args.thresholds.split(",") if x.strip()}))
@@ -237,7 +237,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import run_benchmark
+    from .run.bench import run_benchmark
 
     report = run_benchmark(stage=args.stage, seconds=args.seconds, threads=args.threads,
                            workers=args.workers)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..cubemap import sample_map, texel_solid_angles
+from ..film.cubemap import sample_map, texel_solid_angles
 from . import frame
 
 #: Symmetries of type C photometry, by the C range they need (LM-63 horizontal angles).

@@ -46,12 +46,12 @@ import numpy as np
 from pxr import Pcp, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from .. import schema
-from ..emission import shaping_emits
+from ..trace.emission import shaping_emits
 from ..errors import StageError
 from ..scene import Emitter, Material, Scene
 from . import validate
 from .validate import Sourced
-from .writer import RESULT_LAYER_SUFFIX
+from ..publish.result_layer import RESULT_LAYER_SUFFIX
 
 #: Rec.709 / sRGB luminance weights (linear RGB -> relative luminance Y).
 REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

@@ -13,8 +13,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
-from .schema import SCHEMA_DIR
-from .tracer import PreparedScene, prepare, trace_batch
+from ..schema import SCHEMA_DIR
+from ..trace.tracer import PreparedScene, prepare, trace_batch
 
 DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
 _worker_scene: PreparedScene | None = None
@@ -22,7 +22,7 @@ _worker_scene: PreparedScene | None = None
 
 def _init(stage: str) -> None:
     global _worker_scene
-    from .stage.reader import read_stage
+    from ..stage.reader import read_stage
 
     _worker_scene = prepare(read_stage(stage))
 
@@ -44,7 +44,7 @@ def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
                   threads: int | None = None, resolution: int = 64,
                   batch_size: int = 1 << 17, workers: str = "processes") -> dict:
     """Trace ``stage`` for about ``seconds`` on ``threads`` workers; rates and their ratio."""
-    from .stage.reader import read_stage
+    from ..stage.reader import read_stage
 
     path = Path(stage) if stage is not None else DEMO_STAGE
     scene = read_stage(path)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .accumulate import Accumulator
 from .cubemap import texel_solid_angles
-from .filter import pull_push
+from .pullpush import pull_push
 
 
 def norm2(image: np.ndarray, omega: np.ndarray) -> float:

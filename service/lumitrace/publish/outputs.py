@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .cubemap import texel_directions
-from .session import TraceResult
+from .. import __version__
+from ..film.cubemap import texel_directions
+from ..run.session import TraceResult
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,7 @@ def figures(result: TraceResult) -> ResultFigures:
 def photometric_light(scene, photometry: dict, layer_dir: Path) -> dict:
     """The UsdLux light standing in for the luminaire: an IES-shaped disk the size of its
     luminous opening (equal area), at the opening's centre, with the luminaire's flux."""
-    from .photometry import frame
+    from ..photometry import frame
 
     opening = photometry["opening"]
     _, _, up = frame.axes(scene.up_axis)
@@ -96,7 +96,7 @@ def photometric_light(scene, photometry: dict, layer_dir: Path) -> dict:
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dict:
     """Write the EXR and the result layer; return the paths and figures as a dict."""
     from .exr import write_intensity_exr
-    from .stage.writer import write_result_layer
+    from .result_layer import write_result_layer
 
     scene = result.scene
     stage_path = Path(scene.stage_path)
@@ -136,7 +136,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> dic
         "emitters": [{"path": t.path, "flux": t.flux, "photons": t.photons}
                      for t in acc.emitters],
     }
-    from .photometry.files import figures_for_layer, write_photometry
+    from ..photometry.files import figures_for_layer, write_photometry
 
     photometry = write_photometry(scene, est.filtered, fig.escaped_lm, out, name,
                                   result.relative_error)

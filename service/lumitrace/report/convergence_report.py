@@ -18,12 +18,12 @@ from typing import Callable
 
 import numpy as np
 
-from .atomic import atomic_path, write_text
-from .convergence import estimate, relative_rms
-from .cubemap import texel_directions, texel_solid_angles, sample_map
-from .errors import LumitraceError
+from ..atomic import atomic_path, write_text
+from ..film.convergence import estimate, relative_rms
+from ..film.cubemap import texel_directions, texel_solid_angles, sample_map
+from ..errors import LumitraceError
 from .metrics import psnr, ssim
-from .session import Progress, TraceSettings, run
+from ..run.session import Progress, TraceSettings, run
 
 ERROR_LEVELS = (0.05, 0.02)
 
@@ -39,7 +39,7 @@ class Reference:
 def analytic_reference(stage_path: str | os.PathLike, resolution: int) -> Reference | None:
     """The exact texel averages of the stage's closed form, when it has one."""
     from .references import expected_intensity, read_expectation
-    from .texel_quadrature import texel_integrals
+    from ..film.texel_quadrature import texel_integrals
 
     try:
         exp = read_expectation(stage_path)
@@ -54,7 +54,7 @@ def analytic_reference(stage_path: str | os.PathLike, resolution: int) -> Refere
 
 def exr_reference(path: str | os.PathLike, resolution: int) -> Reference:
     """A long run's intensity EXR (its unfiltered ``raw.Y``), resampled if needed."""
-    from .exr import read_intensity_exr
+    from ..publish.exr import read_intensity_exr
 
     channels, meta, _ = read_intensity_exr(path)
     image = channels.get("raw.Y", channels.get("Y"))
@@ -98,7 +98,7 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
                reference_exr: str | os.PathLike | None = None,
                progress: Callable[[Progress], None] | None = None) -> dict:
     """Trace ``stage``, record convergence after every iteration, write the report files."""
-    from .stage.reader import read_stage
+    from ..stage.reader import read_stage
 
     scene = read_stage(stage)
     out = Path(out_dir)
@@ -189,7 +189,7 @@ def _plots(out: Path, rows, thresholds, ref, snapshots, picked, main_t) -> dict[
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .exr import cube_to_latlong
+    from ..publish.exr import cube_to_latlong
 
     paths = {}
     colours = plt.cm.viridis(np.linspace(0, 0.85, len(thresholds)))

@@ -52,7 +52,7 @@ class Emitter:
     units, as authored. One-sided area lights (disk, rect) emit towards their local -Z, as
     UsdLux defines; sphere and cylinder lights emit outward from their surface.
     ``cone_angle`` (degrees; 180, or 90 for one-sided lights, means unshaped), ``cone_softness`` and ``focus`` come from
-    UsdLuxShapingAPI, measured from the emission axis (-Z); see :mod:`lumitrace.emission`.
+    UsdLuxShapingAPI, measured from the emission axis (-Z); see :mod:`lumitrace.trace.emission`.
     """
 
     path: str

@@ -12,11 +12,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-from .accumulate import Accumulator
-from .convergence import MapEstimate, estimate
-from .scene import Scene
+from ..film.accumulate import Accumulator
+from ..film.convergence import MapEstimate, estimate
+from ..scene import Scene
 from . import workers
-from .tracer import MAX_DEPTH, PreparedScene, prepare
+from ..trace.tracer import MAX_DEPTH, PreparedScene, prepare
 
 DEFAULT_PHOTONS = 2_000_000
 DEFAULT_RESOLUTION = 64

@@ -16,7 +16,7 @@ import numpy as np
 from . import rng
 from .sampling import (cos_sin, cosine_hemisphere, normalize, to_world, uniform_cone,
                        uniform_disk)
-from .scene import Emitter
+from ..scene import Emitter
 
 _PROFILE_SAMPLES = 4096
 

@@ -12,8 +12,8 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator
 
-from .scene import Scene
-from .tracer import BatchTally, PreparedScene, prepare, trace_batch
+from ..scene import Scene
+from ..trace.tracer import BatchTally, PreparedScene, prepare, trace_batch
 
 #: Photon budgets from which "auto" uses worker processes.
 PROCESS_MIN_PHOTONS = 8_000_000

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .sampling import cos_sin, cosine_about, cross, dot, orthonormal_basis, reflect
-from .scene import (ABSORBER, DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, SCATTERING_MODELS,
+from ..scene import (ABSORBER, DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, SCATTERING_MODELS,
                     TRANSLUCENT, Material)
 
 SCATTERING_CODES = range(len(SCATTERING_MODELS))

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cubemap import texel_solid_angles
-from .scene import Scene
-from .tracer import BatchTally
+from ..scene import Scene
+from ..trace.tracer import BatchTally
 
 
 @dataclass

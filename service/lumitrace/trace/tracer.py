@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import rng
-from .cubemap import texel_index
+from ..film.cubemap import texel_index
 from .emission import emit
-from .materials import UNPOLARISED, MaterialTable, kind_runs, scatter
+from .scattering import UNPOLARISED, MaterialTable, kind_runs, scatter
 from .sampling import cross, dot
-from .scene import DIELECTRIC, Emitter, Scene
+from ..scene import DIELECTRIC, Emitter, Scene
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
 RAY_EPSILON = 1e-5

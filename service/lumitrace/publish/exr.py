@@ -1,7 +1,7 @@
 """The intensity map EXR: OpenEXR cube maps with lumitrace metadata.
 
 ``NAME.intensity.exr`` is a single-part scanline OpenEXR image in ImfEnvmap's cube map
-layout (see :mod:`lumitrace.cubemap`): ``res`` wide, ``6 * res`` tall, header attribute
+layout (see :mod:`lumitrace.film.cubemap`): ``res`` wide, ``6 * res`` tall, header attribute
 ``envmap`` = ``ENVMAP_CUBE``. Channels:
 
 ``Y``
@@ -33,9 +33,9 @@ from typing import Any, Mapping
 import numpy as np
 import OpenEXR
 
-from . import cubemap
-from .atomic import atomic_path
-from .errors import LumitraceError, OutputError
+from ..film import cubemap
+from ..atomic import atomic_path
+from ..errors import LumitraceError, OutputError
 
 #: Header attribute holding the metadata as a JSON object.
 METADATA_ATTRIBUTE = "lumitrace"
@@ -184,7 +184,7 @@ def write_intensity_exr(path: str | os.PathLike, channels: Mapping[str, np.ndarr
     channels : mapping of str to array_like, each shape (6 * res, res)
         Channel name to image (``Y``, ``raw.Y`` in cd, ``count`` in photons; others are
         allowed). Any real dtype; stored as 32-bit FLOAT. Rows and columns follow
-        :mod:`lumitrace.cubemap` (``image[row, col]``, faces stacked top to bottom).
+        :mod:`lumitrace.film.cubemap` (``image[row, col]``, faces stacked top to bottom).
     metadata : mapping
         JSON-serialisable (numpy scalars and arrays allowed), without NaN/Inf; stored as
         the JSON string attribute ``lumitrace``.
@@ -286,7 +286,7 @@ def cube_to_latlong(image, height: int | None = None, weld: bool = True) -> np.n
     height : int, optional
         Rows of the lat-long map (default ``2 * res``); it is ``2 * height`` wide.
     weld : bool
-        Merge the cube's shared edge texels first (:func:`lumitrace.cubemap.weld_seams`)
+        Merge the cube's shared edge texels first (:func:`lumitrace.film.cubemap.weld_seams`)
         so that the result is continuous across the cube's edges.
 
     Returns

@@ -1,0 +1,1 @@
+"""Convergence reports: closed-form references, image metrics, error against time."""
