@@ -4,7 +4,8 @@ import pytest
 
 from chi2 import sphere_chi2_pvalue, sphere_integral
 from lumitrace.trace import rng
-from lumitrace.trace.emission import emit, shaping_window
+from lumitrace.scene.shaping import shaping_window
+from lumitrace.trace.emission import emit
 from lumitrace.trace.scattering import MaterialTable, random_polarisation, scatter, smith_g1
 from lumitrace.scene import Emitter, Material
 from lumitrace.trace.sampling import cosine_hemisphere, uniform_cone

@@ -198,7 +198,7 @@ def cmd_trace(args) -> int:
 def cmd_report(args) -> int:
     import os
 
-    from .publish.outputs import stage_name
+    from .filenames import stage_name
     from .report.convergence_report import ReportSettings, run_report
 
     try:

@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import __version__
 from ..film.cubemap import texel_directions
+from ..filenames import stage_name
 from ..run.session import TraceResult
 
 
@@ -37,11 +38,6 @@ class ResultFigures:
     converged: bool
     photons_per_second: float
     segments_per_second: float
-
-
-def stage_name(stage_path: str | os.PathLike) -> str:
-    """``NAME`` of ``NAME.usda`` (the stage file name without its last extension)."""
-    return Path(stage_path).name.rsplit(".", 1)[0]
 
 
 def input_hash(result: TraceResult) -> str:

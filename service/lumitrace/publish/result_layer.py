@@ -27,14 +27,13 @@ from typing import Any, Mapping
 
 from ..atomic import atomic_path
 from ..errors import OutputError
+from ..filenames import result_layer_path
 from ..schema import RESULT_FIELDS
 
 #: Applied API schema of the luminaire prim holding the result.
 LUMINAIRE_API = "LumitraceLuminaireAPI"
 #: Namespace of the result attributes.
 RESULT_NAMESPACE = "lumitrace:result:"
-#: Suffix appended to the stage name for the result layer (``NAME.lumitrace.usda``).
-RESULT_LAYER_SUFFIX = ".lumitrace.usda"
 
 #: Result attributes: key (attribute name after ``lumitrace:result:``) -> value kind.
 #: Kinds map to Sdf value types: asset -> Asset, int64 -> Int64, int -> Int,
@@ -47,13 +46,6 @@ _INT_RANGE = {"int": (-2 ** 31, 2 ** 31 - 1), "int64": (-2 ** 63, 2 ** 63 - 1)}
 
 class ResultLayerWarning(UserWarning):
     """The result layer was written but could not be sublayered into the stage."""
-
-
-def result_layer_path(stage_path: str | os.PathLike) -> Path:
-    """``NAME.lumitrace.usda`` beside the stage ``NAME.<ext>`` (NAME: the file name without
-    its final extension)."""
-    stage = Path(stage_path)
-    return stage.with_name(stage.stem + RESULT_LAYER_SUFFIX)
 
 
 def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None,

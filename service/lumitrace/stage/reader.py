@@ -46,12 +46,12 @@ import numpy as np
 from pxr import Pcp, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from .. import schema
-from ..trace.emission import shaping_emits
 from ..errors import StageError
 from ..scene import Emitter, Material, Scene
+from ..scene.shaping import shaping_emits, shaping_fraction, unshaped_cone_angle
 from . import validate
 from .validate import Sourced
-from ..publish.result_layer import RESULT_LAYER_SUFFIX
+from ..filenames import RESULT_LAYER_SUFFIX
 
 #: Rec.709 / sRGB luminance weights (linear RGB -> relative luminance Y).
 REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -215,38 +215,6 @@ def preview_surface_values(diffuse_color=(0.18, 0.18, 0.18), metallic: float = 0
         return {schema.SCATTERING: "glossy", schema.SPECULAR_REFLECTANCE: albedo,
                 schema.ROUGHNESS: rough}
     return {schema.SCATTERING: "diffuse", schema.REFLECTANCE: y_diffuse}
-
-
-def shaping_fraction(kind: str, cone_angle: float, cone_softness: float = 0.0,
-                     focus: float = 0.0) -> float:
-    """Fraction of an emitter's unshaped flux that UsdLuxShapingAPI lets through.
-
-    The shaping multiplies the intensity at angle theta from the emission axis (-Z) by
-    ``cos(theta)**focus`` and by a cone window: 1 up to ``angle * (1 - softness)``, a
-    smoothstep down to 0 at ``angle``, 0 beyond. The unshaped intensity is ``cos(theta)``
-    for one-sided disk and rect lights (a hard cone of angle a < 90 deg keeps
-    ``sin(a)**2``) and uniform for sphere lights. Cylinder lights are not shaped.
-    """
-    if kind == "cylinder":
-        return 1.0
-    lambertian = kind in ("disk", "rect")
-    limit = 0.5 * math.pi if lambertian else math.pi
-    t_max = math.radians(cone_angle)
-    softness = min(max(cone_softness, 0.0), 1.0)
-    if focus <= 0.0 and (softness == 0.0 or t_max <= 0.0):
-        t = min(t_max, limit)
-        return math.sin(t) ** 2 if lambertian else 0.5 * (1.0 - math.cos(t))
-    theta = np.linspace(0.0, min(t_max, limit), 20001)
-    t_in = t_max * (1.0 - softness)
-    window = np.ones_like(theta)
-    if t_max > t_in:
-        x = np.clip((t_max - theta) / (t_max - t_in), 0.0, 1.0)
-        window = x * x * (3.0 - 2.0 * x)
-    if focus > 0.0:
-        window = window * np.maximum(np.cos(theta), 0.0) ** focus
-    base = np.sin(theta) * (np.cos(theta) if lambertian else 1.0)
-    total = 0.5 if lambertian else 2.0  # integral of base over the full range
-    return float(np.trapezoid(window * base, theta) / total)
 
 
 def light_flux(kind: str, intensity: float, exposure: float = 0.0,
@@ -834,7 +802,7 @@ class _Reader:
         """Cone angle (deg), softness and focus; unshaped: 90 deg for one-sided lights,
         180 deg (all directions) for sphere and cylinder lights."""
         path = str(prim.GetPath())
-        unshaped = 90.0 if kind in ("disk", "rect") else 180.0
+        unshaped = unshaped_cone_angle(kind)
         if not prim.HasAPI(UsdLux.ShapingAPI):
             return unshaped, 0.0, 0.0
         shaping = UsdLux.ShapingAPI(prim)

@@ -9,66 +9,18 @@ cone window that is 1 inside ``angle * (1 - softness)``, falls with a smoothstep
 """
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 
+from ..scene import Emitter
+from ..scene.shaping import is_one_sided, is_shaped, profile_table
 from . import rng
 from .sampling import (cos_sin, cosine_hemisphere, normalize, to_world, uniform_cone,
                        uniform_disk)
-from ..scene import Emitter
-
-_PROFILE_SAMPLES = 4096
-
-
-def is_shaped(e: Emitter) -> bool:
-    """True when shaping changes the emission of ``e`` from the plain Lambertian one."""
-    limit = 90.0 if e.kind in ("disk", "rect") else 180.0
-    return e.focus > 0.0 or e.cone_angle < limit
-
-
-def shaping_window(theta: np.ndarray, angle_deg: float, softness: float, focus: float) -> np.ndarray:
-    """Relative intensity factor of the shaping at angles ``theta`` (rad) from the axis."""
-    t_max = np.radians(angle_deg)
-    t_in = t_max * (1.0 - np.clip(softness, 0.0, 1.0))
-    w = np.where(theta <= t_max, 1.0, 0.0)
-    if t_max > t_in:
-        x = np.clip((t_max - theta) / (t_max - t_in), 0.0, 1.0)
-        w = w * x * x * (3.0 - 2.0 * x)
-    if focus > 0.0:
-        w = w * np.maximum(np.cos(theta), 0.0) ** focus
-    return w
-
-
-@functools.lru_cache(maxsize=64)
-def _profile_table(base_cos_power: int, angle_deg: float, softness: float, focus: float):
-    """Inverse-CDF table over theta for intensity ``cos^base * window`` (rad)."""
-    limit = np.pi / 2 if base_cos_power > 0 else np.pi
-    t_hi = min(np.radians(angle_deg), limit)
-    theta = np.linspace(0.0, t_hi, _PROFILE_SAMPLES + 1)
-    f = shaping_window(theta, angle_deg, softness, focus) * np.sin(theta)
-    if base_cos_power:
-        f = f * np.maximum(np.cos(theta), 0.0) ** base_cos_power
-    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(theta))])
-    if cdf[-1] <= 0.0:
-        raise ValueError("shaping leaves no emission")
-    return theta, cdf / cdf[-1]
-
-
-def shaping_emits(kind: str, cone_angle: float, cone_softness: float, focus: float) -> bool:
-    """Whether a light of ``kind`` shaped so still has directions to emit in, as the sampler
-    resolves them (an extreme focus can leave none)."""
-    try:
-        _profile_table(1 if kind in ("disk", "rect") else 0, float(cone_angle),
-                       float(cone_softness), float(focus))
-    except ValueError:
-        return False
-    return True
 
 
 def _shaped_directions(u1, u2, base_cos_power: int, e: Emitter) -> np.ndarray:
     """Local directions (3, N) about +z distributed as the shaped profile (table inversion)."""
-    theta_tab, cdf = _profile_table(base_cos_power, float(e.cone_angle), float(e.cone_softness),
+    theta_tab, cdf = profile_table(base_cos_power, float(e.cone_angle), float(e.cone_softness),
                                     float(e.focus))
     theta = np.interp(u1, cdf, theta_tab)
     c, s = cos_sin(2.0 * np.pi * u2)
@@ -96,18 +48,18 @@ def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False):
     normal_map = np.linalg.inv(lin / np.abs(lin).max()).T
     n = index.shape[0]
 
-    if e.kind in ("disk", "rect"):
+    if is_one_sided(e.kind):
         if e.kind == "disk":
             p = uniform_disk(u1, u2, e.radius)
         else:
             p = np.stack([(u1 - 0.5) * e.width, (u2 - 0.5) * e.height, np.zeros(n)])
         axis = normal_map @ np.array([0.0, 0.0, -1.0])
         n_w = np.repeat((axis / np.linalg.norm(axis))[:, None], n, axis=1)
-        local = _shaped_directions(u3, u4, 1, e) if is_shaped(e) else cosine_hemisphere(u3, u4)
+        local = _shaped_directions(u3, u4, 1, e) if is_shaped(e.kind, e.cone_angle, e.focus) else cosine_hemisphere(u3, u4)
         d = to_world(local, n_w)
         n_s = n_w
     elif e.kind == "sphere":
-        if is_shaped(e):
+        if is_shaped(e.kind, e.cone_angle, e.focus):
             w_local = _shaped_directions(u1, u2, 0, e) * _MINUS_Z
         else:
             w_local = uniform_cone(u1, u2, -1.0)

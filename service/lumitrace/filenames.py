@@ -1,0 +1,26 @@
+"""The names of the files a run writes for a stage ``NAME.<ext>``: one place for them, so
+the stage reader recognises our own result layer and the writers agree on every name."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+#: Suffix of the result layer, sublayered into the stage: ``NAME.lumitrace.usda``.
+RESULT_LAYER_SUFFIX = ".lumitrace.usda"
+#: Output suffixes after ``NAME`` (the result layer lives beside the stage).
+INTENSITY_SUFFIX = ".intensity.exr"
+IES_SUFFIX = ".ies"
+LDT_SUFFIX = ".ldt"
+POLAR_SUFFIX = ".polar.png"
+SOLID_SUFFIX = ".solid.png"
+
+
+def stage_name(stage_path: str | os.PathLike) -> str:
+    """``NAME`` of ``NAME.usda`` (the stage file name without its last extension)."""
+    return Path(stage_path).name.rsplit(".", 1)[0]
+
+
+def result_layer_path(stage_path: str | os.PathLike) -> Path:
+    """``NAME.lumitrace.usda`` beside the stage ``NAME.<ext>``."""
+    stage = Path(stage_path)
+    return stage.with_name(stage_name(stage) + RESULT_LAYER_SUFFIX)
