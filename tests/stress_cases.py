@@ -25,7 +25,7 @@ import lumitrace  # noqa: F401  (registers the schema before any stage is compos
 from lumitrace.film.cubemap import texel_directions
 from lumitrace.scene import Scene
 from lumitrace.stage.reader import read_stage
-from lumitrace.trace.tracer import MAX_DEPTH, prepare, trace_batch
+from lumitrace.trace.tracer import MAX_DEPTH, BatchJob, prepare, trace_batch
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
 
 #: metersPerUnit of the units luminaires are modelled in.
@@ -92,8 +92,8 @@ def trace(scene: Scene, photons: int, resolution: int = 16, seed: int = 1,
     finite = True
     for e, share in enumerate(allocate([em.flux for em in scene.emitters], photons)):
         for start in range(0, share, batch):
-            t = trace_batch(ps, e, seed, start, min(batch, share - start), resolution,
-                            max_depth, record_rays=check_rays)
+            t = trace_batch(ps, BatchJob(e, start, min(batch, share - start), seed, resolution,
+                                         max_depth), record_rays=check_rays)
             counts += t.counts
             absorbed += t.absorbed
             cut += t.cut
@@ -818,7 +818,7 @@ def case_accumulator_at_scale(folder: Path, photons: int, batches: int = 1000) -
 
     from lumitrace.film.accumulate import Accumulator
     from lumitrace.film.cubemap import texel_solid_angles
-    from lumitrace.trace.tracer import BatchTally
+    from lumitrace.film.tally import BatchTally
 
     t0 = time.perf_counter()
     res = 64
@@ -890,10 +890,10 @@ def case_photon_index_beyond_2_32(folder: Path, photons: int) -> CaseResult:
     ps = prepare(scene)
     out = {}
     for start in (0, 2 ** 32 - photons // 2, 2 ** 40):
-        t = trace_batch(ps, 0, 1, start, photons, 8, record_rays=True)
+        t = trace_batch(ps, BatchJob(0, start, photons, 1, 8), record_rays=True)
         finite = all(np.isfinite(o).all() and np.isfinite(d).all() for o, d in t.rays)
         out[start] = (t, finite)
-    same_low = trace_batch(ps, 0, 1, 0, photons, 8)
+    same_low = trace_batch(ps, BatchJob(0, 0, photons, 1, 8))
     distinct = not np.array_equal(out[0][0].counts, out[2 ** 40][0].counts)
     ok = (all(f and t.escaped + t.absorbed + t.cut == t.photons for t, f in out.values())
           and distinct and np.array_equal(same_low.counts, out[0][0].counts))

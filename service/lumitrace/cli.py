@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import LumitraceError
-from .run.session import DEFAULT_THRESHOLD
+from .run.settings import DEFAULT_THRESHOLD
 
 
 def _positive_int(text: str) -> int:

@@ -7,13 +7,14 @@ that emitter's counts, not a retrace.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .cubemap import texel_solid_angles
 from ..scene import Scene
-from ..trace.tracer import BatchTally
+from .tally import BatchTally
 
 
 @dataclass
@@ -49,12 +50,44 @@ class Accumulator:
         self._solid_angles = texel_solid_angles(self.resolution)
 
     def add(self, batch: BatchTally) -> None:
+        """Add a batch's photons (integer sums: exact and order-independent)."""
+        self._apply(batch, 1)
+
+    def remove(self, batch: BatchTally) -> None:
+        """Take a batch's photons out again, exactly as :meth:`add` put them in (the batch
+        must have been added): the accumulator is then as if it never had been."""
         t = self.emitters[batch.emitter]
-        t.photons += batch.photons
-        t.counts += batch.counts
-        t.absorbed += batch.absorbed
-        t.cut += batch.cut
-        t.segments += batch.segments
+        if batch.photons > t.photons or np.any(batch.counts > t.counts):
+            raise ValueError(f"batch of emitter {batch.emitter} from photon {batch.start} "
+                             "was not added to this accumulator")
+        self._apply(batch, -1)
+
+    def _apply(self, batch: BatchTally, sign: int) -> None:
+        t = self.emitters[batch.emitter]
+        t.photons += sign * batch.photons
+        if sign > 0:
+            t.counts += batch.counts
+        else:
+            t.counts -= batch.counts
+        t.absorbed += sign * batch.absorbed
+        t.cut += sign * batch.cut
+        t.segments += sign * batch.segments
+
+    def snapshot(self) -> "Accumulator":
+        """An independent copy (counts copied): what progress callbacks and other threads
+        get, so the running session never changes a map under their feet."""
+        copy = Accumulator.__new__(Accumulator)
+        copy.resolution = self.resolution
+        copy._solid_angles = self._solid_angles
+        copy.emitters = [dataclasses.replace(t, counts=t.counts.copy()) for t in self.emitters]
+        return copy
+
+    def rescale(self, emitter: int, flux: float) -> None:
+        """Set an emitter's flux (lm): photons are analog, so its counts stay and every
+        intensity and flux it contributes scales with it; nothing is retraced."""
+        if not (flux > 0 and np.isfinite(flux)):
+            raise ValueError(f"flux must be finite and positive, got {flux!r}")
+        self.emitters[emitter].flux = float(flux)
 
     @property
     def photons(self) -> int:

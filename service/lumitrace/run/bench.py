@@ -14,7 +14,9 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 from ..schema import SCHEMA_DIR
-from ..trace.tracer import PreparedScene, prepare, trace_batch
+from ..trace.job import BatchJob
+from ..trace.prepared import PreparedScene, prepare
+from ..trace.tracer import trace_batch
 
 DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
 _worker_scene: PreparedScene | None = None
@@ -27,17 +29,16 @@ def _init(stage: str) -> None:
     _worker_scene = prepare(read_stage(stage))
 
 
-def _job(args) -> tuple[int, int, float, float]:
+def _job(job: BatchJob) -> tuple[int, int, float, float]:
     """(photons, segments, trace seconds, bare-Embree seconds) of one batch."""
-    emitter, start, count, resolution = args
     ps = _worker_scene
     t0 = time.perf_counter()
-    tally = trace_batch(ps, emitter, 0, start, count, resolution, record_rays=True)
+    tally = trace_batch(ps, job, record_rays=True)
     t1 = time.perf_counter()
     for o, d in tally.rays:
         ps.intersect(o, d)
     t2 = time.perf_counter()
-    return count, tally.segments, t1 - t0, t2 - t1
+    return job.count, tally.segments, t1 - t0, t2 - t1
 
 
 def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
@@ -59,10 +60,10 @@ def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
         pool = ThreadPoolExecutor(threads)
     results = []
     with pool:
-        list(pool.map(_job, [(emitter, 0, 1024, resolution)] * threads))  # warm up
+        list(pool.map(_job, [BatchJob(emitter, 0, 1024, 0, resolution)] * threads))  # warm up
         start, t0 = 0, time.perf_counter()
         while time.perf_counter() - t0 < seconds:
-            jobs = [(emitter, start + k * batch_size, batch_size, resolution)
+            jobs = [BatchJob(emitter, start + k * batch_size, batch_size, 0, resolution)
                     for k in range(threads)]
             start += threads * batch_size
             results += list(pool.map(_job, jobs))

@@ -7,55 +7,27 @@ the number of threads or the batch size, so the same seed gives the same map any
 from __future__ import annotations
 
 import math
-import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 from ..film.accumulate import Accumulator
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
+from ..trace.job import BatchJob
+from ..trace.prepared import PreparedScene, TracingFrame, prepare
 from . import workers
-from ..trace.tracer import MAX_DEPTH, PreparedScene, prepare
+from .settings import TraceSettings
 
-DEFAULT_PHOTONS = 2_000_000
-DEFAULT_RESOLUTION = 64
-#: Photon count from which a texel trusts its own estimate whatever its neighbours say
-#: (pull-push threshold): 1 / 0.02**2, the count at which its own noise is 2%.
-DEFAULT_THRESHOLD = 2500.0
-#: Error below which a result counts as converged when no target is given.
-DEFAULT_TARGET_ERROR = 0.02
 #: Photons in the first iteration; later iterations double up to a full round of batches.
 FIRST_ITERATION = 1 << 15
 
 
 @dataclass(frozen=True)
-class TraceSettings:
-    """What to trace and when to stop: ``photons`` (total), ``seconds`` or ``target_error``
-    (flux-weighted relative standard error); the first one reached stops the session."""
-
-    photons: int | None = None
-    seconds: float | None = None
-    target_error: float | None = None
-    resolution: int = DEFAULT_RESOLUTION
-    threshold: float = DEFAULT_THRESHOLD
-    seed: int = 0
-    threads: int = field(default_factory=lambda: os.cpu_count() or 1)
-    batch_size: int = 1 << 17
-    max_depth: int = MAX_DEPTH
-    workers: str = "auto"
-
-    def budget(self) -> int | None:
-        """Total photons to trace, or None when only time or error stops the session."""
-        if self.photons is None and self.seconds is None and self.target_error is None:
-            return DEFAULT_PHOTONS
-        return self.photons
-
-
-@dataclass
 class Progress:
     """One iteration's state, passed to progress callbacks: the map estimate holds the raw
-    and filtered maps (cd) and their estimated errors."""
+    and filtered maps (cd) and their estimated errors; ``accumulator`` is a snapshot that
+    the session never changes afterwards."""
 
     iteration: int
     photons: int
@@ -89,8 +61,7 @@ class TraceResult:
 
     @property
     def converged(self) -> bool:
-        target = self.settings.target_error or DEFAULT_TARGET_ERROR
-        return self.relative_error <= target
+        return self.relative_error <= self.settings.convergence_target
 
 
 def allocate(fluxes: list[float], photons: int) -> list[int]:
@@ -106,25 +77,32 @@ def allocate(fluxes: list[float], photons: int) -> list[int]:
 
 
 def _round_jobs(done: list[int], targets: list[float], shares: list[float],
-                round_photons: int, batch: int) -> list[tuple[int, int, int]]:
-    """Jobs (emitter, first photon, count) of the next round, batch-sized."""
+                round_photons: int, settings: TraceSettings) -> list[BatchJob]:
+    """Batch jobs of the next round, batch-sized."""
+    batch = settings.batch_size
     jobs = []
     for e, (n_done, n_target, share) in enumerate(zip(done, targets, shares)):
         want = min(int(math.ceil(round_photons * share)), n_target - n_done)
         start = n_done
         while want > 0:
             c = int(min(batch, want))
-            jobs.append((e, start, c))
+            jobs.append(BatchJob(e, start, c, settings.seed, settings.resolution,
+                                 settings.max_depth))
             start += c
             want -= c
     return jobs
 
 
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
-        progress: Callable[[Progress], None] | None = None) -> TraceResult:
-    """Trace ``scene`` until the settings say stop; return the accumulated result."""
+        progress: Callable[[Progress], None] | None = None,
+        frame: TracingFrame | None = None) -> TraceResult:
+    """Trace ``scene`` until the settings say stop; return the accumulated result.
+
+    ``frame`` pins the normalised tracing frame (default: the scene's own bounds);
+    ``progress`` is called after every iteration with an immutable snapshot.
+    """
     t0 = time.perf_counter()
-    ps = prepared or prepare(scene)
+    ps = prepared or prepare(scene, frame)
     t_prep = time.perf_counter() - t0
     acc = Accumulator(scene, settings.resolution)
     fluxes = [e.flux for e in scene.emitters]
@@ -139,11 +117,10 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     est = None
 
     mode = workers.choose(settings.workers, threads, budget)
-    with workers.batch_runner(scene, ps, mode, threads, settings.seed, settings.resolution,
-                              settings.max_depth) as trace_jobs:
+    with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:
         start = time.perf_counter()
         while True:
-            jobs = _round_jobs(done, targets, shares, round_photons, settings.batch_size)
+            jobs = _round_jobs(done, targets, shares, round_photons, settings)
             if not jobs:
                 break
             for tally in trace_jobs(jobs):
@@ -155,7 +132,8 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
             elapsed = time.perf_counter() - start
             err = est.error
             if progress is not None:
-                progress(Progress(iteration, acc.photons, elapsed, err, budget, est, acc))
+                progress(Progress(iteration, acc.photons, elapsed, err, budget, est,
+                                  acc.snapshot()))
             if settings.seconds is not None and elapsed >= settings.seconds:
                 break
             if settings.target_error is not None and err <= settings.target_error:

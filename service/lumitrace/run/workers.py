@@ -12,24 +12,25 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator
 
+from ..film.tally import BatchTally
 from ..scene import Scene
-from ..trace.tracer import BatchTally, PreparedScene, prepare, trace_batch
+from ..trace.job import BatchJob
+from ..trace.prepared import PreparedScene, prepare
+from ..trace.tracer import trace_batch
 
 #: Photon budgets from which "auto" uses worker processes.
 PROCESS_MIN_PHOTONS = 8_000_000
 
-Job = tuple[int, int, int]  # (emitter number, first photon, count)
 _worker_scene: PreparedScene | None = None
 
 
-def _init_worker(scene: Scene) -> None:
+def _init_worker(scene: Scene, frame) -> None:
     global _worker_scene
-    _worker_scene = prepare(scene)
+    _worker_scene = prepare(scene, frame)
 
 
-def _run_job(args) -> BatchTally:
-    (e, first, count), seed, resolution, max_depth = args
-    return trace_batch(_worker_scene, e, seed, first, count, resolution, max_depth)
+def _run_job(job: BatchJob) -> BatchTally:
+    return trace_batch(_worker_scene, job)
 
 
 def choose(mode: str, threads: int, budget: int | None) -> str:
@@ -42,21 +43,18 @@ def choose(mode: str, threads: int, budget: int | None) -> str:
 
 
 @contextlib.contextmanager
-def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int, seed: int,
-                 resolution: int, max_depth: int
-                 ) -> Iterator[Callable[[Iterable[Job]], Iterator[BatchTally]]]:
+def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int
+                 ) -> Iterator[Callable[[Iterable[BatchJob]], Iterator[BatchTally]]]:
     """A function mapping jobs to their tallies, in job order, on ``threads`` workers."""
     if mode == "processes":
         ctx = multiprocessing.get_context("spawn")  # no fork: Embree keeps threads
         with ProcessPoolExecutor(max_workers=threads, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(scene,)) as pool:
+                                 initargs=(scene, ps.frame)) as pool:
             list(pool.map(_noop, range(threads)))  # start every worker before timing
-            yield lambda jobs: pool.map(
-                _run_job, [(j, seed, resolution, max_depth) for j in jobs])
+            yield lambda jobs: pool.map(_run_job, list(jobs))
     elif mode == "threads":
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            yield lambda jobs: pool.map(
-                lambda j: trace_batch(ps, j[0], seed, j[1], j[2], resolution, max_depth), jobs)
+            yield lambda jobs: pool.map(lambda job: trace_batch(ps, job), jobs)
     else:
         raise ValueError(f"workers must be auto, threads or processes, got {mode!r}")
 

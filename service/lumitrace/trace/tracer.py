@@ -1,28 +1,27 @@
-"""The photon tracer: wavefront photon paths through the scene with Embree.
+"""The photon tracer: wavefront photon paths through the prepared scene with Embree.
 
-A batch is a pure function ``(prepared scene, emitter, seed, first photon, count) ->
-BatchTally``: photon i's path depends on nothing but the scene, the seed and i, so batches
-can run on any thread or machine and an edit can retrace exactly the photons it affects.
-All photons of a batch advance one bounce at a time; Embree's ``run`` releases the GIL, so
-two threads tracing two batches keep both cores busy.
-
-Geometry is traced in a normalised frame (centred on the luminaire, largest half-extent 1)
-so that the float32 precision Embree works in, and the ray offsets, are the same whether
-the luminaire is modelled in millimetres or metres, at the origin or a kilometre away.
-Directions are unchanged by that frame, so escaping photons are binned in the stage's axes.
+A batch is a pure function ``(prepared scene, batch job) -> BatchTally``: photon i's path
+depends on nothing but the scene, the seed and i, so batches can run on any thread or
+machine and an edit can retrace exactly the photons it affects. All photons of a batch
+advance one bounce at a time; Embree's ``run`` releases the GIL, so two threads tracing
+two batches keep both cores busy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from . import rng
 from ..film.cubemap import texel_index
+from ..film.tally import BatchTally
+from ..scene import Emitter
+from . import rng
 from .emission import emit
-from .scattering import UNPOLARISED, MaterialTable, kind_runs, scatter
-from .sampling import cross, dot
-from ..scene import DIELECTRIC, Emitter, Scene
+from .job import MAX_DEPTH, BatchJob
+from .prepared import PreparedScene, TracingFrame, prepare
+from .sampling import dot
+from .scattering import UNPOLARISED, kind_runs, scatter
+
+__all__ = ["MAX_DEPTH", "BatchJob", "BatchTally", "PreparedScene", "TracingFrame", "prepare",
+           "trace_batch"]
 
 #: Ray origin offset off a surface, in normalised units (1 = the luminaire's half-size).
 RAY_EPSILON = 1e-5
@@ -32,129 +31,19 @@ RAY_BACKOFF = 0.5 * RAY_EPSILON
 #: is checked against the float64 origin: float32 rounding can put an origin that is just
 #: off one face onto another one near an edge (see :func:`trace_batch`).
 NEAR_HIT = 1e-6
-#: Default maximum number of surface interactions; photons still alive then are cut.
-MAX_DEPTH = 512
 
 
-@dataclass
-class PreparedScene:
-    """Scene arrays in the normalised frame plus the Embree scene built from them.
 
-    Unit triangle normals (front = counter-clockwise) and first corners are (3, T) arrays.
-    """
-
-    scene: Scene
-    center: np.ndarray
-    scale: float
-    normals: np.ndarray
-    corners: np.ndarray  # (3, T) first corner of every triangle, normalised
-    material_index: np.ndarray
-    triangle_kind: np.ndarray
-    polarised: bool
-    table: MaterialTable | None
-    embree: object = field(default=None, repr=False)
-
-    @property
-    def triangle_count(self) -> int:
-        return int(self.normals.shape[1])
-
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> dict:
-        """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``tfar``."""
-        if self.embree is None:
-            n = origins.shape[0]
-            return {"primID": np.full(n, -1, np.int32), "tfar": np.full(n, np.inf, np.float32)}
-        return self.embree.run(origins, directions, output=1)
-
-
-def _emitter_reach(e: Emitter) -> float:
-    """Distance (local units) from the light's origin that its emitting surface reaches.
-
-    Only the sizes of the light's own kind count: the others keep their dataclass defaults
-    (1 stage unit), which would make a 1 mm LED modelled in metres a metre wide and the
-    normalised frame, hence float rounding and ray offsets, depend on the stage's unit.
-    """
-    if e.kind == "sphere":
-        return 0.0 if e.treat_as_point else e.radius  # a point light has no surface
-    if e.kind == "disk":
-        return e.radius
-    if e.kind == "rect":
-        return 0.5 * float(np.hypot(e.width, e.height))
-    return float(np.hypot(0.5 * e.length, e.radius))
-
-
-def _bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned bounds (world m) of the triangles and the emitters' surfaces."""
-    pts = [scene.triangles.reshape(-1, 3)] if scene.triangles.size else []
-    for e in scene.emitters:
-        m = np.asarray(e.to_world, dtype=np.float64)
-        reach = np.linalg.norm(m[:3, :3], 2) * _emitter_reach(e)
-        pts.append(m[:3, 3][None, :] + reach * np.array([[-1.0, -1, -1], [1, 1, 1]]))
-    allp = np.concatenate(pts, axis=0)
-    return allp.min(axis=0), allp.max(axis=0)
-
-
-def prepare(scene: Scene) -> PreparedScene:
-    """Normalise the scene and build the Embree acceleration structure."""
-    lo, hi = _bounds(scene)
-    center = 0.5 * (lo + hi)
-    scale = float(0.5 * (hi - lo).max())
-    if not scale > 0.0:  # a lone point light: any scale will do
-        scale = 1.0
-    tri = (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
-    v0 = np.ascontiguousarray(tri[:, 0].T)
-    e1 = np.ascontiguousarray(tri[:, 1].T) - v0
-    e2 = np.ascontiguousarray(tri[:, 2].T) - v0
-    nrm = cross(e1, e2)
-    length = np.sqrt(dot(nrm, nrm))
-    normals = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
-    embree = None
-    table = None
-    kind = np.zeros(tri.shape[0], np.int8)
-    if tri.shape[0]:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        embree = rtcore_scene.EmbreeScene(robust=True)
-        TriangleMesh(embree, np.ascontiguousarray(tri, dtype=np.float32))
-        table = MaterialTable.from_materials(scene.materials)
-        kind = np.take(table.kind, np.asarray(scene.material_index))
-    return PreparedScene(scene=scene, center=center, scale=scale,
-                         normals=normals, corners=v0, material_index=np.asarray(scene.material_index), triangle_kind=kind,
-                         polarised=bool(np.any(kind == DIELECTRIC)),
-                         table=table, embree=embree)
-
-
-@dataclass
-class BatchTally:
-    """What one batch of photons did: escapes per texel and where the rest went.
-
-    ``counts`` is (2, texels): escapes of the photons in each of two pseudo-random halves.
-    """
-
-    emitter: int
-    start: int
-    photons: int
-    counts: np.ndarray
-    absorbed: int = 0
-    cut: int = 0
-    segments: int = 0
-    rays: list | None = None
-
-    @property
-    def escaped(self) -> int:
-        return int(self.counts.sum())
-
-
-def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, count: int,
-                resolution: int, max_depth: int = MAX_DEPTH, record_rays: bool = False) -> BatchTally:
-    """Trace photons ``start .. start+count-1`` of one emitter and tally them.
+def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> BatchTally:
+    """Trace the photons of ``job`` and tally them.
 
     With ``record_rays`` every traced ray (float32 origins, directions) is kept, for the
     benchmark that replays the same rays through bare Embree.
     """
-    e: Emitter = ps.scene.emitters[emitter_number]
-    key = rng.stream_key(seed, e.key)
-    idx = np.arange(start, start + count, dtype=np.int64)
+    e: Emitter = ps.scene.emitters[job.emitter]
+    resolution, max_depth = job.resolution, job.max_depth
+    key = rng.stream_key(job.seed, e.key)
+    idx = np.arange(job.first, job.stop, dtype=np.int64)
     base = rng.photon_hash(key, idx)
     p, d, n_emit = emit(e, key, idx, normals=True)
     # off the emitting surface along its normal, as off any surface: an offset along d would
@@ -163,8 +52,7 @@ def trace_batch(ps: PreparedScene, emitter_number: int, seed: int, start: int, c
     # polarisation matters only where a dielectric can see it; drawn at first need
     pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
-    tally = BatchTally(emitter_number, start, count, np.zeros((2, ntex), np.int64),
-                       rays=[] if record_rays else None)
+    tally = BatchTally.empty(job.emitter, job.first, job.count, resolution, record_rays)
 
     for depth in range(max_depth + 1):
         if base.size == 0:

@@ -1,0 +1,42 @@
+"""The batch tally: what one batch of photons did, in exact integer counts.
+
+The tracer fills it; the accumulators own it: they add a batch's tally and can take it
+out again exactly, so a batch's photons can be retraced after an edit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class BatchTally:
+    """Escapes per texel and where the rest of one batch's photons went.
+
+    ``counts`` is (2, texels) int64: escapes of the photons in each of two pseudo-random
+    halves (split by the photon hash), two independent estimates of the same map.
+    ``emitter``, ``start`` and ``photons`` name the batch (emitter number, first photon
+    index, photon count); ``segments`` counts traced path segments (rays).
+    """
+
+    emitter: int
+    start: int
+    photons: int
+    counts: np.ndarray
+    absorbed: int = 0
+    cut: int = 0
+    segments: int = 0
+    rays: list | None = None
+
+    @property
+    def escaped(self) -> int:
+        return int(self.counts.sum())
+
+    @classmethod
+    def empty(cls, emitter: int, start: int, photons: int, resolution: int,
+              record_rays: bool = False) -> "BatchTally":
+        """A zero tally for a batch, ready to be filled (``rays`` kept on request)."""
+        ntex = 6 * resolution * resolution
+        return cls(emitter, start, photons, np.zeros((2, ntex), np.int64),
+                   rays=[] if record_rays else None)

@@ -1,0 +1,118 @@
+"""What to trace and when to stop: settings that check themselves, and every default once.
+
+A JSON request to the service builds :class:`TraceSettings` as the command line does, so
+the checks live here, not in argparse: a bad value is one :class:`SettingsError` naming
+the setting, before anything is traced.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import os
+from dataclasses import dataclass, field
+
+from ..errors import LumitraceError
+from ..trace.job import MAX_DEPTH
+
+#: Photons traced when no stop criterion is given.
+DEFAULT_PHOTONS = 2_000_000
+#: Cube-map face size in texels.
+DEFAULT_RESOLUTION = 64
+#: Photon count from which a texel trusts its own estimate whatever its neighbours say
+#: (pull-push threshold): 1 / 0.02**2, the count at which its own noise is 2%.
+DEFAULT_THRESHOLD = 2500.0
+#: Error below which a result counts as converged when no target is given.
+DEFAULT_TARGET_ERROR = 0.02
+#: Photons per batch job.
+DEFAULT_BATCH_SIZE = 1 << 17
+#: Tracing time (s) of a convergence report and of the benchmark when none is given.
+DEFAULT_REPORT_SECONDS = 30.0
+DEFAULT_BENCH_SECONDS = 10.0
+
+#: Largest cube-map face size: 6 x 1024^2 texels, 100 MB of counts per accumulator.
+MAX_RESOLUTION = 1024
+#: Largest photon budget: photon indices stay far inside int64 and float64 sums exact.
+MAX_PHOTONS = 1 << 53
+#: Seeds are stored as 32-bit ints in the result layer (``lumitrace:result:seed``).
+MAX_SEED = 2 ** 31 - 1
+MAX_THREADS = 1024
+MAX_TRACE_DEPTH = 1 << 20
+WORKER_MODES = ("auto", "threads", "processes")
+
+
+class SettingsError(LumitraceError):
+    """A trace setting is out of range or of the wrong type."""
+
+
+def default_threads() -> int:
+    """Tracing workers when none are asked for: all cores."""
+    return os.cpu_count() or 1
+
+
+def _integer(name: str, value, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or \
+            not math.isfinite(value) or float(value) != int(value):
+        raise SettingsError(f"must be an integer, got {value!r}", prop=name)
+    v = int(value)
+    if not lo <= v <= hi:
+        raise SettingsError(f"must be between {lo:,} and {hi:,}, got {v:,}", prop=name)
+    return v
+
+
+def _real(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise SettingsError(f"must be a finite number, got {value!r}", prop=name)
+    v = float(value)
+    if v < lo or (lo_open and v == lo) or v > hi:
+        bound = f"greater than {lo:g}" if lo_open else f"at least {lo:g}"
+        limit = "" if hi == math.inf else f" and at most {hi:g}"
+        raise SettingsError(f"must be {bound}{limit}, got {v:g}", prop=name)
+    return v
+
+
+@dataclass(frozen=True)
+class TraceSettings:
+    """What to trace and when to stop: ``photons`` (total), ``seconds`` or ``target_error``
+    (relative RMS error of the written map); the first one reached stops the session, and
+    with none given the session traces :data:`DEFAULT_PHOTONS`."""
+
+    photons: int | None = None
+    seconds: float | None = None
+    target_error: float | None = None
+    resolution: int = DEFAULT_RESOLUTION
+    threshold: float = DEFAULT_THRESHOLD
+    seed: int = 0
+    threads: int = field(default_factory=default_threads)
+    batch_size: int = DEFAULT_BATCH_SIZE
+    max_depth: int = MAX_DEPTH
+    workers: str = "auto"
+
+    def __post_init__(self) -> None:
+        put = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731 (frozen)
+        if self.photons is not None:
+            put("photons", _integer("photons", self.photons, 1, MAX_PHOTONS))
+        if self.seconds is not None:
+            put("seconds", _real("seconds", self.seconds, 0.0, lo_open=True))
+        if self.target_error is not None:
+            put("target_error", _real("target_error", self.target_error, 0.0, 1.0,
+                                      lo_open=True))
+        put("resolution", _integer("resolution", self.resolution, 1, MAX_RESOLUTION))
+        put("threshold", _real("threshold", self.threshold, 0.0))
+        put("seed", _integer("seed", self.seed, 0, MAX_SEED))
+        put("threads", _integer("threads", self.threads, 1, MAX_THREADS))
+        put("batch_size", _integer("batch_size", self.batch_size, 1, 1 << 24))
+        put("max_depth", _integer("max_depth", self.max_depth, 0, MAX_TRACE_DEPTH))
+        if self.workers not in WORKER_MODES:
+            raise SettingsError(f"must be one of {', '.join(WORKER_MODES)}, got "
+                                f"{self.workers!r}", prop="workers")
+
+    def budget(self) -> int | None:
+        """Total photons to trace, or None when only time or error stops the session."""
+        if self.photons is None and self.seconds is None and self.target_error is None:
+            return DEFAULT_PHOTONS
+        return self.photons
+
+    @property
+    def convergence_target(self) -> float:
+        """The error at or below which a result is converged."""
+        return self.target_error or DEFAULT_TARGET_ERROR
