@@ -41,7 +41,7 @@ def test_result_light_axes_in_a_y_up_stage(tmp_path):
     assert scene.up_axis == "Y"
     result = run(scene, TraceSettings(photons=100_000, resolution=16, threads=2))
     written = write_outputs(result, None)
-    fig = written["photometry"]
+    fig = written
     # (bilinear lookups at res 16 spread ~0.5 % of the flux over the horizon)
     assert fig.downward_flux_fraction == pytest.approx(1.0, abs=1e-2)
     assert fig.peak_gamma < 15.0  # the peak is at nadir, -Y

@@ -13,7 +13,7 @@ from lumitrace import atomic
 from lumitrace.errors import OutputError
 from lumitrace.report.references import read_expectation
 from lumitrace.publish import result_layer as writer
-from lumitrace.publish.result_layer import (RESULT_ATTRIBUTES, ResultLayerWarning, result_layer_path,
+from lumitrace.publish.result_layer import (RESULT_KINDS, ResultLayerWarning, result_layer_path,
                                     write_result_layer)
 from pxr import Sdf, Usd, UsdGeom, UsdUtils
 
@@ -100,8 +100,8 @@ def test_attributes_have_the_contract_types(stage_copy):
     prim = stage.GetPrimAtPath("/Luminaire")
     assert "LumitraceLuminaireAPI" in prim.GetAppliedSchemas()
     attrs = result_attrs(stage_path)
-    assert set(attrs) == set(RESULT_ATTRIBUTES)
-    for key, kind in RESULT_ATTRIBUTES.items():
+    assert set(attrs) == set(RESULT_KINDS)
+    for key, kind in RESULT_KINDS.items():
         assert attrs[key].type_name == TYPES[kind], key
     assert attrs["photons"].Get() == 10_000_000_000
     assert attrs["iterations"].Get() == 12

@@ -128,70 +128,61 @@ def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
     return bar, update
 
 
-def cmd_trace(args) -> int:
-    import os
+def _summary_text(r, stage) -> str:
+    """The human summary of a result record."""
+    d = r.peak_direction
+    ang = lambda v: "-" if v is None else f"{v:.1f} deg"  # noqa: E731
+    lines = [
+        f"{r.luminaire} in {stage}",
+        f"  photons         {r.photons:,} in {r.iterations} iterations, {r.seconds:.2f} s "
+        f"({r.photons_per_second:,.0f} photons/s)",
+        f"  emitted         {r.emitted_lm:10.2f} lm",
+        f"  escaped         {r.escaped_lm:10.2f} lm   (light output ratio "
+        f"{r.light_output_ratio:.3f})",
+        f"  absorbed        {r.absorbed_lm:10.2f} lm"]
+    if r.cut_lm:
+        lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
+    lines += [
+        f"  peak intensity  {r.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})",
+        f"  relative error  {r.relative_error:.2%} estimated RMS over the sphere "
+        f"(raw map {r.raw_relative_error:.2%}){', converged' if r.converged else ''}",
+        f"  downward flux   {r.downward_flux_fraction:.1%}   CIE flux code {r.cie_flux_code}",
+        f"  beam angle      {ang(r.beam_angle_c0_c180)} (C0-C180), "
+        f"{ang(r.beam_angle_c90_c270)} (C90-C270)",
+        f"  field angle     {ang(r.field_angle_c0_c180)} (C0-C180), "
+        f"{ang(r.field_angle_c90_c270)} (C90-C270)",
+        f"  symmetry        {r.symmetry}",
+        f"  intensity map   {r.intensity_map}",
+        f"  IES / LDT       {r.ies}  {r.ldt}",
+        f"  pictures        {r.polar_diagram}  {r.photometric_solid}",
+        f"  result layer    {r.result_layer}"]
+    return "\n".join(lines)
 
+
+def cmd_trace(args) -> int:
     from .publish.outputs import write_outputs
-    from .run.session import TraceSettings, run
+    from .run.session import run
+    from .run.settings import TraceSettings, default_threads
     from .stage.reader import read_stage
 
-    scene = read_stage(args.stage)
-    for w in scene.warnings:
-        print(f"warning: {w}", file=sys.stderr)
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed,
-                             threads=args.threads or os.cpu_count() or 1, workers=args.workers)
+                             threads=args.threads or default_threads(), workers=args.workers)
+    scene = read_stage(args.stage)
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
     try:
         result = run(scene, settings, progress=update)
     finally:
         if bar is not None:
             bar.close()
-    written = write_outputs(result, args.out)
-    fig = written["figures"]
-    summary = {
-        "stage": str(args.stage), "luminaire": scene.luminaire_path,
-        "photons": fig.photons, "iterations": fig.iterations, "seconds": fig.seconds,
-        "emitted_lm": fig.emitted_lm, "escaped_lm": fig.escaped_lm,
-        "absorbed_lm": fig.absorbed_lm, "cut_lm": fig.cut_lm,
-        "light_output_ratio": fig.light_output_ratio, "peak_cd": fig.peak_cd,
-        "peak_direction": fig.peak_direction, "relative_error": fig.relative_error,
-        "converged": fig.converged, "photons_per_second": fig.photons_per_second,
-        "segments_per_second": fig.segments_per_second,
-        "photometry": {**written["photometry"].as_dict(), "symmetry": written["symmetry"]},
-        "outputs": {k: written[k] for k in ("intensity_map", "ies", "ldt", "polar_diagram",
-                                            "photometric_solid", "result_layer")},
-    }
+    record = write_outputs(result, args.out)
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(record.summary()))
     else:
-        d = fig.peak_direction
-        print(f"{scene.luminaire_path} in {args.stage}")
-        print(f"  photons         {fig.photons:,} in {fig.iterations} iterations, "
-              f"{fig.seconds:.2f} s ({fig.photons_per_second:,.0f} photons/s)")
-        print(f"  emitted         {fig.emitted_lm:10.2f} lm")
-        print(f"  escaped         {fig.escaped_lm:10.2f} lm   (light output ratio "
-              f"{fig.light_output_ratio:.3f})")
-        print(f"  absorbed        {fig.absorbed_lm:10.2f} lm")
-        if fig.cut_lm:
-            print(f"  cut (depth)     {fig.cut_lm:10.4f} lm")
-        print(f"  peak intensity  {fig.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})")
-        est = result.estimate
-        print(f"  relative error  {fig.relative_error:.2%} estimated RMS over the sphere "
-              f"(raw map {est.raw_error:.2%}){', converged' if fig.converged else ''}")
-        p = written["photometry"]
-        ang = lambda v: "-" if v is None else f"{v:.1f} deg"  # noqa: E731
-        print(f"  downward flux   {p.downward_flux_fraction:.1%}   CIE flux code {p.cie_flux_code}")
-        print(f"  beam angle      {ang(p.beam_angle_c0_c180)} (C0-C180), "
-              f"{ang(p.beam_angle_c90_c270)} (C90-C270)")
-        print(f"  field angle     {ang(p.field_angle_c0_c180)} (C0-C180), "
-              f"{ang(p.field_angle_c90_c270)} (C90-C270)")
-        print(f"  symmetry        {written['symmetry']}")
-        print(f"  intensity map   {written['intensity_map']}")
-        print(f"  IES / LDT       {written['ies']}  {written['ldt']}")
-        print(f"  pictures        {written['polar_diagram']}  {written['photometric_solid']}")
-        print(f"  result layer    {written['result_layer']}")
+        print(_summary_text(record, args.stage))
     return 0
 
 

@@ -20,6 +20,7 @@ stage reader validates against (:mod:`lumitrace.stage.validate`).
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 from .scene import SCATTERING_MODELS
@@ -82,36 +83,104 @@ IOR_EXCLUSIVE_MIN = 0.0
 #: Luminous flux in lm; only an authored value counts, and it must be finite and > 0.
 LUMINOUS_FLUX = "lumitrace:luminousFlux"
 
-# -- LumitraceLuminaireAPI ------------------------------------------------------------
+# -- LumitraceLuminaireAPI and the result record ---------------------------------------
 RESULT_PREFIX = "lumitrace:result:"
-#: Result attribute name -> Sdf value type name, as in ``schemas/schema.usda``.
-#: The luminaire API's result attributes: name after ``lumitrace:result:`` -> value kind.
-RESULT_FIELDS = {
-    "intensityMap": "asset",
-    "iesFile": "asset",
-    "ldtFile": "asset",
-    "photons": "int64",
-    "iterations": "int",
-    "elapsedSeconds": "double",
-    "relativeError": "double",
-    "luminousFlux": "double",
-    "lightOutputRatio": "double",
-    "threshold": "double",
-    "resolution": "int",
-    "seed": "int",
-    "converged": "bool",
-    "inputHash": "string",
-    "downwardFluxFraction": "double",
-    "peakIntensity": "double",
-    "beamAngleC0": "double",
-    "beamAngleC90": "double",
-    "fieldAngleC0": "double",
-    "fieldAngleC90": "double",
-    "cieFluxCode": "string",
-    "polarDiagram": "asset",
-    "photometricSolid": "asset",
-}
-RESULT_ATTRIBUTES = {RESULT_PREFIX + k: v for k, v in RESULT_FIELDS.items()}
+
+
+@dataclass(frozen=True)
+class ResultField:
+    """One figure of a traced result, declared once for every place it is written.
+
+    ``key`` names it in the result record, the ``--json`` summary and the service's JSON
+    (snake_case, unit in the name where it helps); ``attribute`` is its result-layer
+    attribute after ``lumitrace:result:`` (None: not in the layer) with Sdf value ``kind``
+    (asset, int64, int, double, bool, string; vector and list are JSON only); ``exr`` is
+    its key in the EXR header's JSON metadata (None: not there); ``group`` nests it in the
+    JSON summary (``outputs`` for file paths, ``photometry`` for the photometric figures).
+    """
+
+    key: str
+    kind: str
+    unit: str = ""
+    attribute: str | None = None
+    exr: str | None = None
+    group: str | None = None
+    doc: str = ""
+
+
+def _f(key, kind, unit="", attribute=None, exr=None, group=None, doc=""):
+    return ResultField(key, kind, unit, attribute, exr, group, doc)
+
+
+#: The result record's fields, in the order they are written.
+RESULT_FIELDS: tuple[ResultField, ...] = (
+    _f("stage", "string", exr="stage", doc="stage file the result belongs to"),
+    _f("luminaire", "string", exr="luminaire", doc="luminaire prim path"),
+    _f("intensity_map", "asset", attribute="intensityMap", group="outputs",
+       doc="cube-map EXR of the intensity"),
+    _f("ies", "asset", attribute="iesFile", group="outputs", doc="IES LM-63-2019 file"),
+    _f("ldt", "asset", attribute="ldtFile", group="outputs", doc="EULUMDAT file"),
+    _f("polar_diagram", "asset", attribute="polarDiagram", group="outputs",
+       doc="polar light distribution curve (PNG)"),
+    _f("photometric_solid", "asset", attribute="photometricSolid", group="outputs",
+       doc="photometric solid around the luminaire (PNG)"),
+    _f("result_layer", "asset", group="outputs", doc="the result layer"),
+    _f("photons", "int64", "photons", "photons", "photons", doc="photons traced"),
+    _f("iterations", "int", "", "iterations", "iterations", doc="progressive iterations"),
+    _f("seconds", "double", "s", "elapsedSeconds", "elapsedSeconds",
+       doc="tracing time"),
+    _f("emitted_lm", "double", "lm", exr="emittedFlux", doc="flux of the emitters"),
+    _f("escaped_lm", "double", "lm", "luminousFlux", "luminousFlux",
+       doc="flux leaving the luminaire"),
+    _f("absorbed_lm", "double", "lm", exr="absorbedFlux", doc="flux absorbed by its parts"),
+    _f("cut_lm", "double", "lm", exr="cutFlux", doc="flux of photons cut by the depth limit"),
+    _f("light_output_ratio", "double", "", "lightOutputRatio", "lightOutputRatio",
+       doc="escaped / emitted flux"),
+    _f("peak_cd", "double", "cd", doc="largest texel of the written map"),
+    _f("peak_direction", "vector", "", doc="direction of that texel, stage axes"),
+    _f("relative_error", "double", "", "relativeError", "relativeError",
+       doc="estimated relative RMS error of the written map over the sphere"),
+    _f("raw_relative_error", "double", "", exr="rawRelativeError",
+       doc="estimated relative RMS error of the raw map"),
+    _f("filtered_relative_error", "double", "", exr="filteredRelativeError",
+       doc="estimated relative RMS error of the filtered map"),
+    _f("converged", "bool", "", "converged", "converged",
+       doc="relative error at or below the target"),
+    _f("target_error", "double", "", exr="targetError", doc="target error (null: the default)"),
+    _f("threshold", "double", "photons", "threshold", "threshold",
+       doc="pull-push filter threshold"),
+    _f("resolution", "int", "texels", "resolution", "resolution", doc="cube-map face size"),
+    _f("seed", "int", "", "seed", "seed", doc="random seed"),
+    _f("input_hash", "string", "", "inputHash", "inputHash",
+       doc="hash of the scene content and the settings that shape the map"),
+    _f("photons_per_second", "double", "1/s", doc="photons traced per second"),
+    _f("segments_per_second", "double", "1/s", doc="path segments traced per second"),
+    _f("luminous_flux", "double", "lm", group="photometry", doc="flux of the C-gamma grid"),
+    _f("lamp_flux", "double", "lm", group="photometry", doc="emitters' flux"),
+    _f("downward_flux_fraction", "double", "", "downwardFluxFraction", group="photometry",
+       doc="share of the luminaire's flux below the horizon"),
+    _f("upward_flux_fraction", "double", "", group="photometry",
+       doc="share of the luminaire's flux above the horizon"),
+    _f("peak_intensity", "double", "cd", "peakIntensity", group="photometry",
+       doc="peak of the C-gamma grid"),
+    _f("peak_c", "double", "deg", group="photometry", doc="C angle of the peak"),
+    _f("peak_gamma", "double", "deg", group="photometry", doc="gamma angle of the peak"),
+    _f("beam_angle_c0_c180", "double", "deg", "beamAngleC0", group="photometry",
+       doc="beam (50%) angle in the C0-C180 plane"),
+    _f("beam_angle_c90_c270", "double", "deg", "beamAngleC90", group="photometry",
+       doc="beam (50%) angle in the C90-C270 plane"),
+    _f("field_angle_c0_c180", "double", "deg", "fieldAngleC0", group="photometry",
+       doc="field (10%) angle in the C0-C180 plane"),
+    _f("field_angle_c90_c270", "double", "deg", "fieldAngleC90", group="photometry",
+       doc="field (10%) angle in the C90-C270 plane"),
+    _f("cie_flux_code", "string", "", "cieFluxCode", group="photometry",
+       doc="CIE flux code N1 N2 N3 N4 N5"),
+    _f("symmetry", "string", "", group="photometry", doc="symmetry used in the files"),
+)
+#: Result-layer attribute (after ``lumitrace:result:``) -> Sdf value kind.
+RESULT_KINDS: dict[str, str] = {f.attribute: f.kind for f in RESULT_FIELDS if f.attribute}
+#: Full result attribute name -> Sdf value kind, as in ``schemas/schema.usda``.
+RESULT_ATTRIBUTES = {RESULT_PREFIX + k: v for k, v in RESULT_KINDS.items()}
 
 _registered = False
 

@@ -20,32 +20,25 @@ from __future__ import annotations
 import math
 import numbers
 import os
-import stat
-import warnings
 from pathlib import Path
 from typing import Any, Mapping
 
 from ..atomic import atomic_path
 from ..errors import OutputError
 from ..filenames import result_layer_path
-from ..schema import RESULT_FIELDS
+from ..schema import EMITTER_API, LUMINAIRE_API, LUMINOUS_FLUX, RESULT_KINDS, RESULT_PREFIX
+from .sublayer import ResultLayerWarning, file_mode, reload_if_open, sublayer_into_root
 
-#: Applied API schema of the luminaire prim holding the result.
-LUMINAIRE_API = "LumitraceLuminaireAPI"
-#: Namespace of the result attributes.
-RESULT_NAMESPACE = "lumitrace:result:"
-
-#: Result attributes: key (attribute name after ``lumitrace:result:``) -> value kind.
-#: Kinds map to Sdf value types: asset -> Asset, int64 -> Int64, int -> Int,
-#: double -> Double, bool -> Bool, string -> String.
-RESULT_ATTRIBUTES: dict[str, str] = RESULT_FIELDS
+__all__ = ["ResultLayerWarning", "ResultValueError", "RESULT_KINDS", "convert_results",
+           "result_layer_path", "write_result_layer"]
 
 _NON_NEGATIVE = {"photons", "iterations", "resolution"}
 _INT_RANGE = {"int": (-2 ** 31, 2 ** 31 - 1), "int64": (-2 ** 63, 2 ** 63 - 1)}
 
 
-class ResultLayerWarning(UserWarning):
-    """The result layer was written but could not be sublayered into the stage."""
+class ResultValueError(OutputError, ValueError):
+    """A result value of the wrong type or out of range, an unknown key or a bad prim
+    path, found before anything is written."""
 
 
 def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None,
@@ -61,7 +54,7 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
         Absolute path of the luminaire prim (the stage's default prim); ``None`` reads the
         root layer's ``defaultPrim``.
     results : mapping
-        Attribute suffix -> value, with the keys of :data:`RESULT_ATTRIBUTES`; any subset
+        Attribute suffix -> value, with the keys of :data:`RESULT_KINDS`; any subset
         may be given, and the layer holds exactly the given ones (each call rewrites it).
         Assets (``intensityMap``, ``iesFile``, ``ldtFile``) are file paths: relative ones are
         taken as relative to the stage's folder (where the result layer lives), absolute ones
@@ -97,22 +90,22 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
     if light is not None:
         missing = sorted({"ies", "flux", "radius", "position"} - set(light))
         if missing:
-            raise ValueError(f"the result light needs {', '.join(missing)}")
+            raise ResultValueError(f"the result light needs {', '.join(missing)}")
     prim_path = _luminaire_path(stage, luminaire_path)
 
     text = _result_layer_text(stage, prim_path, values, light)
     # Read the root layer before writing anything: a stage Sdf cannot read fails here.
     root = None if stage.suffix.lower() == ".usdz" else _open_copy(stage)
-    mode = _file_mode(layer_path if layer_path.exists() else stage)
+    mode = file_mode(layer_path if layer_path.exists() else stage)
     try:
         with atomic_path(layer_path) as tmp:
             tmp.write_text(text, encoding="utf-8")
             os.chmod(tmp, mode)
     except OSError as exc:
         raise OutputError(f"cannot write the result layer: {exc}", str(layer_path)) from exc
-    _reload_if_open(layer_path)
+    reload_if_open(layer_path)
 
-    _sublayer_into_root(stage, layer_path, root)
+    sublayer_into_root(stage, layer_path, root)
     return layer_path
 
 
@@ -127,50 +120,50 @@ def convert_results(results: Mapping[str, Any], layer_dir: str | os.PathLike) ->
     from pxr import Sdf
 
     if not isinstance(results, Mapping):
-        raise ValueError(f"results must be a mapping, got {type(results).__name__}")
-    unknown = sorted(set(results) - set(RESULT_ATTRIBUTES))
+        raise ResultValueError(f"results must be a mapping, got {type(results).__name__}")
+    unknown = sorted(set(results) - set(RESULT_KINDS))
     if unknown:
-        raise ValueError(f"unknown result attribute(s) {', '.join(map(repr, unknown))}; "
-                         f"known: {', '.join(RESULT_ATTRIBUTES)}")
+        raise ResultValueError(f"unknown result attribute(s) {', '.join(map(repr, unknown))}; "
+                         f"known: {', '.join(RESULT_KINDS)}")
     out = {}
-    for key, kind in RESULT_ATTRIBUTES.items():   # fixed order: a deterministic layer
+    for key, kind in RESULT_KINDS.items():   # fixed order: a deterministic layer
         if key not in results:
             continue
         value = results[key]
-        name = RESULT_NAMESPACE + key
+        name = RESULT_PREFIX + key
         if kind == "asset":
             out[key] = Sdf.AssetPath(_relative_asset(value, Path(layer_dir), name))
         elif kind in _INT_RANGE:
             out[key] = _as_int(value, kind, name, non_negative=key in _NON_NEGATIVE)
         elif kind == "double":
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise ValueError(f"{name}: expected a real number, got {value!r}")
+                raise ResultValueError(f"{name}: expected a real number, got {value!r}")
             out[key] = float(value)
         elif kind == "bool":
             if type(value).__name__ not in ("bool", "bool_"):
-                raise ValueError(f"{name}: expected a bool, got {value!r}")
+                raise ResultValueError(f"{name}: expected a bool, got {value!r}")
             out[key] = bool(value)
         else:  # string
             if not isinstance(value, str):
-                raise ValueError(f"{name}: expected a string, got {value!r}")
+                raise ResultValueError(f"{name}: expected a string, got {value!r}")
             out[key] = value
     return out
 
 
 def _as_int(value: Any, kind: str, name: str, non_negative: bool) -> int:
     if isinstance(value, bool) or type(value).__name__ == "bool_":
-        raise ValueError(f"{name}: expected an integer, got {value!r}")
+        raise ResultValueError(f"{name}: expected an integer, got {value!r}")
     if isinstance(value, numbers.Integral):
         v = int(value)
     elif isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
         v = int(value)
     else:
-        raise ValueError(f"{name}: expected an integer, got {value!r}")
+        raise ResultValueError(f"{name}: expected an integer, got {value!r}")
     lo, hi = _INT_RANGE[kind]
     if non_negative:
         lo = 0
     if not lo <= v <= hi:
-        raise ValueError(f"{name}: {v} is out of range [{lo}, {hi}] for {kind}")
+        raise ResultValueError(f"{name}: {v} is out of range [{lo}, {hi}] for {kind}")
     return v
 
 
@@ -180,7 +173,7 @@ def _relative_asset(value: Any, layer_dir: Path, name: str) -> str:
     if isinstance(value, Sdf.AssetPath):
         value = value.path
     if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
-        raise ValueError(f"{name}: expected a file path, got {value!r}")
+        raise ResultValueError(f"{name}: expected a file path, got {value!r}")
     path = os.fspath(value)
     if os.path.isabs(path):
         try:
@@ -204,13 +197,13 @@ def _luminaire_path(stage: Path, luminaire_path: str | None):
     if luminaire_path is None or str(luminaire_path) == "":
         layer = _open_copy(stage, metadata_only=True)
         if not layer.defaultPrim:
-            raise ValueError(f"{stage}: no luminaire prim given and the stage has no "
+            raise ResultValueError(f"{stage}: no luminaire prim given and the stage has no "
                              "defaultPrim")
         luminaire_path = "/" + layer.defaultPrim
     path = Sdf.Path(str(luminaire_path))
     if path.isEmpty or not path.IsAbsolutePath() or not path.IsPrimPath() \
             or path == Sdf.Path.absoluteRootPath:
-        raise ValueError(f"luminaire path must be an absolute prim path, got "
+        raise ResultValueError(f"luminaire path must be an absolute prim path, got "
                          f"{str(luminaire_path)!r}")
     return path
 
@@ -228,8 +221,8 @@ def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | No
     spec.specifier = Sdf.SpecifierOver
     spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=[LUMINAIRE_API]))
     for key, value in values.items():
-        attr = Sdf.AttributeSpec(spec, RESULT_NAMESPACE + key,
-                                 type_names[RESULT_ATTRIBUTES[key]],
+        attr = Sdf.AttributeSpec(spec, RESULT_PREFIX + key,
+                                 type_names[RESULT_KINDS[key]],
                                  Sdf.VariabilityVarying, declaresCustom=False)
         attr.default = value
     if light is not None:
@@ -266,8 +259,8 @@ def _photometric_variant(layer, prim_path, light: Mapping) -> None:
         disk.CreateNormalizeAttr(True)
         disk.CreateIntensityAttr(flux / math.pi)  # normalised: flux = pi * luminance
         p = disk.GetPrim()
-        p.AddAppliedSchema("LumitraceEmitterAPI")
-        p.CreateAttribute("lumitrace:luminousFlux", Sdf.ValueTypeNames.Float).Set(flux)
+        p.AddAppliedSchema(EMITTER_API)
+        p.CreateAttribute(LUMINOUS_FLUX, Sdf.ValueTypeNames.Float).Set(flux)
         shaping = UsdLux.ShapingAPI.Apply(p)
         shaping.CreateShapingIesFileAttr(Sdf.AssetPath(str(light["ies"])))
         shaping.CreateShapingIesNormalizeAttr(True)
@@ -294,218 +287,3 @@ def _open_copy(path: Path, metadata_only: bool = False):
     return layer
 
 
-def _file_mode(path: Path) -> int:
-    try:
-        return stat.S_IMODE(path.stat().st_mode)
-    except OSError:
-        return 0o644
-
-
-def _resolves_to(entry: str, root_dir: Path, target: Path) -> bool:
-    if "://" in entry or entry.startswith("@"):
-        return False
-    candidate = Path(entry) if os.path.isabs(entry) else root_dir / entry
-    return os.path.normcase(os.path.normpath(candidate)) == \
-        os.path.normcase(os.path.normpath(target))
-
-
-def _warn(message: str) -> None:
-    warnings.warn(message, ResultLayerWarning, stacklevel=4)  # the caller
-
-
-def _sublayer_into_root(stage: Path, layer_path: Path, root) -> None:
-    entry = "./" + layer_path.name
-    suffix = stage.suffix.lower()
-    if root is None:
-        _warn(f"{stage}: a .usdz package is not modified; add {entry} to its subLayers "
-              f"(or open {layer_path.name} over it) to see the result in the stage")
-        return
-    if any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths):
-        _sync_open_root(stage, entry, layer_path)
-        return
-    if not (os.access(stage, os.W_OK) and os.access(stage.parent, os.W_OK)):
-        _warn(f"{stage}: the root layer is not writable; the result is in "
-              f"{layer_path.name} but is not sublayered into the stage")
-        return
-
-    data = stage.read_bytes()
-    new_text = None
-    if data.startswith(b"#usda"):
-        new_text = _insert_sublayer_text(data.decode("utf-8"), entry, root)
-    mode = _file_mode(stage)
-    target = Path(os.path.realpath(stage))   # replace the file, not a symlink to it
-    try:
-        with atomic_path(target) as tmp:
-            if new_text is not None:
-                tmp.write_bytes(new_text.encode("utf-8"))
-            else:
-                root.subLayerPaths.insert(0, entry)
-                args = {}
-                if suffix == ".usd":   # keep the underlying format of a .usd file
-                    args["format"] = "usda" if data.startswith(b"#usda") else "usdc"
-                if not root.Export(str(tmp), args=args):
-                    raise OSError("Sdf could not export the root layer")
-            os.chmod(tmp, mode)
-    except OSError as exc:
-        raise OutputError(f"cannot sublayer the result layer into the stage: {exc}",
-                          str(stage)) from exc
-    _sync_open_root(stage, entry, layer_path)
-
-
-def _reload_if_open(path: Path) -> None:
-    """Reload a layer this process has open, so its stages see the new file."""
-    from pxr import Sdf
-
-    layer = Sdf.Layer.Find(str(path))
-    if layer is not None:
-        layer.Reload(force=True)
-
-
-def _sync_open_root(stage: Path, entry: str, layer_path: Path) -> None:
-    """Bring an open instance of the root layer in line with the file: reload it when it
-    has no unsaved edits, otherwise add the sublayer entry in memory (keeping the edits)."""
-    from pxr import Sdf
-
-    layer = Sdf.Layer.Find(str(stage))
-    if layer is None:
-        return
-    if any(_resolves_to(p, stage.parent, layer_path) for p in layer.subLayerPaths):
-        return
-    if layer.dirty:
-        layer.subLayerPaths.insert(0, entry)
-    else:
-        layer.Reload(force=True)
-
-
-# ------------------------------------------------------------------------------------------
-# Text edit of a .usda root layer (keeps comments and formatting)
-# ------------------------------------------------------------------------------------------
-
-
-def _insert_sublayer_text(text: str, entry: str, root) -> str | None:
-    """``text`` with ``@entry@`` first in its ``subLayers``, or ``None`` when the edit is
-    not certain to equal ``root`` (the layer as read by Sdf) with the entry inserted."""
-    from pxr import Sdf, Tf
-
-    try:
-        candidate = _edit_header(text, entry)
-    except ValueError:
-        return None
-    if candidate is None:
-        return None
-    expected = Sdf.Layer.CreateAnonymous(".usda")
-    expected.TransferContent(root)
-    expected.subLayerPaths.insert(0, entry)
-    check = Sdf.Layer.CreateAnonymous(".usda")
-    try:
-        if not check.ImportFromString(candidate):
-            return None
-    except Tf.ErrorException:
-        return None
-    if check.ExportToString() != expected.ExportToString():
-        return None
-    return candidate
-
-
-def _edit_header(text: str, entry: str) -> str | None:
-    nl = "\r\n" if "\r\n" in text else "\n"
-    end = text.find("\n")
-    if end < 0:
-        return None
-    pos = end + 1
-    # skip blank and comment lines between the header and the metadata block
-    i = pos
-    while i < len(text):
-        if text[i] in " \t\r\n":
-            i += 1
-        elif text[i] == "#":
-            j = text.find("\n", i)
-            i = len(text) if j < 0 else j + 1
-        else:
-            break
-    item = f"@{entry}@"
-    if i >= len(text) or text[i] != "(":
-        block = f"({nl}    subLayers = [{nl}        {item}{nl}    ]{nl}){nl}"
-        return text[:pos] + block + text[pos:]
-    close, sub_open = _scan_block(text, i)
-    if sub_open is not None:
-        j = sub_open + 1
-        while j < len(text) and text[j] in " \t\r\n":
-            j += 1
-        if j < len(text) and text[j] == "]":     # empty list
-            return text[:sub_open + 1] + f"{nl}        {item}{nl}    " + text[j:]
-        if text[sub_open + 1] in "\r\n":              # one entry per line
-            return text[:sub_open + 1] + f"{nl}        {item}," + text[sub_open + 1:]
-        return text[:sub_open + 1] + f"{item}, " + text[sub_open + 1:]
-    line_start = text.rfind("\n", i, close) + 1
-    if line_start > i and text[line_start:close].strip() == "":
-        return (text[:line_start] + f"    subLayers = [{nl}        {item}{nl}    ]{nl}"
-                + text[line_start:])
-    return text[:close] + f"{nl}    subLayers = [{nl}        {item}{nl}    ]{nl}" + text[close:]
-
-
-def _scan_block(text: str, start: int) -> tuple[int, int | None]:
-    """Scan the layer metadata block opening at ``text[start] == '('``: return the index of
-    its closing parenthesis and of the ``[`` opening a top-level ``subLayers`` list (or
-    None). Strings, asset paths, prim paths and comments are skipped."""
-    depth = 0
-    sub_open = None
-    i = start
-    n = len(text)
-    while i < n:
-        c = text[i]
-        if c in "\"'":
-            q3 = text[i:i + 3]
-            if q3 in ('"""', "'''"):
-                j = text.find(q3, i + 3)
-                if j < 0:
-                    raise ValueError("unterminated string")
-                i = j + 3
-                continue
-            j = i + 1
-            while j < n and text[j] != c:
-                if text[j] == "\\":
-                    j += 1
-                elif text[j] == "\n":
-                    raise ValueError("unterminated string")
-                j += 1
-            i = j + 1
-            continue
-        if c == "@":
-            if text.startswith("@@@", i):
-                j = text.find("@@@", i + 3)
-                i = j + 3 if j >= 0 else n
-            else:
-                j = text.find("@", i + 1)
-                i = j + 1 if j >= 0 else n
-            continue
-        if c == "<":
-            j = text.find(">", i + 1)
-            i = j + 1 if j >= 0 else n
-            continue
-        if c == "#":
-            j = text.find("\n", i)
-            i = n if j < 0 else j
-            continue
-        if c in "([{":
-            depth += 1
-        elif c in ")]}":
-            depth -= 1
-            if depth == 0:
-                return i, sub_open
-        elif depth == 1 and sub_open is None and text.startswith("subLayers", i) \
-                and not (text[i - 1].isalnum() or text[i - 1] in "_:"):
-            j = i + len("subLayers")
-            while j < n and text[j] in " \t":
-                j += 1
-            if j < n and text[j] == "=":
-                j += 1
-                while j < n and text[j] in " \t\r\n":
-                    j += 1
-                if j < n and text[j] == "[":
-                    sub_open = j
-                    depth += 1
-                    i = j + 1
-                    continue
-        i += 1
-    raise ValueError("unterminated layer metadata block")

@@ -1,0 +1,131 @@
+"""Text edit of a ``.usda`` root layer: put one entry first in its ``subLayers``, keeping
+every comment and all formatting, and check the edit against an Sdf round trip."""
+from __future__ import annotations
+
+def insert_sublayer_text(text: str, entry: str, root) -> str | None:
+    """``text`` with ``@entry@`` first in its ``subLayers``, or ``None`` when the edit is
+    not certain to equal ``root`` (the layer as read by Sdf) with the entry inserted."""
+    from pxr import Sdf, Tf
+
+    try:
+        candidate = _edit_header(text, entry)
+    except ValueError:
+        return None
+    if candidate is None:
+        return None
+    expected = Sdf.Layer.CreateAnonymous(".usda")
+    expected.TransferContent(root)
+    expected.subLayerPaths.insert(0, entry)
+    check = Sdf.Layer.CreateAnonymous(".usda")
+    try:
+        if not check.ImportFromString(candidate):
+            return None
+    except Tf.ErrorException:
+        return None
+    if check.ExportToString() != expected.ExportToString():
+        return None
+    return candidate
+
+
+def _edit_header(text: str, entry: str) -> str | None:
+    nl = "\r\n" if "\r\n" in text else "\n"
+    end = text.find("\n")
+    if end < 0:
+        return None
+    pos = end + 1
+    # skip blank and comment lines between the header and the metadata block
+    i = pos
+    while i < len(text):
+        if text[i] in " \t\r\n":
+            i += 1
+        elif text[i] == "#":
+            j = text.find("\n", i)
+            i = len(text) if j < 0 else j + 1
+        else:
+            break
+    item = f"@{entry}@"
+    if i >= len(text) or text[i] != "(":
+        block = f"({nl}    subLayers = [{nl}        {item}{nl}    ]{nl}){nl}"
+        return text[:pos] + block + text[pos:]
+    close, sub_open = _scan_block(text, i)
+    if sub_open is not None:
+        j = sub_open + 1
+        while j < len(text) and text[j] in " \t\r\n":
+            j += 1
+        if j < len(text) and text[j] == "]":     # empty list
+            return text[:sub_open + 1] + f"{nl}        {item}{nl}    " + text[j:]
+        if text[sub_open + 1] in "\r\n":              # one entry per line
+            return text[:sub_open + 1] + f"{nl}        {item}," + text[sub_open + 1:]
+        return text[:sub_open + 1] + f"{item}, " + text[sub_open + 1:]
+    line_start = text.rfind("\n", i, close) + 1
+    if line_start > i and text[line_start:close].strip() == "":
+        return (text[:line_start] + f"    subLayers = [{nl}        {item}{nl}    ]{nl}"
+                + text[line_start:])
+    return text[:close] + f"{nl}    subLayers = [{nl}        {item}{nl}    ]{nl}" + text[close:]
+
+
+def _scan_block(text: str, start: int) -> tuple[int, int | None]:
+    """Scan the layer metadata block opening at ``text[start] == '('``: return the index of
+    its closing parenthesis and of the ``[`` opening a top-level ``subLayers`` list (or
+    None). Strings, asset paths, prim paths and comments are skipped."""
+    depth = 0
+    sub_open = None
+    i = start
+    n = len(text)
+    while i < n:
+        c = text[i]
+        if c in "\"'":
+            q3 = text[i:i + 3]
+            if q3 in ('"""', "'''"):
+                j = text.find(q3, i + 3)
+                if j < 0:
+                    raise ValueError("unterminated string")
+                i = j + 3
+                continue
+            j = i + 1
+            while j < n and text[j] != c:
+                if text[j] == "\\":
+                    j += 1
+                elif text[j] == "\n":
+                    raise ValueError("unterminated string")
+                j += 1
+            i = j + 1
+            continue
+        if c == "@":
+            if text.startswith("@@@", i):
+                j = text.find("@@@", i + 3)
+                i = j + 3 if j >= 0 else n
+            else:
+                j = text.find("@", i + 1)
+                i = j + 1 if j >= 0 else n
+            continue
+        if c == "<":
+            j = text.find(">", i + 1)
+            i = j + 1 if j >= 0 else n
+            continue
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth -= 1
+            if depth == 0:
+                return i, sub_open
+        elif depth == 1 and sub_open is None and text.startswith("subLayers", i) \
+                and not (text[i - 1].isalnum() or text[i - 1] in "_:"):
+            j = i + len("subLayers")
+            while j < n and text[j] in " \t":
+                j += 1
+            if j < n and text[j] == "=":
+                j += 1
+                while j < n and text[j] in " \t\r\n":
+                    j += 1
+                if j < n and text[j] == "[":
+                    sub_open = j
+                    depth += 1
+                    i = j + 1
+                    continue
+        i += 1
+    raise ValueError("unterminated layer metadata block")
