@@ -1,4 +1,5 @@
-"""Shared fixtures: the test helpers on sys.path and OpenEXR's own ImfEnvmap as an oracle."""
+"""Shared fixtures: ``tests/helpers`` and the stress cases of ``tools/`` on sys.path, and
+OpenEXR's own ImfEnvmap as an oracle."""
 import os
 import shutil
 import subprocess
@@ -10,6 +11,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tools"))  # the stress case library
 INSTALL_HINT = "apt-get install -y libopenexr-dev pkg-config g++"
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from chi2 import sphere_chi2_pvalue, sphere_integral
+from helpers.chi2 import sphere_chi2_pvalue, sphere_integral
 from lumitrace.trace import rng
 from lumitrace.scene.shaping import shaping_window
 from lumitrace.trace.emission import emit

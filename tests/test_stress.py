@@ -2,7 +2,7 @@
 breaks naive tracers, accumulation at scale, white-furnace energy checks, bad input through
 the command line, and bounded fuzzing of the stage reader.
 
-Every case lives in ``stress_cases.py`` and returns its measured outcome; ``tools/stress.py``
+Every case lives in ``tools/stress_cases.py`` and returns its measured outcome; ``tools/stress.py``
 runs the same cases with many more photons and a longer fuzz, and prints them as a table.
 The service (HTTP 4xx) and the scene-delta parser do not exist yet: their part of the issue
 is not tested here.
@@ -134,7 +134,6 @@ def test_fuzz_attribute_values(fuzz_folder, edits):
 @pytest.mark.slow
 def test_long_stress_run():
     """The long runner with a moderate budget (minutes): ``pytest -m slow``."""
-    sys.path.insert(0, str(sc.Path(__file__).resolve().parents[1] / "tools"))
     import stress
 
     assert stress.main(["--photons", "2e5", "--fuzz-seconds", "30"]) == 0

@@ -8,7 +8,7 @@ PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 if [ "$1" = "--test" ]; then
-    .venv/bin/python -m pip install -q -e '.[test]'
+    .venv/bin/python -m pip install -q -e '.[plot,test]'
     if ! pkg-config --exists OpenEXR 2>/dev/null || ! command -v g++ >/dev/null 2>&1; then
         if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
             echo "installing libopenexr-dev, pkg-config and g++ for the ImfEnvmap oracle tests"
@@ -19,5 +19,5 @@ if [ "$1" = "--test" ]; then
         fi
     fi
 else
-    .venv/bin/python -m pip install -q -e .
+    .venv/bin/python -m pip install -q -e '.[plot]'
 fi

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""The long part of the stress suite (issue #5): every case of ``tests/stress_cases.py``
+"""The long part of the stress suite (issue #5): every case of ``tools/stress_cases.py``
 with many more photons, bad input through the command line, and a time-bounded fuzz of the
 stage reader; prints a table of cases and measured outcomes.
 
@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
 try:
     import lumitrace  # noqa: F401
 except ImportError:  # running from a source checkout without installing the package

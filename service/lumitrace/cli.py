@@ -5,9 +5,10 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from pathlib import Path
 
-from .errors import LumitraceError
+from .errors import LumitraceError, LumitraceWarning
 from .run.settings import DEFAULT_THRESHOLD
 
 
@@ -246,8 +247,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+_python_showwarning = warnings.showwarning
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """lumitrace's warnings as one line each on stderr; others as Python shows them."""
+    if issubclass(category, LumitraceWarning):
+        print(f"warning: {message}", file=sys.stderr)
+    else:
+        _python_showwarning(message, category, filename, lineno, file, line)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    warnings.showwarning = _show_warning
     try:
         if args.command == "trace":
             return cmd_trace(args)

@@ -1,5 +1,12 @@
-"""Errors that name what is wrong and where: the prim, the property, the file."""
+"""Errors and warnings that name what is wrong and where: the prim, the property, the file.
+
+Every warning lumitrace gives is a :class:`LumitraceWarning` sent with :func:`warn`, the one
+route by which the command line prints them and the service turns them into events; the
+stage reader also keeps its own in ``Scene.warnings`` (the scene's record of its input).
+"""
 from __future__ import annotations
+
+import warnings
 
 
 class LumitraceError(Exception):
@@ -28,3 +35,17 @@ class StageError(LumitraceError):
 
 class OutputError(LumitraceError):
     """A result could not be written (nothing half-written is left behind)."""
+
+
+class LumitraceWarning(UserWarning):
+    """Something the user should know, with a result all the same."""
+
+
+class OutputWarning(LumitraceWarning):
+    """An output was written differently than asked (a picture skipped, a layer not
+    sublayered), with the reason."""
+
+
+def warn(message: str, category: type[LumitraceWarning] = LumitraceWarning) -> None:
+    """Send a lumitrace warning (shown once per distinct message by Python's defaults)."""
+    warnings.warn(message, category, stacklevel=3)

@@ -148,9 +148,3 @@ class Accumulator:
             out["absorbed"] += t.absorbed * w
             out["cut"] += t.cut * w
         return out
-
-    def relative_error(self) -> float:
-        """Estimated relative RMS error of the raw intensity map (see :mod:`convergence`)."""
-        from .convergence import raw_relative_error
-
-        return raw_relative_error(self)

@@ -7,12 +7,14 @@ Every file is written atomically, the files before the layer that references the
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
+from ..errors import OutputWarning, warn
 from ..filenames import INTENSITY_SUFFIX, result_layer_path, stage_name
 from ..photometry import frame
 from ..photometry.distribution import Photometry, photometry_of
@@ -43,6 +45,11 @@ def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: P
             "flux": ph.figures.luminous_flux, "radius": radius / mpu,
             "position": tuple(float(x) / mpu for x in centre), "up_axis": scene.up_axis,
             "emitters": [e.path for e in scene.emitters if "[" not in e.path]}
+
+
+def plotting_available() -> bool:
+    """Whether the plot extra (matplotlib) is installed."""
+    return importlib.util.find_spec("matplotlib") is not None
 
 
 def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path]) -> ResultRecord:
@@ -86,11 +93,17 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> Res
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
              **photometric_paths(out, name),
              "result_layer": result_layer_path(stage_path)}
+    pictures = plotting_available()
+    if not pictures:
+        warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
+             "installed (install lumitrace[plot])", OutputWarning)
+        paths.pop("polar_diagram")
+        paths.pop("photometric_solid")
     est = result.estimate
     escaped = result.accumulator.fluxes()["escaped"]
     ph = photometry_of(scene, est.filtered, escaped, result.relative_error)
     record = build_record(result, ph, paths)
-    write_photometric_files(scene, ph, paths, name, result.relative_error)
+    write_photometric_files(scene, ph, paths, name, result.relative_error, pictures)
     acc = result.accumulator
     channels = {"Y": est.filtered, "raw.Y": est.raw, "count": acc.counts().astype(np.float64),
                 "relativeError": np.minimum(est.texel_error, 1e30)}

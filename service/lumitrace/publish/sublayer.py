@@ -7,11 +7,11 @@ import warnings
 from pathlib import Path
 
 from ..atomic import atomic_path
-from ..errors import OutputError
+from ..errors import OutputError, OutputWarning
 from .usda_text import insert_sublayer_text
 
 
-class ResultLayerWarning(UserWarning):
+class ResultLayerWarning(OutputWarning):
     """The result layer was written but could not be sublayered into the stage."""
 
 

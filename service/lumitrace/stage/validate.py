@@ -104,6 +104,25 @@ def check_token(value: Any, allowed, where: str, prop: str) -> str:
     return value
 
 
+def check_array(value, where: str, prop: str, dtype=np.float64, width: int | None = None
+                ) -> np.ndarray:
+    """An array attribute's value as a numpy array ((N,) or (N, width)); no value gives an
+    empty one. A value of another type (an unknown type name in the file, text) is a
+    StageError naming the prim and property."""
+    if value is None:
+        return np.zeros((0, width) if width else 0, dtype=dtype)
+    try:
+        arr = np.asarray(value, dtype=dtype)
+        arr = arr.reshape(-1, width) if width else arr.reshape(-1)
+        if not width and np.ndim(value) != 1:
+            raise ValueError(value)
+    except (TypeError, ValueError, OverflowError):
+        kind = f"{width}-component vectors" if width else "numbers"
+        raise StageError(f"expected an array of {kind}, got {type(value).__name__}",
+                         where, prop) from None
+    return arr
+
+
 def check_finite_points(points: np.ndarray, where: str, prop: str = "points",
                         what: str = "points") -> None:
     """Every coordinate of an (N, 3) array must be finite."""

@@ -1,0 +1,99 @@
+"""USD's own diagnostics while a stage is read: warnings collected instead of printed,
+composition errors judged (an error within the luminaire, a warning elsewhere), and pxr
+error texts made readable."""
+from __future__ import annotations
+
+import re
+from typing import Callable
+
+from pxr import Pcp, Usd, UsdUtils
+
+from ..errors import StageError
+from ..filenames import RESULT_LAYER_SUFFIX
+
+_NAMESPACE = re.compile(r"pxrInternal_v\d+_\d+(?:_\d+)?__pxrReserved__::")
+#: The session layer USD adds to layer stacks in messages: ",@anon:0x...:NAME-session.usda@".
+_ANON_LAYER = re.compile(r",@anon:[^@]*@")
+
+#: Composition errors that leave the luminaire incomplete or undefined, with what to say.
+_FATAL_COMPOSITION = {
+    Pcp.ErrorType_InvalidAssetPath: "cannot open a referenced layer",
+    Pcp.ErrorType_InvalidSublayerPath: "cannot open a sublayer",
+    Pcp.ErrorType_ArcCycle: "composition cycle",
+    Pcp.ErrorType_SublayerCycle: "sublayer cycle",
+    Pcp.ErrorType_UnresolvedPrimPath: "reference to a prim that does not exist",
+    Pcp.ErrorType_InvalidPrimPath: "reference to an invalid prim path",
+    Pcp.ErrorType_ArcCapacityExceeded: "composition too deep",
+    Pcp.ErrorType_ArcNamespaceDepthCapacityExceeded: "composition too deep",
+    Pcp.ErrorType_IndexCapacityExceeded: "composition too large",
+}
+_SUBLAYER_ERRORS = {Pcp.ErrorType_InvalidSublayerPath, Pcp.ErrorType_SublayerCycle,
+                    Pcp.ErrorType_InvalidSublayerOffset,
+                    Pcp.ErrorType_InvalidSublayerOwnership}
+
+
+class UsdDiagnostics:
+    """While in use, USD's warnings and status messages are collected instead of printed
+    (bad input must give one clear error, and nothing else, on stderr); the reader reports
+    them as scene warnings, and composition errors itself."""
+
+    def __enter__(self) -> "UsdDiagnostics":
+        self._delegate = UsdUtils.CoalescingDiagnosticDelegate()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._delegate = None  # unregisters it
+
+    def take(self) -> list[str]:
+        """The messages collected so far (composition errors left out)."""
+        notes = []
+        for d in self._delegate.TakeUncoalescedDiagnostics():
+            if d.sourceFunction.endswith("UsdStage::_ReportErrors"):
+                continue
+            notes.append(" ".join(_NAMESPACE.sub("", d.commentary).split())[:300])
+        return notes
+
+
+def check_composition(stage: Usd.Stage, root: Usd.Prim, layer_where: str,
+                      warn: Callable[[str], None]) -> None:
+    """Composition errors that leave the luminaire incomplete (a missing layer, a cycle,
+    a reference to no prim) are bad input; elsewhere in the stage they are warnings, as
+    is a missing result layer of ours (the next run writes it again)."""
+    root_path = root.GetPath()
+    for error in stage.GetCompositionErrors():
+        message = _ANON_LAYER.sub("", tf_message(error))
+        site = error.rootSite.path
+        what = _FATAL_COMPOSITION.get(error.errorType)
+        sublayer = error.errorType in _SUBLAYER_ERRORS
+        where = layer_where if sublayer or site.IsAbsoluteRootPath() else str(site)
+        ours = sublayer and RESULT_LAYER_SUFFIX in message
+        inside = (site.IsAbsoluteRootPath() or site.HasPrefix(root_path)
+                  or root_path.HasPrefix(site))
+        if what is not None and inside and not ours:
+            prop = "subLayers" if sublayer else _arc_property(message)
+            raise StageError(f"{what}: {message}", where, prop)
+        warn(f"{where}: composition error: {message}")
+
+
+def _arc_property(message: str) -> str:
+    """The composition arc a Pcp message is about, as the metadata field that authors it."""
+    text = message.lower()
+    for word, field_name in (("payload", "payload"), ("inherit", "inherits"),
+                             ("specializ", "specializes"), ("variant", "variantSets")):
+        if word in text:
+            return field_name
+    return "references"
+
+
+def tf_message(error) -> str:
+    """The readable part of a pxr error (Tf.ErrorException or a composition error)."""
+    text = _NAMESPACE.sub("", str(error)).strip()
+    messages = []
+    for chunk in re.split(r"\s*Error in ", text):
+        _, sep, body = chunk.partition(" : '")
+        if sep:
+            messages.append(body.strip().rstrip("'"))
+    message = messages[0] if messages else text or repr(error)
+    # parser internals between "parse error" and the offending text
+    message = re.sub(r" matching .*? at '", " at '", message, flags=re.DOTALL)
+    return " ".join(message.split())[:300]

@@ -1,0 +1,201 @@
+"""Emitters: ``UsdLux`` Sphere, Disk, Rect and Cylinder lights read into
+:class:`~lumitrace.scene.Emitter` s, their shaping, world area and luminous flux."""
+from __future__ import annotations
+
+import math
+from dataclasses import fields
+from typing import Callable
+
+import numpy as np
+from pxr import Usd, UsdGeom, UsdLux
+
+from .. import schema
+from ..errors import StageError
+from ..scene import Emitter
+from ..scene.shaping import shaping_emits, shaping_fraction, unshaped_cone_angle
+from . import validate
+from .materials import luminance
+from .transforms import Frame, invertible, placements, raise_bad_transform
+from .validate import check_array
+
+_LIGHT_TYPES = (
+    (UsdLux.SphereLight, "sphere"),
+    (UsdLux.DiskLight, "disk"),
+    (UsdLux.RectLight, "rect"),
+    (UsdLux.CylinderLight, "cylinder"),
+)
+_EMITTER_FIELDS = {f.name for f in fields(Emitter)}
+
+
+def light_flux(kind: str, intensity: float, exposure: float = 0.0,
+               color=(1.0, 1.0, 1.0), normalize: bool = False, area: float = 1.0,
+               fraction: float = 1.0) -> float:
+    """Luminous flux (lm) of a UsdLux light from its intensity inputs.
+
+    The luminance is ``L = intensity * 2**exposure * Y(color)`` (nits); a Lambertian
+    surface of world area ``A`` (m^2; one side of a disk or rect, the whole sphere, the
+    cylinder's side without caps) emits ``pi * L * A``; ``normalize`` divides the area
+    out: ``pi * L``. ``fraction`` is the shaping fraction (:func:`shaping_fraction`).
+    A colour temperature does not change the flux: UsdLux's blackbody colour is
+    normalised to luminance 1.
+    """
+    del kind  # same formula for every kind once the area is known
+    with np.errstate(over="ignore"):  # a huge exposure is an infinite flux, refused later
+        lum = intensity * float(np.exp2(exposure)) * luminance(color)
+    return math.pi * lum * (1.0 if normalize else area) * fraction
+
+
+def light_kind(prim: Usd.Prim) -> str | None:
+    """The emitter kind of a supported light prim, else None."""
+    for light_type, kind in _LIGHT_TYPES:
+        if prim.IsA(light_type):
+            return kind
+    return None
+
+
+def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
+               meters_per_unit: float, warn: Callable[[str], None]) -> list[Emitter]:
+    """The emitters of a light of ``kind``, one per placement of ``prim`` in ``frame``, read
+    at the time of ``xf``."""
+    time = xf.GetTime()
+    path = str(prim.GetPath())
+    light = UsdLux.LightAPI(prim)
+    dims: dict[str, float | bool] = {}
+    if kind == "sphere":
+        sphere = UsdLux.SphereLight(prim)
+        dims["radius"] = validate.check_non_negative(
+            sphere.GetRadiusAttr().Get(time), path, "inputs:radius")
+        dims["treat_as_point"] = bool(sphere.GetTreatAsPointAttr().Get(time))
+    elif kind == "disk":
+        dims["radius"] = validate.check_positive(
+            UsdLux.DiskLight(prim).GetRadiusAttr().Get(time), path, "inputs:radius")
+    elif kind == "rect":
+        rect = UsdLux.RectLight(prim)
+        dims["width"] = validate.check_positive(rect.GetWidthAttr().Get(time), path,
+                                                "inputs:width")
+        dims["height"] = validate.check_positive(rect.GetHeightAttr().Get(time), path,
+                                                 "inputs:height")
+        if rect.GetTextureFileAttr().Get(time):
+            warn(f"{path}.inputs:texture:file: light textures are ignored")
+    else:
+        cylinder = UsdLux.CylinderLight(prim)
+        dims["length"] = validate.check_positive(cylinder.GetLengthAttr().Get(time),
+                                                 path, "inputs:length")
+        dims["radius"] = validate.check_positive(cylinder.GetRadiusAttr().Get(time),
+                                                 path, "inputs:radius")
+    cone_angle, cone_softness, focus = _shaping(prim, kind, time, warn)
+
+    flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
+    authored_flux = None
+    if flux_attr and flux_attr.HasAuthoredValue():
+        authored_flux = validate.check_luminous_flux(flux_attr.Get(time), path,
+                                                     schema.LUMINOUS_FLUX)
+    elif not light.GetIntensityAttr().HasAuthoredValue():
+        raise StageError("light has no luminous flux: author lumitrace:luminousFlux (lm) "
+                         "or inputs:intensity", path)
+    else:
+        intensity = validate.check_non_negative(light.GetIntensityAttr().Get(time),
+                                                path, "inputs:intensity")
+        exposure = validate.check_finite(light.GetExposureAttr().Get(time), path,
+                                         "inputs:exposure")
+        color = check_array(light.GetColorAttr().Get(time), path, "inputs:color",
+                            width=3).ravel()
+        if color.size != 3 or not np.isfinite(color).all() or (color < 0).any():
+            raise StageError(f"must be finite and >= 0, got {tuple(color)}", path,
+                             "inputs:color")
+        normalize = bool(light.GetNormalizeAttr().Get(time))
+        fraction = shaping_fraction(kind, cone_angle, cone_softness, focus)
+
+    emitters = []
+    for matrix, label in placements(xf, prim, frame):
+        to_world = np.diag([meters_per_unit] * 3 + [1.0]) @ matrix.T
+        validate.check_extent(to_world[:3, 3], path, "xformOpOrder")
+        validate.check_extent(np.abs(to_world[:3, :3]).sum(axis=0) * max(
+            v for v in dims.values() if not isinstance(v, bool)), path, "xformOpOrder")
+        if not invertible(matrix[:3, :3]):
+            raise_bad_transform(prim, time, singular=True)
+        if authored_flux is not None:
+            flux = authored_flux
+        else:
+            area = _world_area(kind, dims, to_world[:3, :3])
+            flux = light_flux(kind, intensity, exposure, color, normalize, area, fraction)
+            if not (math.isfinite(flux) and flux > 0.0):
+                raise StageError(f"light emits no {'finite ' if flux else ''}flux "
+                                 f"({flux:g} lm from intensity "
+                                 f"{intensity:g}, exposure {exposure:g}, world area "
+                                 f"{area:g} m^2)", path, "inputs:intensity")
+        extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
+        emitters.append(Emitter(
+            path=path + label, kind=kind, flux=float(flux), to_world=to_world,
+            cone_angle=cone_angle, cone_softness=cone_softness, **dims, **extra))
+    return emitters
+
+
+def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode,
+             warn: Callable[[str], None]) -> tuple[float, float, float]:
+    """Cone angle (deg), softness and focus; unshaped: 90 deg for one-sided lights,
+    180 deg (all directions) for sphere and cylinder lights."""
+    path = str(prim.GetPath())
+    unshaped = unshaped_cone_angle(kind)
+    if not prim.HasAPI(UsdLux.ShapingAPI):
+        return unshaped, 0.0, 0.0
+    shaping = UsdLux.ShapingAPI(prim)
+    angle_attr = shaping.GetShapingConeAngleAttr()
+    angle, softness, focus = unshaped, 0.0, 0.0
+    if angle_attr.HasAuthoredValue():
+        angle = validate.check_positive(angle_attr.Get(time), path,
+                                        "inputs:shaping:cone:angle")
+        angle = min(angle, 180.0)
+    softness_attr = shaping.GetShapingConeSoftnessAttr()
+    if softness_attr.HasAuthoredValue():
+        softness = min(validate.check_non_negative(softness_attr.Get(time), path,
+                                                   "inputs:shaping:cone:softness"), 1.0)
+    focus_attr = shaping.GetShapingFocusAttr()
+    if focus_attr.HasAuthoredValue():
+        focus = validate.check_non_negative(focus_attr.Get(time), path,
+                                            "inputs:shaping:focus")
+    if shaping.GetShapingIesFileAttr().Get(time):
+        warn(f"{path}.inputs:shaping:ies:file: IES profiles on emitters are ignored")
+    if kind == "cylinder" and (angle < unshaped or focus > 0.0):
+        warn(f"{path}: shaping of a CylinderLight is ignored")
+        return unshaped, 0.0, 0.0
+    if focus > 0.0 and "focus" not in _EMITTER_FIELDS:
+        warn(f"{path}.inputs:shaping:focus: focus is not supported: ignored")
+        focus = 0.0
+    if not shaping_emits(kind, angle, softness, focus):
+        raise StageError("shaping leaves no direction to emit in (cone angle, softness and "
+                         "focus together)", path,
+                         "inputs:shaping:focus" if focus > 0.0 else "inputs:shaping:cone:angle")
+    return angle, softness, focus
+
+
+def _cofactor(a: np.ndarray) -> np.ndarray:
+    """Cofactor matrix of a 3x3 linear map: ``C @ n`` is the area vector that a unit area
+    with normal ``n`` maps to (valid for singular maps too)."""
+    c = np.empty((3, 3))
+    for i in range(3):
+        c[:, i] = np.cross(a[:, (i + 1) % 3], a[:, (i + 2) % 3])
+    return c
+
+
+def _world_area(kind: str, dims: dict, linear: np.ndarray) -> float:
+    """World area (m^2) of a light's emitting surface under the local-to-world map."""
+    c = _cofactor(linear)
+    if kind == "disk":
+        return math.pi * dims["radius"] ** 2 * float(np.linalg.norm(c[:, 2]))
+    if kind == "rect":
+        return dims["width"] * dims["height"] * float(np.linalg.norm(c[:, 2]))
+    if kind == "cylinder":  # side only; axis along local X
+        phi = np.linspace(0.0, 2.0 * math.pi, 256, endpoint=False)
+        normals = np.stack([np.zeros_like(phi), np.cos(phi), np.sin(phi)])
+        ring = float(np.mean(np.linalg.norm(c @ normals, axis=0))) * 2.0 * math.pi
+        return dims["radius"] * dims["length"] * ring
+    # sphere: integrate |C n| over the unit sphere (Gauss-Legendre in cos(theta))
+    mu, weights = np.polynomial.legendre.leggauss(48)
+    phi = np.linspace(0.0, 2.0 * math.pi, 96, endpoint=False)
+    s = np.sqrt(1.0 - mu ** 2)
+    normals = np.stack([np.outer(s, np.cos(phi)), np.outer(s, np.sin(phi)),
+                        np.outer(mu, np.ones_like(phi))]).reshape(3, -1)
+    integrand = np.linalg.norm(c @ normals, axis=0).reshape(mu.size, phi.size)
+    solid = float(np.sum(weights[:, None] * integrand) * (2.0 * math.pi / phi.size))
+    return dims["radius"] ** 2 * solid

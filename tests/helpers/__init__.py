@@ -1,0 +1,1 @@
+"""Helpers shared by the test modules (statistical tests on the sphere)."""
