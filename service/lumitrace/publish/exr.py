@@ -353,3 +353,14 @@ def write_latlong_exr(path: str | os.PathLike, channels, metadata: Mapping[str, 
 
 __all__ = ["METADATA_ATTRIBUTE", "CHANNEL_UNITS", "write_intensity_exr", "read_intensity_exr",
            "metadata_json", "cube_to_latlong", "write_latlong_exr"]
+
+
+def read_exr_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
+    """The ``lumitrace`` JSON metadata of an EXR file from its header alone (no pixels);
+    None when the file is missing, unreadable or carries none."""
+    try:
+        header = OpenEXR.File(str(path), header_only=True).header()
+        meta = json.loads(header.get(METADATA_ATTRIBUTE) or "null")
+    except Exception:  # noqa: BLE001 (any unreadable file: no metadata)
+        return None
+    return meta if isinstance(meta, dict) else None

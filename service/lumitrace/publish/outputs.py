@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..errors import OutputWarning, warn
+from ..errors import OutputError, OutputWarning, warn
 from ..filenames import INTENSITY_SUFFIX, result_layer_path, stage_name
 from ..photometry import frame
 from ..photometry.distribution import Photometry, photometry_of
@@ -23,7 +23,9 @@ from ..scene import Scene
 from .exr import write_intensity_exr
 from .photometric import photometric_paths, write_photometric_files
 from .record import ResultRecord, trace_figures
-from .result_layer import write_result_layer
+from .result_layer import result_layer_text, write_layer_file
+from .sublayer import reload_if_open, sublayer_into_root
+from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover
 
 
 def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: Path) -> dict:
@@ -83,11 +85,14 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
     }
 
 
-def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> ResultRecord:
-    """Write the photometric files, the EXR and the result layer; return the record."""
+def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
+                  wait: float = DEFAULT_LOCK_WAIT) -> ResultRecord:
+    """Write the photometric files, the EXR and the result layer as one transaction (see
+    :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage; return
+    the record. Waits up to ``wait`` s for another run publishing the same stage."""
     scene = result.scene
-    stage_path = Path(scene.stage_path)
-    out = Path(out_dir) if out_dir is not None else stage_path.parent
+    stage_path = Path(scene.stage_path).absolute()
+    out = Path(out_dir).absolute() if out_dir is not None else stage_path.parent
     name = stage_name(stage_path)
     layer_dir = stage_path.parent
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
@@ -103,11 +108,64 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None) -> Res
     escaped = result.accumulator.fluxes()["escaped"]
     ph = photometry_of(scene, est.filtered, escaped, result.relative_error)
     record = build_record(result, ph, paths)
-    write_photometric_files(scene, ph, paths, name, result.relative_error, pictures)
-    acc = result.accumulator
-    channels = {"Y": est.filtered, "raw.Y": est.raw, "count": acc.counts().astype(np.float64),
-                "relativeError": np.minimum(est.texel_error, 1e30)}
-    write_intensity_exr(paths["intensity_map"], channels, exr_metadata(result, record))
-    write_result_layer(stage_path, scene.luminaire_path, record.layer_values(layer_dir),
-                       light=photometric_light(scene, ph, paths["ies"], layer_dir))
+    folders = [out, layer_dir]
+    with locked(folders, name, wait):
+        for note in recover(folders, name, [p.name for p in paths.values()]):
+            warn(note, OutputWarning)
+        check_ownership(stage_path, paths)
+        tx = Transaction(name, layer_dir)
+        try:
+            staged = {k: tx.staged(v) for k, v in paths.items()}
+            write_photometric_files(scene, ph, staged, name, result.relative_error, pictures,
+                                    run_id=tx.run_id)
+            acc = result.accumulator
+            channels = {"Y": est.filtered, "raw.Y": est.raw,
+                        "count": acc.counts().astype(np.float64),
+                        "relativeError": np.minimum(est.texel_error, 1e30)}
+            meta = {**exr_metadata(result, record), "runId": tx.run_id,
+                    "stagePath": str(stage_path)}
+            write_intensity_exr(staged["intensity_map"], channels, meta)
+            text = result_layer_text(stage_path, scene.luminaire_path,
+                                     record.layer_values(layer_dir),
+                                     photometric_light(scene, ph, paths["ies"], layer_dir),
+                                     layer_dir, {"runId": tx.run_id, "stage": str(stage_path)})
+            write_layer_file(stage_path, staged["result_layer"], text)
+            tx.commit(last=paths["result_layer"])
+        except BaseException:
+            tx.abort()
+            raise
+        reload_if_open(paths["result_layer"])
+        sublayer_into_root(stage_path, paths["result_layer"])
     return record
+
+
+def check_ownership(stage_path: Path, paths: dict[str, Path]) -> None:
+    """Refuse to overwrite outputs that belong to another stage of the same NAME (say
+    ``lamp.usda`` and ``lamp.usdc`` in one folder, or two stages with one ``--out``)."""
+    from .exr import read_exr_metadata
+
+    exr = paths["intensity_map"]
+    if exr.exists():
+        meta = read_exr_metadata(exr) or {}
+        other = meta.get("stagePath")
+        if other and Path(other) != stage_path:
+            raise OutputError(f"holds the result of another stage, {other}; write this "
+                              f"stage's outputs to a folder of their own (--out)", str(exr))
+    layer = paths["result_layer"]
+    if layer.exists():
+        other = _layer_stage(layer)
+        if other and Path(other) != stage_path:
+            raise OutputError(f"is the result layer of another stage, {other}; rename one "
+                              "of the stages (their results would share this file)",
+                              str(layer))
+
+
+def _layer_stage(layer: Path) -> str | None:
+    """The stage a result layer says it belongs to (None for layers that do not say)."""
+    from pxr import Sdf, Tf
+
+    try:
+        data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
+    except Tf.ErrorException:
+        return None
+    return None if data is None else data.customLayerData.get("lumitrace:stage")

@@ -20,7 +20,7 @@ def photometric_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
 
 
 def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path], name: str,
-                            map_error: float, pictures: bool = True) -> None:
+                            map_error: float, pictures: bool = True, run_id: str = "") -> None:
     """Write the IES and LDT files (and, with ``pictures``, the polar curve and the
     photometric solid) of ``ph`` to ``paths`` (see :func:`photometric_paths`)."""
     fig, opening, grid, lamp = ph.figures, ph.opening, ph.grid, ph.lamp_flux
@@ -29,13 +29,14 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
                 "LAMP": f"{len(scene.emitters)} UsdLux emitter(s), {lamp:.6g} lm",
                 "FILEGENINFO": "computed by photon tracing from the USD stage; "
                                f"estimated relative RMS error {map_error:.2%}; "
-                               f"symmetry {grid.symmetry}"}
+                               f"symmetry {grid.symmetry}",
+                "_LUMITRACE_RUN": run_id}
     write_ies(paths["ies"], grid, lamp, opening.width, opening.length, opening.height, keywords)
     mm = {"length": 1000 * opening.length, "width": 1000 * opening.width,
           "height": 1000 * opening.height, "lum_length": 1000 * opening.length,
           "lum_width": 1000 * opening.width, "lum_height": 1000 * opening.height}
     write_ldt(paths["ldt"], grid, lamp, luminaire, mm, fig.downward_flux_fraction,
-              fig.light_output_ratio, report=f"lumitrace {name}")
+              fig.light_output_ratio, report=f"lumitrace {name} run {run_id}".strip())
     if pictures:
         title = f"{luminaire}: {fig.luminous_flux:.0f} lm, LOR {fig.light_output_ratio:.2f}"
         polar_diagram(paths["polar_diagram"], grid, lamp, title)

@@ -83,30 +83,40 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
         as they were.
     """
     stage = Path(stage_path).absolute()
+    layer_path = result_layer_path(stage)
+    text = result_layer_text(stage, luminaire_path, results, light, layer_path.parent)
+    write_layer_file(stage, layer_path, text)
+    sublayer_into_root(stage, layer_path)
+    return layer_path
+
+
+def result_layer_text(stage: Path, luminaire_path: str | None, results: Mapping[str, Any],
+                      light: Mapping[str, Any] | None, layer_dir: Path,
+                      layer_data: Mapping[str, str] | None = None) -> str:
+    """The result layer as usda text (see :func:`write_result_layer`); ``layer_data`` goes
+    into its customLayerData (the run id and stage it belongs to). Checks every value and
+    raises :class:`ResultValueError` before anything is written."""
     if not stage.is_file():
         raise OutputError("no such stage file", str(stage))
-    layer_path = result_layer_path(stage)
-    values = convert_results(results, layer_path.parent)
+    values = convert_results(results, layer_dir)
     if light is not None:
         missing = sorted({"ies", "flux", "radius", "position"} - set(light))
         if missing:
             raise ResultValueError(f"the result light needs {', '.join(missing)}")
     prim_path = _luminaire_path(stage, luminaire_path)
+    return _result_layer_text(stage, prim_path, values, light, layer_data)
 
-    text = _result_layer_text(stage, prim_path, values, light)
-    # Read the root layer before writing anything: a stage Sdf cannot read fails here.
-    root = None if stage.suffix.lower() == ".usdz" else _open_copy(stage)
-    mode = file_mode(layer_path if layer_path.exists() else stage)
+
+def write_layer_file(stage: Path, path: Path, text: str) -> None:
+    """Write layer text atomically with the stage's (or the old layer's) file mode."""
+    mode = file_mode(path if path.exists() else stage)
     try:
-        with atomic_path(layer_path) as tmp:
+        with atomic_path(path) as tmp:
             tmp.write_text(text, encoding="utf-8")
             os.chmod(tmp, mode)
     except OSError as exc:
-        raise OutputError(f"cannot write the result layer: {exc}", str(layer_path)) from exc
-    reload_if_open(layer_path)
-
-    sublayer_into_root(stage, layer_path, root)
-    return layer_path
+        raise OutputError(f"cannot write the result layer: {exc}", str(path)) from exc
+    reload_if_open(path)
 
 
 # ------------------------------------------------------------------------------------------
@@ -208,7 +218,8 @@ def _luminaire_path(stage: Path, luminaire_path: str | None):
     return path
 
 
-def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | None = None) -> str:
+def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | None = None,
+                       layer_data: Mapping[str, str] | None = None) -> str:
     from pxr import Sdf
 
     type_names = {"asset": Sdf.ValueTypeNames.Asset, "int64": Sdf.ValueTypeNames.Int64,
@@ -217,6 +228,8 @@ def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | No
     layer = Sdf.Layer.CreateAnonymous(".usda")
     layer.documentation = (f"lumitrace result for {stage.name}, sublayered into it; "
                            "rewritten by every run.")
+    if layer_data:
+        layer.customLayerData = {f"lumitrace:{k}": str(v) for k, v in layer_data.items()}
     spec = Sdf.CreatePrimInLayer(layer, prim_path)
     spec.specifier = Sdf.SpecifierOver
     spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=[LUMINAIRE_API]))

@@ -1,12 +1,13 @@
 """Sublayering the result layer into the stage's root layer, once, without losing edits."""
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
+import tempfile
 import warnings
 from pathlib import Path
 
-from ..atomic import atomic_path
 from ..errors import OutputError, OutputWarning
 from .usda_text import insert_sublayer_text
 
@@ -34,44 +35,143 @@ def _warn(message: str) -> None:
     warnings.warn(message, ResultLayerWarning, stacklevel=4)  # the caller
 
 
-def sublayer_into_root(stage: Path, layer_path: Path, root) -> None:
-    """Put ``./NAME.lumitrace.usda`` first in the stage root layer's subLayers, once."""
+#: Attempts of the compare-and-swap edit before giving up (each after the file changed).
+CAS_ATTEMPTS = 20
+
+
+def _open_bytes_copy(data: bytes, stage: Path):
+    """An anonymous Sdf layer holding the root layer as read from ``data``."""
+    from pxr import Sdf, Tf
+
+    try:
+        if data.startswith(b"#usda"):
+            layer = Sdf.Layer.CreateAnonymous(".usda")
+            if layer.ImportFromString(data.decode("utf-8")):
+                return layer
+        layer = Sdf.Layer.OpenAsAnonymous(str(stage))
+    except (Tf.ErrorException, UnicodeDecodeError) as exc:
+        raise OutputError(f"cannot read the stage's root layer: {exc}", str(stage)) from exc
+    if layer is None:
+        raise OutputError("cannot read the stage's root layer", str(stage))
+    return layer
+
+
+def _edited_bytes(stage: Path, data: bytes, entry: str, root) -> bytes:
+    """The root layer's bytes with ``entry`` first in its subLayers: a text edit of a
+    .usda file (comments and formatting kept), else Sdf's export in the file's format."""
+    if data.startswith(b"#usda"):
+        text = insert_sublayer_text(data.decode("utf-8"), entry, root)
+        if text is not None:
+            return text.encode("utf-8")
+    from pxr import Sdf
+
+    copy = Sdf.Layer.CreateAnonymous(".usda")
+    copy.TransferContent(root)
+    copy.subLayerPaths.insert(0, entry)
+    fmt = "usda" if data.startswith(b"#usda") else "usdc"
+    fd, tmp = tempfile.mkstemp(prefix=f".{stage.stem}.", suffix=f".tmp.{fmt}",
+                               dir=stage.parent)
+    os.close(fd)
+    try:
+        if not copy.Export(tmp, args={"format": fmt} if stage.suffix.lower() == ".usd" else {}):
+            raise OutputError("Sdf could not export the root layer", str(stage))
+        return Path(tmp).read_bytes()
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+
+
+def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) -> bool:
+    """Write ``data`` over ``target`` if it still holds ``expected``; keep its inode when
+    it has other hard links or another owner we cannot give the new file, else rename a
+    temporary file with the same mode and owner over it. False when the file changed."""
+    in_place = st.st_nlink > 1
+    if not in_place:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}",
+                                   dir=target.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(tmp, stat.S_IMODE(st.st_mode))
+            if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
+                try:
+                    os.chown(tmp, st.st_uid, st.st_gid)
+                except PermissionError:
+                    in_place = True
+            if not in_place:
+                if target.read_bytes() != expected:   # compare ...
+                    return False
+                os.replace(tmp, target)                 # ... and swap
+                tmp = None
+        finally:
+            if tmp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+        if not in_place:
+            fsync_dir(target.parent)
+            return True
+    with open(target, "r+b") as fh:
+        if fh.read() != expected:
+            return False
+        fh.seek(0)
+        fh.write(data)
+        fh.truncate()
+        fh.flush()
+        os.fsync(fh.fileno())
+    return True
+
+
+def fsync_dir(folder: Path) -> None:
+    """Flush a folder's entries to disk (where the platform allows)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def sublayer_into_root(stage: Path, layer_path: Path) -> None:
+    """Put ``./NAME.lumitrace.usda`` first in the stage root layer's subLayers, once.
+
+    A compare-and-swap: the file is read, the edit made on that copy, and the file is
+    replaced only if it still holds exactly what was read; a save by anyone else in between
+    makes it start again. Nothing but the subLayers entry changes (a .usda file's text is
+    edited in place); the file keeps its mode, owner and hard links.
+    """
     entry = "./" + layer_path.name
-    suffix = stage.suffix.lower()
-    if root is None:
+    if stage.suffix.lower() == ".usdz":
         _warn(f"{stage}: a .usdz package is not modified; add {entry} to its subLayers "
               f"(or open {layer_path.name} over it) to see the result in the stage")
         return
-    if any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths):
-        _sync_open_root(stage, entry, layer_path)
-        return
-    if not (os.access(stage, os.W_OK) and os.access(stage.parent, os.W_OK)):
-        _warn(f"{stage}: the root layer is not writable; the result is in "
-              f"{layer_path.name} but is not sublayered into the stage")
-        return
-
-    data = stage.read_bytes()
-    new_text = None
-    if data.startswith(b"#usda"):
-        new_text = insert_sublayer_text(data.decode("utf-8"), entry, root)
-    mode = file_mode(stage)
-    target = Path(os.path.realpath(stage))   # replace the file, not a symlink to it
-    try:
-        with atomic_path(target) as tmp:
-            if new_text is not None:
-                tmp.write_bytes(new_text.encode("utf-8"))
-            else:
-                root.subLayerPaths.insert(0, entry)
-                args = {}
-                if suffix == ".usd":   # keep the underlying format of a .usd file
-                    args["format"] = "usda" if data.startswith(b"#usda") else "usdc"
-                if not root.Export(str(tmp), args=args):
-                    raise OSError("Sdf could not export the root layer")
-            os.chmod(tmp, mode)
-    except OSError as exc:
-        raise OutputError(f"cannot sublayer the result layer into the stage: {exc}",
-                          str(stage)) from exc
-    _sync_open_root(stage, entry, layer_path)
+    target = Path(os.path.realpath(stage))   # edit the file, not a symlink to it
+    for _ in range(CAS_ATTEMPTS):
+        try:
+            data = target.read_bytes()
+            st = target.stat()
+        except OSError as exc:
+            raise OutputError(f"cannot read the stage's root layer: {exc.strerror}",
+                              str(stage)) from exc
+        root = _open_bytes_copy(data, target)
+        if any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths):
+            _sync_open_root(stage, entry, layer_path)
+            return
+        if not (os.access(target, os.W_OK) and os.access(target.parent, os.W_OK)):
+            _warn(f"{stage}: the root layer is not writable; the result is in "
+                  f"{layer_path.name} but is not sublayered into the stage")
+            return
+        new = _edited_bytes(target, data, entry, root)
+        try:
+            if _replace_keeping_identity(target, new, data, st):
+                _sync_open_root(stage, entry, layer_path)
+                return
+        except OSError as exc:
+            raise OutputError(f"cannot sublayer the result layer into the stage: {exc}",
+                              str(stage)) from exc
+    raise OutputError(f"the stage changed on disk {CAS_ATTEMPTS} times while the result "
+                      "layer was being sublayered; run again", str(stage))
 
 
 def reload_if_open(path: Path) -> None:
