@@ -4,16 +4,21 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import signal
 import sys
 import warnings
 from pathlib import Path
 
-from .errors import LumitraceError, LumitraceWarning
+from .errors import Interrupted, LumitraceError, LumitraceWarning
 from .run.settings import DEFAULT_THRESHOLD
 
 
 def _positive_int(text: str) -> int:
-    v = int(float(text))
+    try:
+        v = int(float(text))
+    except OverflowError:
+        raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text}")
     if v <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return v
@@ -170,6 +175,7 @@ def cmd_trace(args) -> int:
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed,
                              threads=args.threads or default_threads(), workers=args.workers)
+    preflight(args.stage, args.out)
     scene = read_stage(args.stage)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -180,10 +186,14 @@ def cmd_trace(args) -> int:
         if bar is not None:
             bar.close()
     record = write_outputs(result, args.out)
-    if args.json:
-        print(json.dumps(record.summary()))
-    else:
-        print(_summary_text(record, args.stage))
+    text = json.dumps(record.summary()) if args.json else _summary_text(record, args.stage)
+    try:
+        print(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        sys.stdout = open(os.devnull, "w")  # nothing more to say there, even at exit
+        raise LumitraceError(f"the outputs were written, but the summary could not be "
+                             f"printed: {exc.strerror or exc}", "standard output") from None
     return 0
 
 
@@ -258,10 +268,51 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         _python_showwarning(message, category, filename, lineno, file, line)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    warnings.showwarning = _show_warning
+HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _raise_interrupted(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
+def _interrupted_message(exc: Interrupted) -> str:
+    name = signal.Signals(exc.signum).name
+    if exc.published:
+        return (f"lumitrace: {name}: interrupted after this run's outputs were published "
+                "(they are complete)")
+    return f"lumitrace: {name}: interrupted; nothing was written, earlier outputs are unchanged"
+
+
+def preflight(stage: Path, out: Path | None) -> None:
+    """What can be checked before a long trace: the stage is a regular file, the output
+    folders exist or can be made, and can be written to."""
+    import stat as st
+
     try:
+        mode = os.stat(stage).st_mode
+    except OSError as exc:
+        raise LumitraceError(f"cannot open the stage: {exc.strerror}", str(stage)) from None
+    if not st.S_ISREG(mode):
+        raise LumitraceError("the stage is not a regular file", str(stage))
+    folders = [stage.absolute().parent] + ([out.absolute()] if out is not None else [])
+    for folder in folders:
+        if folder.exists() and not folder.is_dir():
+            raise LumitraceError("the output folder is a file, not a folder", str(folder))
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise LumitraceError(f"cannot create the output folder: {exc.strerror}",
+                                 str(folder)) from None
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise LumitraceError("the output folder is not writable (results go to the "
+                                 "stage's folder unless --out names another)", str(folder))
+
+
+def main(argv: list[str] | None = None) -> int:
+    previous = {s: signal.signal(s, _raise_interrupted) for s in HANDLED_SIGNALS}
+    try:
+        args = build_parser().parse_args(argv)
+        warnings.showwarning = _show_warning
         if args.command == "trace":
             return cmd_trace(args)
         if args.command == "report":
@@ -271,9 +322,20 @@ def main(argv: list[str] | None = None) -> int:
     except LumitraceError as exc:
         print(f"lumitrace: error: {exc}", file=sys.stderr)
         return 2
+    except Interrupted as exc:
+        print(_interrupted_message(exc), file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
-        print("lumitrace: interrupted; nothing was written", file=sys.stderr)
+        print("lumitrace: interrupted; nothing was written, earlier outputs are unchanged",
+              file=sys.stderr)
         return 130
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"lumitrace: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
     return 1
 
 

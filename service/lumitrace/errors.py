@@ -37,6 +37,17 @@ class OutputError(LumitraceError):
     """A result could not be written (nothing half-written is left behind)."""
 
 
+class Interrupted(BaseException):
+    """SIGINT, SIGTERM or SIGHUP arrived; ``published`` says whether this run's outputs
+    were already complete on disk when it did (a BaseException, like KeyboardInterrupt,
+    so that no ``except Exception`` swallows it)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+        self.published = False
+
+
 class LumitraceWarning(UserWarning):
     """Something the user should know, with a result all the same."""
 

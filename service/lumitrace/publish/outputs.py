@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..errors import OutputError, OutputWarning, warn
+from ..errors import Interrupted, OutputError, OutputWarning, warn
 from ..filenames import INTENSITY_SUFFIX, result_layer_path, stage_name
 from ..photometry import frame
 from ..photometry.distribution import Photometry, photometry_of
@@ -25,7 +25,7 @@ from .photometric import photometric_paths, write_photometric_files
 from .record import ResultRecord, trace_figures
 from .result_layer import result_layer_text, write_layer_file
 from .sublayer import reload_if_open, sublayer_into_root
-from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover
+from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signals_held
 
 
 def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: Path) -> dict:
@@ -131,11 +131,16 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                                      layer_dir, {"runId": tx.run_id, "stage": str(stage_path)})
             write_layer_file(stage_path, staged["result_layer"], text)
             tx.commit(last=paths["result_layer"])
+        except Interrupted as exc:
+            exc.published = tx.committed
+            tx.abort()
+            raise
         except BaseException:
             tx.abort()
             raise
         reload_if_open(paths["result_layer"])
-        sublayer_into_root(stage_path, paths["result_layer"])
+        with signals_held():
+            sublayer_into_root(stage_path, paths["result_layer"])
     return record
 
 

@@ -9,6 +9,7 @@ from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
 from ..photometry.lm63 import write_ies
 from ..scene import Scene
+from .transaction import signals_held
 
 
 def photometric_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
@@ -40,4 +41,7 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     if pictures:
         title = f"{luminaire}: {fig.luminous_flux:.0f} lm, LOR {fig.light_output_ratio:.2f}"
         polar_diagram(paths["polar_diagram"], grid, lamp, title)
-        photometric_solid(paths["photometric_solid"], grid, scene, title)
+        # VTK does not survive a Python exception raised inside it by a signal handler:
+        # a signal waits until the picture is drawn
+        with signals_held():
+            photometric_solid(paths["photometric_solid"], grid, scene, title)

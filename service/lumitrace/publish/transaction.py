@@ -130,11 +130,14 @@ class Transaction:
     home: Path
     run_id: str = field(default_factory=new_run_id)
     targets: dict[Path, Path] = field(default_factory=dict)  # target -> staged file
+    committed: bool = False
+    folders: set[Path] = field(default_factory=set)  # staging folders, known before made
 
     def staged(self, target: str | os.PathLike) -> Path:
         """Where to write ``target``'s new content (the same folder's staging area)."""
         target = Path(target).absolute()
         folder = target.parent / f".{self.name}{_STAGING}{self.run_id}"
+        self.folders.add(folder)
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -145,7 +148,7 @@ class Transaction:
         return path
 
     def _staging_folders(self) -> set[Path]:
-        return {p.parent for p in self.targets.values()}
+        return set(self.folders)
 
     def abort(self) -> None:
         """Remove every staged file: the earlier outputs stay as they were."""
@@ -181,6 +184,7 @@ class Transaction:
                 raise OutputError(f"cannot write the publishing journal: {exc.strerror}",
                                   str(journal)) from exc
             _roll_forward(journal, record)
+            self.committed = True
 
 
 def _roll_forward(journal: Path, record: dict) -> None:

@@ -8,7 +8,10 @@ GIL, which pays off on long runs once their start-up (about a second) is amortis
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import multiprocessing
+import signal
+import sys
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator
 
@@ -26,7 +29,32 @@ _worker_scene: PreparedScene | None = None
 
 def _init_worker(scene: Scene, frame) -> None:
     global _worker_scene
+    _detach_from_signals()
     _worker_scene = prepare(scene, frame)
+
+
+def _detach_from_signals() -> None:
+    """A worker leaves SIGINT and SIGHUP to its parent (which ends the pool) and, on Linux,
+    is sent SIGTERM when the parent dies, so no worker outlives a killed run."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+
+def _end_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a process pool now: queued jobs cancelled, running workers terminated."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=5)
 
 
 def _run_job(job: BatchJob) -> BatchTally:
@@ -48,10 +76,15 @@ def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int
     """A function mapping jobs to their tallies, in job order, on ``threads`` workers."""
     if mode == "processes":
         ctx = multiprocessing.get_context("spawn")  # no fork: Embree keeps threads
-        with ProcessPoolExecutor(max_workers=threads, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(scene, ps.frame)) as pool:
+        pool = ProcessPoolExecutor(max_workers=threads, mp_context=ctx,
+                                   initializer=_init_worker, initargs=(scene, ps.frame))
+        try:
             list(pool.map(_noop, range(threads)))  # start every worker before timing
             yield lambda jobs: pool.map(_run_job, list(jobs))
+        except BaseException:
+            _end_pool(pool)
+            raise
+        pool.shutdown(wait=True)
     elif mode == "threads":
         with ThreadPoolExecutor(max_workers=threads) as pool:
             yield lambda jobs: pool.map(lambda job: trace_batch(ps, job), jobs)

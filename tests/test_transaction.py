@@ -1,0 +1,293 @@
+"""The write path as one transaction, tried as it runs: the real CLI in subprocesses, real
+signals at chosen moments of the write, concurrent runs, a stage edited while the result
+layer is sublayered, crashes after the commit point, and bad options caught up front."""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DISC = ROOT / "stages" / "reference" / "lambertian_disc.usda"
+OUTPUTS = (".intensity.exr", ".ies", ".ldt", ".polar.png", ".solid.png", ".lumitrace.usda")
+
+
+def _cli(*args, **kw):
+    return subprocess.Popen([sys.executable, "-m", "lumitrace.cli", *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+
+
+def _trace(stage, *extra, photons=60_000, seed=1):
+    p = _cli("trace", stage, "--photons", photons, "--resolution", 16, "--seed", seed,
+             "--no-progress", "--threads", 1, *extra)
+    out, err = p.communicate(timeout=300)
+    return p.returncode, out, err
+
+
+def run_ids(folder: Path, name: str) -> dict[str, str | None]:
+    """The run id each output of stage ``name`` in ``folder`` carries (None: missing)."""
+    from lumitrace.publish.exr import read_exr_metadata
+
+    ids: dict[str, str | None] = {}
+    exr = folder / f"{name}.intensity.exr"
+    ids["exr"] = (read_exr_metadata(exr) or {}).get("runId") if exr.exists() else None
+    ies = folder / f"{name}.ies"
+    ids["ies"] = None
+    if ies.exists():
+        for line in ies.read_text().splitlines():
+            if line.startswith("[_LUMITRACE_RUN]"):
+                ids["ies"] = line.split()[1]
+    ldt = folder / f"{name}.ldt"
+    ids["ldt"] = next((ln.rsplit(" ", 1)[-1] for ln in ldt.read_text().splitlines()
+                       if ln.startswith("lumitrace disc run ") or " run " in ln), None) \
+        if ldt.exists() else None
+    layer = folder / f"{name}.lumitrace.usda"
+    ids["layer"] = None
+    if layer.exists():
+        from pxr import Sdf
+
+        ids["layer"] = Sdf.Layer.OpenAsAnonymous(str(layer)).customLayerData.get(
+            "lumitrace:runId")
+    return ids
+
+
+def assert_one_complete_set(folder: Path, name: str) -> str:
+    ids = run_ids(folder, name)
+    assert len(set(ids.values())) == 1 and None not in ids.values(), ids
+    for suffix in OUTPUTS:
+        assert (folder / f"{name}{suffix}").stat().st_size > 0
+    leftovers = [p.name for p in folder.iterdir()
+                 if p.name.startswith(f".{name}") and not p.name.endswith(".lock")]
+    assert not leftovers, leftovers
+    return ids["exr"]
+
+
+@pytest.fixture
+def disc(tmp_path):
+    stage = tmp_path / "disc.usda"
+    shutil.copy(DISC, stage)
+    return stage
+
+
+def test_a_run_publishes_one_set_with_one_run_id(disc):
+    code, _, err = _trace(disc)
+    assert code == 0, err
+    assert_one_complete_set(disc.parent, "disc")
+
+
+def test_signals_at_any_moment_leave_the_old_set_or_the_new_set(disc):
+    """SIGTERM, SIGINT and SIGHUP sent at moments spread over a whole run (reading,
+    tracing, the write window): every time the folder holds one complete set, and the
+    message says truthfully which."""
+    code, _, err = _trace(disc, seed=1)
+    assert code == 0, err
+    first = assert_one_complete_set(disc.parent, "disc")
+    stage_bytes = disc.read_bytes()
+    t0 = time.perf_counter()
+    assert _trace(disc, seed=2)[0] == 0
+    total = time.perf_counter() - t0
+    seen = {"old": 0, "new": 0}
+    sigs = [signal.SIGTERM, signal.SIGINT, signal.SIGHUP]
+    for k, frac in enumerate((0.35, 0.55, 0.7, 0.8, 0.88, 0.94)):
+        before = assert_one_complete_set(disc.parent, "disc")
+        p = _cli("trace", disc, "--photons", 60_000, "--resolution", 16, "--seed", 10 + k,
+                 "--no-progress", "--threads", 1)
+        time.sleep(frac * total)
+        p.send_signal(sigs[k % 3])
+        _, err = p.communicate(timeout=120)
+        after = assert_one_complete_set(disc.parent, "disc")
+        if p.returncode in (0, -sigs[k % 3]):
+            # the signal came after main() had returned: the run was complete
+            assert after != before
+            seen["new"] += 1
+            continue
+        assert p.returncode == 128 + sigs[k % 3], err
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+        if after == before:
+            assert "nothing was written" in err, err
+            seen["old"] += 1
+        else:
+            assert "published" in err, err
+            seen["new"] += 1
+    assert first and sum(seen.values()) == 6
+    # the stage only ever gained the one sublayer entry
+    assert disc.read_bytes() == stage_bytes
+
+
+def test_concurrent_runs_publish_one_after_the_other(disc):
+    procs = [_cli("trace", disc, "--photons", 40_000, "--resolution", 16, "--seed", s,
+                  "--no-progress", "--threads", 1) for s in (1, 2, 3)]
+    results = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0], [r[1] for r in results]
+    assert_one_complete_set(disc.parent, "disc")
+    text = disc.read_text()
+    assert text.count("disc.lumitrace.usda") == 1
+
+
+def test_stale_staging_and_temporary_files_are_cleaned_up(disc):
+    folder = disc.parent
+    stale = folder / ".disc.lumitrace-staging-0123456789abcdef"
+    stale.mkdir()
+    (stale / "disc.ies").write_text("half")
+    tmp = folder / ".disc.intensity.abcd1234.tmp.exr"
+    tmp.write_bytes(b"half")
+    code, _, err = _trace(disc)
+    assert code == 0, err
+    assert not stale.exists() and not tmp.exists()
+    assert "removed the unfinished outputs" in err
+    assert_one_complete_set(folder, "disc")
+
+
+def test_a_crash_after_the_commit_point_is_rolled_forward(tmp_path, monkeypatch):
+    from lumitrace.publish import transaction as tr
+
+    targets = [tmp_path / "lamp.a", tmp_path / "lamp.b"]
+    for t in targets:
+        t.write_text("old")
+    tx = tr.Transaction("lamp", tmp_path)
+    for t in targets:
+        tx.staged(t).write_text("new")
+    real = os.replace
+    calls = []
+
+    def crash_after_first(src, dst):
+        calls.append(dst)
+        if len(calls) == 3:  # the journal, the first file, then the crash
+            raise SystemExit("killed")  # as if the process died mid-commit
+        real(src, dst)
+
+    monkeypatch.setattr(tr.os, "replace", crash_after_first)
+    with pytest.raises(SystemExit):
+        tx.commit()
+    monkeypatch.setattr(tr.os, "replace", real)
+    assert [t.read_text() for t in targets] == ["new", "old"]  # the mixed state a crash leaves
+    done = tr.recover([tmp_path], "lamp")
+    assert [t.read_text() for t in targets] == ["new", "new"]
+    assert any("completed the interrupted publishing" in d for d in done)
+    assert not list(tmp_path.glob(".lamp*journal*")) and not list(tmp_path.glob(".lamp.lumi*"))
+
+
+def test_a_stage_saved_during_the_sublayer_edit_is_not_lost(disc, monkeypatch):
+    """A DCC saves the stage between our read and our swap: the swap notices, starts
+    again from the saved file, and both the DCC's edit and our sublayer entry are kept."""
+    from lumitrace.publish import sublayer
+
+    real = sublayer._edited_bytes
+    saved = []
+
+    def dcc_saves_meanwhile(stage, data, entry, root):
+        out = real(stage, data, entry, root)
+        if not saved:
+            text = disc.read_text().replace("(\n", '(\n    doc = "edited by a DCC"\n', 1)
+            disc.write_text(text)
+            saved.append(True)
+        return out
+
+    monkeypatch.setattr(sublayer, "_edited_bytes", dcc_saves_meanwhile)
+    layer = disc.with_name("disc.lumitrace.usda")
+    layer.write_text("#usda 1.0\n")
+    sublayer.sublayer_into_root(disc, layer)
+    text = disc.read_text()
+    assert 'doc = "edited by a DCC"' in text and "@./disc.lumitrace.usda@" in text
+    assert saved
+
+
+def test_the_stage_keeps_its_mode_and_hard_links(disc):
+    link = disc.with_name("alias.usda")
+    os.link(disc, link)
+    os.chmod(disc, 0o640)
+    ino = disc.stat().st_ino
+    code, _, err = _trace(disc)
+    assert code == 0, err
+    assert disc.stat().st_ino == ino and disc.stat().st_nlink == 2
+    assert (disc.stat().st_mode & 0o777) == 0o640
+    assert "disc.lumitrace.usda" in link.read_text()
+
+
+def test_two_stages_of_one_name_never_share_outputs(tmp_path):
+    from pxr import Sdf
+
+    a = tmp_path / "lamp.usda"
+    shutil.copy(DISC, a)
+    b = tmp_path / "lamp.usdc"
+    Sdf.Layer.FindOrOpen(str(DISC)).Export(str(b))
+    assert _trace(a)[0] == 0
+    before = run_ids(tmp_path, "lamp")
+    code, _, err = _trace(b)
+    assert code == 2 and "another stage" in err and len(err.strip().splitlines()) == 1, err
+    assert run_ids(tmp_path, "lamp") == before
+    # with a folder of their own they are fine
+    assert _trace(b, "--out", tmp_path / "usdc")[0] == 2  # the result layer still collides
+    other = tmp_path / "other"
+    other.mkdir()
+    shutil.copy(DISC, other / "lamp.usda")
+    shared = tmp_path / "shared"
+    assert _trace(other / "lamp.usda", "--out", shared)[0] == 0
+    code, _, err = _trace(a, "--out", shared)
+    assert code == 2 and "another stage" in err
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--seed", str(2 ** 31)], "seed"),
+    (["--photons", "inf"], "--photons"),
+    (["--resolution", "100000"], "resolution"),
+    (["--threshold", "nan"], "--threshold"),
+])
+def test_bad_options_are_one_line_before_anything_runs(disc, args, words):
+    p = _cli("trace", disc, "--no-progress", *args)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 2 and words in err and "Traceback" not in err, err
+    assert not disc.with_name("disc.intensity.exr").exists()
+
+
+def test_an_output_folder_that_is_a_file_is_refused_before_tracing(disc):
+    f = disc.with_name("not_a_folder")
+    f.write_text("")
+    t0 = time.perf_counter()
+    code, _, err = _trace(disc, "--out", f, photons=50_000_000)
+    assert code == 2 and "not a folder" in err and time.perf_counter() - t0 < 20
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_a_fifo_as_the_stage_is_refused_not_waited_on(tmp_path):
+    fifo = tmp_path / "stage.usda"
+    os.mkfifo(fifo)
+    code, _, err = _trace(fifo)
+    assert code == 2 and "not a regular file" in err
+
+
+def test_read_only_stage_folder_is_refused_before_tracing(disc):
+    if os.geteuid() == 0:
+        pytest.skip("root writes into read-only folders")
+    os.chmod(disc.parent, 0o555)
+    try:
+        code, _, err = _trace(disc)
+    finally:
+        os.chmod(disc.parent, 0o755)
+    assert code == 2 and "not writable" in err
+
+
+def test_full_stdout_after_publishing_says_the_outputs_are_written(disc):
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full")
+    with open("/dev/full", "w") as full:
+        p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace", str(disc),
+                            "--photons", "40000", "--resolution", "16", "--no-progress",
+                            "--json"], stdout=full, stderr=subprocess.PIPE, text=True,
+                           timeout=300)
+    assert p.returncode == 2 and "outputs were written" in p.stderr
+    assert "Traceback" not in p.stderr
+    assert_one_complete_set(disc.parent, "disc")
+
+
+def test_summary_names_the_run_outputs(disc):
+    code, out, err = _trace(disc, "--json")
+    assert code == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    for key in ("intensity_map", "ies", "ldt", "result_layer"):
+        assert Path(summary["outputs"][key]).exists()
