@@ -30,30 +30,9 @@ def _trace(stage, *extra, photons=60_000, seed=1):
 
 
 def run_ids(folder: Path, name: str) -> dict[str, str | None]:
-    """The run id each output of stage ``name`` in ``folder`` carries (None: missing)."""
-    from lumitrace.publish.exr import read_exr_metadata
+    from lumitrace.publish.runs import published_run_ids
 
-    ids: dict[str, str | None] = {}
-    exr = folder / f"{name}.intensity.exr"
-    ids["exr"] = (read_exr_metadata(exr) or {}).get("runId") if exr.exists() else None
-    ies = folder / f"{name}.ies"
-    ids["ies"] = None
-    if ies.exists():
-        for line in ies.read_text().splitlines():
-            if line.startswith("[_LUMITRACE_RUN]"):
-                ids["ies"] = line.split()[1]
-    ldt = folder / f"{name}.ldt"
-    ids["ldt"] = next((ln.rsplit(" ", 1)[-1] for ln in ldt.read_text().splitlines()
-                       if ln.startswith("lumitrace disc run ") or " run " in ln), None) \
-        if ldt.exists() else None
-    layer = folder / f"{name}.lumitrace.usda"
-    ids["layer"] = None
-    if layer.exists():
-        from pxr import Sdf
-
-        ids["layer"] = Sdf.Layer.OpenAsAnonymous(str(layer)).customLayerData.get(
-            "lumitrace:runId")
-    return ids
+    return published_run_ids(folder, name)
 
 
 def assert_one_complete_set(folder: Path, name: str) -> str:

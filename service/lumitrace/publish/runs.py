@@ -1,0 +1,41 @@
+"""Which run each published file of a stage belongs to: the run id in the EXR header, the
+IES keyword ``[_LUMITRACE_RUN]``, the LDT report line and the result layer's metadata."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..filenames import IES_SUFFIX, INTENSITY_SUFFIX, LDT_SUFFIX, RESULT_LAYER_SUFFIX
+from .exr import read_exr_metadata
+
+
+def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
+                      ) -> dict[str, str | None]:
+    """Run id per output of stage ``name`` (None where the file is missing or says none);
+    one complete set has one id everywhere."""
+    folder = Path(folder)
+    ids: dict[str, str | None] = {"exr": None, "ies": None, "ldt": None, "layer": None}
+    exr = folder / f"{name}{INTENSITY_SUFFIX}"
+    if exr.exists():
+        ids["exr"] = (read_exr_metadata(exr) or {}).get("runId")
+    ies = folder / f"{name}{IES_SUFFIX}"
+    if ies.exists():
+        for line in ies.read_text(errors="replace").splitlines():
+            if line.startswith("[_LUMITRACE_RUN]") and len(line.split()) > 1:
+                ids["ies"] = line.split()[1]
+    ldt = folder / f"{name}{LDT_SUFFIX}"
+    if ldt.exists():
+        prefix = f"lumitrace {name} run "
+        for line in ldt.read_text(errors="replace").splitlines():
+            if line.startswith(prefix):
+                ids["ldt"] = line[len(prefix):].strip()
+    layer = Path(layer_folder or folder) / f"{name}{RESULT_LAYER_SUFFIX}"
+    if layer.exists():
+        from pxr import Sdf, Tf
+
+        try:
+            data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
+        except Tf.ErrorException:
+            data = None
+        if data is not None:
+            ids["layer"] = data.customLayerData.get("lumitrace:runId")
+    return ids
