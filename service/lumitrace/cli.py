@@ -290,6 +290,8 @@ def preflight(stage: Path, out: Path | None) -> None:
 
     try:
         mode = os.stat(stage).st_mode
+    except FileNotFoundError:
+        raise LumitraceError("stage file not found", str(stage)) from None
     except OSError as exc:
         raise LumitraceError(f"cannot open the stage: {exc.strerror}", str(stage)) from None
     if not st.S_ISREG(mode):

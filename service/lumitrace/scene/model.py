@@ -96,6 +96,7 @@ class Scene:
     luminaire_path: str = "/Luminaire"
     stage_path: str = ""
     warnings: tuple[str, ...] = field(default=(), compare=False)
+    time_code: float | None = field(default=None, compare=False)  # None: default time
 
     @property
     def total_flux(self) -> float:

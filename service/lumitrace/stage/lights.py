@@ -119,6 +119,12 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         else:
             area = _world_area(kind, dims, to_world[:3, :3])
             flux = light_flux(kind, intensity, exposure, color, normalize, area, fraction)
+            if flux > validate.MAX_LUMINOUS_FLUX:  # Inf too; NaN is refused below
+                validate.check_flux_limit(
+                    flux, path, _flux_source(kind, intensity, exposure, color, normalize,
+                                             area, fraction),
+                    f"luminous flux from intensity {intensity:g}, exposure {exposure:g}, "
+                    f"world area {area:g} m^2")
             if not (math.isfinite(flux) and flux > 0.0):
                 raise StageError(f"light emits no {'finite ' if flux else ''}flux "
                                  f"({flux:g} lm from intensity "
@@ -129,6 +135,21 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
             cone_angle=cone_angle, cone_softness=cone_softness, **dims, **extra))
     return emitters
+
+
+def _flux_source(kind: str, intensity: float, exposure: float, color, normalize: bool,
+                 area: float, fraction: float) -> str:
+    """The input that takes a light's flux above :data:`.validate.MAX_LUMINOUS_FLUX`: the
+    exposure, if the flux is within the limit without it, else the colour, if its
+    luminance above 1 is what does it, else the intensity."""
+    if exposure > 0.0 and light_flux(kind, intensity, 0.0, color, normalize, area,
+                                      fraction) <= validate.MAX_LUMINOUS_FLUX:
+        return "inputs:exposure"
+    if luminance(color) > 1.0 and light_flux(kind, intensity, exposure, (1.0, 1.0, 1.0),
+                                             normalize, area, fraction) \
+            <= validate.MAX_LUMINOUS_FLUX:
+        return "inputs:color"
+    return "inputs:intensity"
 
 
 def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode,

@@ -29,6 +29,15 @@ What is read, and how:
   all its attributes count (schema fallbacks included); where it is not, only authored
   ``lumitrace:*`` attributes do. A gprim with no material gets diffuse 0.8.
 - **Emitters.** ``UsdLux`` Sphere, Disk, Rect and Cylinder lights; see :func:`light_flux`.
+  A light's flux, and the luminaire's, may be at most
+  :data:`~lumitrace.stage.validate.MAX_LUMINOUS_FLUX`.
+- **One time code** for every value: the caller's, else Default for a static luminaire,
+  else the stage's ``startTimeCode`` or the earliest time sample, with a warning (see
+  :mod:`lumitrace.stage.timing`); ``Scene.time_code`` records it.
+- **Never lumitrace's own output.** A ``photometric`` selection of the
+  ``lumitraceRepresentation`` variant set is read as ``geometry``, and a light
+  ``lumitracePhotometricLight`` under the luminaire is skipped, each with a warning (see
+  :mod:`lumitrace.stage.representation`).
 
 Every bad value raises :class:`~lumitrace.errors.StageError` naming prim and property
 (the rules live in :mod:`lumitrace.stage.validate`); imperfect but traceable input only
@@ -49,6 +58,8 @@ from .diagnostics import UsdDiagnostics, check_composition, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
 from .lights import light_kind, read_light
 from .materials import BoundMaterials
+from .representation import is_stand_in_light, modelled_luminaire
+from .timing import read_time, requested_time, scene_time_code
 from .transforms import Frame, placements
 from .validate import check_array
 
@@ -69,7 +80,9 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
     luminaire : str, optional
         Prim path of the luminaire; default: the default prim, else the first root prim.
     time : Usd.TimeCode or float, optional
-        Time to read values at; default ``Usd.TimeCode.Default()``.
+        Time to read every value at; default: ``Usd.TimeCode.Default()`` for a static
+        luminaire, else the stage's ``startTimeCode`` or the earliest time sample (see
+        :mod:`lumitrace.stage.timing`). ``Scene.time_code`` records the one used.
 
     Raises
     ------
@@ -113,18 +126,11 @@ def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: UsdDiagnos
         # every value read is checked explicitly: numpy's warnings about the NaN, Inf or
         # overflow those checks catch would only add lines to the one error a user sees
         with np.errstate(all="ignore"):
-            return _Reader(stage, _timecode(time), stage_file, label, diagnostics).read(luminaire)
+            return _Reader(stage, requested_time(time), stage_file, label,
+                           diagnostics).read(luminaire)
     except Tf.ErrorException as exc:
         raise StageError(f"USD error while reading the stage: {tf_message(exc)}",
                          label) from exc
-
-
-def _timecode(time) -> Usd.TimeCode:
-    if time is None:
-        return Usd.TimeCode.Default()
-    if isinstance(time, Usd.TimeCode):
-        return time
-    return Usd.TimeCode(float(time))
 
 
 # --------------------------------------------------------------------------------------
@@ -132,19 +138,21 @@ def _timecode(time) -> Usd.TimeCode:
 # --------------------------------------------------------------------------------------
 
 class _Reader:
-    def __init__(self, stage: Usd.Stage, time: Usd.TimeCode, stage_file: str, label: str,
-                 diagnostics: UsdDiagnostics):
+    def __init__(self, stage: Usd.Stage, time: Usd.TimeCode | None, stage_file: str,
+                 label: str, diagnostics: UsdDiagnostics):
         self.stage = stage
         self.diagnostics = diagnostics
-        self.time = time
+        self.requested_time = time  # None: chosen by read_time
+        self.root_path = Sdf.Path.emptyPath
+        self.time = Usd.TimeCode.Default()
         self.stage_file = stage_file
         self.label = label
-        self.xf = UsdGeom.XformCache(time)
+        self.xf = UsdGeom.XformCache(self.time)
         self.triangles: list[np.ndarray] = []
         self.material_index: list[np.ndarray] = []
         self.part_index: list[np.ndarray] = []
         self.parts: dict[str, int] = {}
-        self.materials = BoundMaterials(time, self._warn)
+        self.materials = BoundMaterials(self.time, self._warn)
         self.emitters: list[Emitter] = []
         self.warnings: dict[str, None] = {}
         self.local_meshes: dict[str, LocalMesh | None] = {}
@@ -154,7 +162,19 @@ class _Reader:
 
     def read(self, luminaire: str | None) -> Scene:
         root = self._luminaire_prim(luminaire)
+        # our own photometric stand-in is never traced: read the modelled luminaire
+        with modelled_luminaire(self.stage, root, self._warn) as stage:
+            self.stage = stage
+            root = stage.GetPrimAtPath(root.GetPath())
+            # one time code for every value read
+            self.time = read_time(stage, root, self.requested_time, self._warn)
+            self.xf = UsdGeom.XformCache(self.time)
+            self.materials = BoundMaterials(self.time, self._warn)
+            return self._read_luminaire(root)
+
+    def _read_luminaire(self, root: Usd.Prim) -> Scene:
         root_path = str(root.GetPath())
+        self.root_path = root.GetPath()
         layer_where = self.stage_file or self.label
         if not UsdGeom.StageHasAuthoredMetersPerUnit(self.stage):
             self._warn(f"{layer_where}: metersPerUnit is not authored: assuming centimetres "
@@ -176,6 +196,7 @@ class _Reader:
         if not self.emitters:
             raise StageError("no emitter: the luminaire has no active, visible Sphere, Disk, "
                              f"Rect or Cylinder light (in {self.label})", root_path)
+        validate.check_total_flux([e.flux for e in self.emitters], root_path)
 
         for note in self.diagnostics.take():
             self._warn(f"{self.label}: USD: {note}")
@@ -199,6 +220,7 @@ class _Reader:
             luminaire_path=root_path,
             stage_path=self.stage_file,
             warnings=tuple(self.warnings),
+            time_code=scene_time_code(self.time),
         )
 
     def _luminaire_prim(self, luminaire: str | None) -> Usd.Prim:
@@ -236,6 +258,12 @@ class _Reader:
                 it.PruneChildren()
                 continue
             kind = light_kind(prim)
+            if (kind is not None or prim.HasAPI(UsdLux.LightAPI)) \
+                    and is_stand_in_light(prim, self.root_path):
+                self._warn(f"{prim.GetPath()}: the stand-in light of lumitrace's photometric "
+                           "representation (its own result) is not traced: skipped")
+                it.PruneChildren()
+                continue
             if kind is not None:
                 self.emitters.extend(read_light(prim, kind, frame, self.xf,
                                                 self.meters_per_unit, self._warn))
@@ -265,7 +293,8 @@ class _Reader:
         path = str(prim.GetPath())
         visibility = validate.check_token(imageable.GetVisibilityAttr().Get(self.time),
                                           _VISIBILITIES, path, "visibility")
-        validate.check_token(imageable.GetPurposeAttr().Get(), _PURPOSES, path, "purpose")
+        validate.check_token(imageable.GetPurposeAttr().Get(self.time), _PURPOSES, path,
+                             "purpose")
         if computed:
             visibility = imageable.ComputeVisibility(self.time)
         # else: ancestors were checked on the way down

@@ -202,9 +202,39 @@ def check_non_negative(value: Any, where: str, prop: str) -> float:
     return v
 
 
+#: Largest luminous flux (lm) of one light, and of a whole luminaire, lumitrace traces.
+#: Far beyond any luminaire (the brightest lamps emit some 1e6 lm), and small enough that
+#: the outputs, which store intensities in cd as float32 (largest 3.4e38), stay finite:
+#: all of it into one steradian is 1e24 cd, all of it into the smallest texel of a cube
+#: map of 1024 x 1024 texels per face (7.3e-7 sr, at a face's corner) is 1.4e30 cd.
+MAX_LUMINOUS_FLUX = 1e24
+#: The limit as checked: 1e24 as a float attribute holds it (float32, 1.00000001e24) passes.
+_FLUX_LIMIT = max(MAX_LUMINOUS_FLUX, float(np.float32(MAX_LUMINOUS_FLUX)))
+
+
+def check_flux_limit(flux: float, where: str, prop: str | None, what: str = "luminous flux"
+                     ) -> float:
+    """A luminous flux (lm) must be at most :data:`MAX_LUMINOUS_FLUX` (also false for NaN
+    and Inf); ``what`` says which flux, for the message."""
+    if not flux <= _FLUX_LIMIT:
+        raise StageError(f"{what} of {flux:g} lm is above the {MAX_LUMINOUS_FLUX:g} lm "
+                         "lumitrace can trace (intensities would not fit the outputs)",
+                         where, prop)
+    return flux
+
+
 def check_luminous_flux(value: Any, where: str, prop: str) -> float:
-    """An authored luminous flux must be finite and > 0 (lm)."""
-    return check_positive(value, where, prop, unit=" lm")
+    """An authored luminous flux must be finite, > 0 and at most
+    :data:`MAX_LUMINOUS_FLUX` (lm)."""
+    return check_flux_limit(check_positive(value, where, prop, unit=" lm"), where, prop)
+
+
+def check_total_flux(fluxes, where: str) -> float:
+    """The luminous flux of all emitters together (lm) must be at most
+    :data:`MAX_LUMINOUS_FLUX`; ``where`` is the luminaire prim."""
+    total = float(sum(fluxes))  # inf on overflow, refused below
+    return check_flux_limit(total, where, None,
+                            f"total luminous flux of its {len(fluxes)} emitters")
 
 
 def check_material(values: Mapping[str, Sourced]) -> None:
