@@ -1,0 +1,86 @@
+"""Seams the live service stands on: a batch's tally taken out exactly as it was added, a
+tracing frame pinned for a session, batch jobs as hashable records, progress snapshots."""
+import dataclasses
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def downlight():
+    from lumitrace.stage.reader import read_stage
+
+    return read_stage(ROOT / "stages" / "downlight.usda")
+
+
+def test_removing_a_batch_restores_the_accumulator_exactly(downlight):
+    from lumitrace.film.accumulate import Accumulator
+    from lumitrace.trace.tracer import BatchJob, prepare, trace_batch
+
+    ps = prepare(downlight)
+    a, b = (trace_batch(ps, BatchJob(0, first, 20_000, 3, 8)) for first in (0, 20_000))
+    acc = Accumulator(downlight, 8)
+    acc.add(a)
+    before = acc.snapshot()
+    acc.add(b)
+    assert acc.photons == 40_000
+    acc.remove(b)
+    assert acc.photons == before.photons
+    for t, u in zip(acc.emitters, before.emitters):
+        assert np.array_equal(t.counts, u.counts)
+        assert (t.absorbed, t.cut, t.segments) == (u.absorbed, u.cut, u.segments)
+    with pytest.raises(ValueError):
+        acc.remove(b)  # never added now
+
+
+def test_a_snapshot_does_not_change_with_the_session(downlight):
+    from lumitrace.run.session import TraceSettings, run
+
+    seen = []
+    run(downlight, TraceSettings(photons=100_000, resolution=8, threads=1,
+                                 workers="threads"), progress=seen.append)
+    first = seen[0].accumulator
+    assert first.photons == seen[0].photons < seen[-1].photons
+    assert first.counts().sum() <= seen[-1].accumulator.counts().sum()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        seen[0].photons = 0
+
+
+def test_a_pinned_frame_keeps_unchanged_parts_bit_identical(downlight):
+    from lumitrace.trace.prepared import TracingFrame, prepare
+
+    frame = TracingFrame.of(downlight)
+    moved = dataclasses.replace(downlight, triangles=downlight.triangles.copy())
+    part = np.asarray(downlight.part_index) == 0
+    moved.triangles[part] += np.array([0.0, 0.0, 0.05])  # the part moves 5 cm: bounds grow
+    assert TracingFrame.of(moved) != frame
+    a, b = prepare(downlight, frame), prepare(moved, frame)
+    assert np.array_equal(a.corners[:, ~part], b.corners[:, ~part])
+    assert np.array_equal(a.normals[:, ~part], b.normals[:, ~part])
+    free = prepare(moved)
+    assert not np.array_equal(a.corners[:, ~part], free.corners[:, ~part])
+
+
+def test_a_batch_job_is_a_small_hashable_picklable_record():
+    from lumitrace.trace.job import BatchJob
+
+    job = BatchJob(1, 1 << 40, 4096, 7, 64)
+    assert pickle.loads(pickle.dumps(job)) == job and hash(job) == hash(BatchJob(1, 1 << 40,
+                                                                               4096, 7, 64))
+    assert job.stop == (1 << 40) + 4096
+
+
+@pytest.mark.parametrize("field, value, words", [
+    ("seed", 2 ** 31, "seed"), ("resolution", 0, "resolution"), ("photons", 1.5, "photons"),
+    ("threshold", float("nan"), "threshold"), ("workers", "gpu", "workers"),
+    ("target_error", 2.0, "target_error"), ("threads", True, "threads"),
+])
+def test_settings_check_themselves(field, value, words):
+    from lumitrace.run.settings import SettingsError, TraceSettings
+
+    with pytest.raises(SettingsError, match=words):
+        TraceSettings(**{field: value})
