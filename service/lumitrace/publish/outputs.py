@@ -22,7 +22,9 @@ from ..run.session import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
 from .photometric import photometric_paths, write_photometric_files
+from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
+from .runs import layer_data
 from .result_layer import result_layer_text, write_layer_file
 from .sublayer import reload_if_open, sublayer_into_root
 from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signals_held
@@ -65,12 +67,8 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
     """The EXR header's JSON metadata: the record's figures plus units and emitters."""
     acc = result.accumulator
     scene = result.scene
-    photometric = {k: record[k] for k in ("luminous_flux", "lamp_flux", "light_output_ratio",
-                                          "downward_flux_fraction", "upward_flux_fraction",
-                                          "peak_intensity", "peak_c", "peak_gamma",
-                                          "beam_angle_c0_c180", "beam_angle_c90_c270",
-                                          "field_angle_c0_c180", "field_angle_c90_c270",
-                                          "cie_flux_code", "symmetry")}
+    photometric = {f.key: record[f.key] for f in RESULT_FIELDS if f.group == "photometry"}
+    photometric["light_output_ratio"] = record["light_output_ratio"]
     return {
         "software": f"lumitrace {__version__}",
         **record.exr_metadata(),
@@ -158,19 +156,8 @@ def check_ownership(stage_path: Path, paths: dict[str, Path]) -> None:
                               f"stage's outputs to a folder of their own (--out)", str(exr))
     layer = paths["result_layer"]
     if layer.exists():
-        other = _layer_stage(layer)
+        other = layer_data(layer).get("stage")
         if other and Path(other) != stage_path:
             raise OutputError(f"is the result layer of another stage, {other}; rename one "
                               "of the stages (their results would share this file)",
                               str(layer))
-
-
-def _layer_stage(layer: Path) -> str | None:
-    """The stage a result layer says it belongs to (None for layers that do not say)."""
-    from pxr import Sdf, Tf
-
-    try:
-        data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
-    except Tf.ErrorException:
-        return None
-    return None if data is None else data.customLayerData.get("lumitrace:stage")

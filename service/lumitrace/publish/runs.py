@@ -30,12 +30,20 @@ def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
                 ids["ldt"] = line[len(prefix):].strip()
     layer = Path(layer_folder or folder) / f"{name}{RESULT_LAYER_SUFFIX}"
     if layer.exists():
-        from pxr import Sdf, Tf
-
-        try:
-            data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
-        except Tf.ErrorException:
-            data = None
-        if data is not None:
-            ids["layer"] = data.customLayerData.get("lumitrace:runId")
+        ids["layer"] = layer_data(layer).get("runId")
     return ids
+
+
+def layer_data(layer: Path) -> dict[str, str]:
+    """The ``lumitrace:*`` customLayerData of a result layer (run id, stage), without the
+    ``lumitrace:`` prefix; empty for a layer that cannot be read or says nothing."""
+    from pxr import Sdf, Tf
+
+    try:
+        data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
+    except Tf.ErrorException:
+        return {}
+    if data is None:
+        return {}
+    return {k.split(":", 1)[1]: v for k, v in data.customLayerData.items()
+            if k.startswith("lumitrace:")}

@@ -9,6 +9,7 @@ import warnings
 from pathlib import Path
 
 from ..errors import OutputError, OutputWarning
+from .transaction import fsync_path
 from .usda_text import insert_sublayer_text
 
 
@@ -110,7 +111,7 @@ def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) ->
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
         if not in_place:
-            fsync_dir(target.parent)
+            fsync_path(target.parent)
             return True
     with open(target, "r+b") as fh:
         if fh.read() != expected:
@@ -121,16 +122,6 @@ def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) ->
         fh.flush()
         os.fsync(fh.fileno())
     return True
-
-
-def fsync_dir(folder: Path) -> None:
-    """Flush a folder's entries to disk (where the platform allows)."""
-    with contextlib.suppress(OSError):
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 def sublayer_into_root(stage: Path, layer_path: Path) -> None:
