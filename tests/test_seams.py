@@ -84,3 +84,38 @@ def test_settings_check_themselves(field, value, words):
 
     with pytest.raises(SettingsError, match=words):
         TraceSettings(**{field: value})
+
+
+def test_results_of_a_stage_with_no_file_go_to_the_named_folder(tmp_path):
+    """A stage open in memory (as in a DCC) has no file: its results are written to the
+    folder the caller names, under the luminaire's name, and its result layer, sublayered
+    into the in-memory stage, composes the result onto the luminaire."""
+    from pxr import Usd
+
+    from lumitrace.errors import OutputError
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+    from lumitrace.stage.reader import scene_from_stage
+
+    disc = Usd.Stage.Open(str(ROOT / "stages" / "reference" / "lambertian_disc.usda"))
+    stage = Usd.Stage.CreateInMemory()
+    stage.GetRootLayer().TransferContent(disc.GetRootLayer())
+    scene = scene_from_stage(stage)
+    assert scene.stage_path == ""
+    result = run(scene, TraceSettings(photons=20_000, resolution=8, threads=1))
+    with pytest.raises(OutputError, match="no file of its own: name an output folder"):
+        write_outputs(result, None)
+    out = tmp_path / "results"
+    out.mkdir()
+    record = write_outputs(result, out)
+    name = scene.luminaire_path.rsplit("/", 1)[-1]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == sorted(
+        f"{name}{s}" for s in (".intensity.exr", ".ies", ".ldt", ".polar.png", ".solid.png",
+                               ".lumitrace.usda"))
+    assert record["photons"] == 20_000
+    stage.GetRootLayer().subLayerPaths.append(str(out / f"{name}.lumitrace.usda"))
+    prim = stage.GetPrimAtPath(scene.luminaire_path)
+    assert prim.GetAttribute("lumitrace:result:photons").Get() == 20_000
+    exr = prim.GetAttribute("lumitrace:result:intensityMap").Get()
+    assert Path(exr.resolvedPath) == out / f"{name}.intensity.exr"

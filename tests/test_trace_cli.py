@@ -134,6 +134,21 @@ def test_not_a_usd_file(tmp_path):
     _assert_clean_failure(lumitrace("trace", path), path, "junk.usda")
 
 
+def test_bytes_that_are_not_utf8(tmp_path):
+    """Latin-1 in a comment of the stage, or of a sublayer: one line naming file, line and
+    column of the first bad byte (USD's own message cannot even be printed)."""
+    bad = tmp_path / "latin1.usda"
+    bad.write_bytes((REFERENCE / "isotropic.usda").read_bytes() + b"# caf\xe9\n")
+    line = bad.read_bytes().count(b"\n")
+    p = lumitrace("trace", bad, "--photons", 1000)
+    _assert_clean_failure(p, bad, "latin1.usda", f"line {line}, column 6: byte 0xe9 is not UTF-8")
+    root = tmp_path / "root.usda"
+    root.write_text('#usda 1.0\n(\n    subLayers = [@./latin1.usda@]\n    defaultPrim = '
+                    '"Luminaire"\n)\n')
+    p = lumitrace("trace", root, "--photons", 1000)
+    _assert_clean_failure(p, root, "latin1.usda", f"line {line}, column 6")
+
+
 def test_nan_points(tmp_path):
     def edit(stage):
         mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Luminaire/Reflector"))

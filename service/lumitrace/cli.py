@@ -12,6 +12,7 @@ from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
 from .run.settings import DEFAULT_THRESHOLD
+from .trace.job import MAX_DEPTH
 
 
 def _positive_int(text: str) -> int:
@@ -60,6 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pull-push filter threshold: photons from which a texel trusts its own "
                         f"estimate; 0 writes the raw estimate (default {DEFAULT_THRESHOLD:g})")
     t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    t.add_argument("--max-depth", type=_positive_int, default=MAX_DEPTH, metavar="N",
+                   help=f"scattering events a photon may have before it is cut (default "
+                        f"{MAX_DEPTH}); the cut flux is reported")
     t.add_argument("--threads", type=_positive_int, default=None,
                    help="tracing workers (default: all cores); the map does not depend on it")
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
@@ -129,9 +133,14 @@ def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
             bar.update(min(p.seconds, seconds) - bar.n)
         else:
             bar.update(p.photons - bar.n)
-        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err {p.relative_error:.2%}")
+        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err {_pct(p.relative_error)}")
 
     return bar, update
+
+
+def _pct(value: float | None) -> str:
+    """A relative error as a percentage; 'undefined' where there is none (no light)."""
+    return "undefined" if value is None or not math.isfinite(value) else f"{value:.2%}"
 
 
 def _summary_text(r, stage) -> str:
@@ -150,8 +159,9 @@ def _summary_text(r, stage) -> str:
         lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
     lines += [
         f"  peak intensity  {r.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})",
-        f"  relative error  {r.relative_error:.2%} estimated RMS over the sphere "
-        f"(raw map {r.raw_relative_error:.2%}){', converged' if r.converged else ''}",
+        f"  relative error  {_pct(r.relative_error)} estimated RMS over the sphere "
+        f"(raw map {_pct(r.raw_relative_error)}){', converged' if r.converged else ''}"
+        + ("" if r.escaped_lm else "   (no light escapes the luminaire)"),
         f"  downward flux   {r.downward_flux_fraction:.1%}   CIE flux code {r.cie_flux_code}",
         f"  beam angle      {ang(r.beam_angle_c0_c180)} (C0-C180), "
         f"{ang(r.beam_angle_c90_c270)} (C90-C270)",
@@ -173,7 +183,7 @@ def cmd_trace(args) -> int:
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
-                             threshold=args.threshold, seed=args.seed,
+                             threshold=args.threshold, seed=args.seed, max_depth=args.max_depth,
                              threads=args.threads or default_threads(), workers=args.workers)
     preflight(args.stage, args.out)
     scene = read_stage(args.stage)

@@ -7,6 +7,9 @@ from pathlib import Path
 
 #: Suffix of the result layer, sublayered into the stage: ``NAME.lumitrace.usda``.
 RESULT_LAYER_SUFFIX = ".lumitrace.usda"
+#: Suffix of the edits layer holding a service's accepted scene deltas:
+#: ``NAME.lumitrace-edits.usda``, beside the stage, applied over it as its session layer.
+EDITS_LAYER_SUFFIX = ".lumitrace-edits.usda"
 #: Output suffixes after ``NAME`` (the result layer lives beside the stage).
 INTENSITY_SUFFIX = ".intensity.exr"
 IES_SUFFIX = ".ies"
@@ -24,3 +27,9 @@ def result_layer_path(stage_path: str | os.PathLike) -> Path:
     """``NAME.lumitrace.usda`` beside the stage ``NAME.<ext>``."""
     stage = Path(stage_path)
     return stage.with_name(stage_name(stage) + RESULT_LAYER_SUFFIX)
+
+
+def edits_layer_path(stage_path: str | os.PathLike) -> Path:
+    """``NAME.lumitrace-edits.usda`` beside the stage ``NAME.<ext>``."""
+    stage = Path(stage_path)
+    return stage.with_name(stage_name(stage) + EDITS_LAYER_SUFFIX)

@@ -12,6 +12,7 @@ filtered map and the other half's raw map (independent of it) once both noises a
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,8 @@ def _raw_noise2(acc: Accumulator, omega: np.ndarray) -> float:
 
 def raw_relative_error(acc: Accumulator) -> float:
     """Estimated relative RMS error of the raw map, from binomial texel variances."""
+    if acc.photons < 2:  # one photon says nothing about its own spread
+        return math.inf
     omega = texel_solid_angles(acc.resolution)
     raw = acc.intensity()
     noise2 = _raw_noise2(acc, omega)
@@ -91,9 +94,11 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     cross = 0.5 * sum(norm2(halves[i] - raw_halves[1 - i], omega) for i in (0, 1))
     bias2 = max(0.0, cross - 2.0 * noise_raw2 - 2.0 * var_f2)
     total2 = var_f2 + bias2
-    signal2 = max(norm2(filtered, omega) - var_f2, 1e-300)
+    signal2 = norm2(filtered, omega) - var_f2
     # per texel: the split-half variance, smoothed by the same filter
     local_var = pull_push(diff * diff / 4.0 * omega, counts, threshold, omega)
     texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
-    return MapEstimate(raw, filtered, threshold, raw_err, float(np.sqrt(total2 / signal2)),
-                       float(np.sqrt(var_f2 / signal2)), np.where(filtered > 0, texel, np.inf))
+    # no signal above the noise (no light escaped): the relative error is undefined
+    rel = (lambda x2: float(np.sqrt(x2 / signal2))) if signal2 > 0 else (lambda x2: math.inf)
+    return MapEstimate(raw, filtered, threshold, raw_err, rel(total2), rel(var_f2),
+                       np.where(filtered > 0, texel, np.inf))

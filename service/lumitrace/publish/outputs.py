@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import Interrupted, OutputError, OutputWarning, warn
-from ..filenames import INTENSITY_SUFFIX, result_layer_path, stage_name
+from ..filenames import INTENSITY_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from ..photometry import frame
 from ..photometry.distribution import Photometry, photometry_of
 from ..run.session import TraceResult
@@ -83,19 +83,35 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
     }
 
 
+def output_place(scene, out_dir: str | os.PathLike | None,
+                 name: str | None = None) -> tuple[Path | None, Path, str, Path]:
+    """Where a scene's results go: (stage file or None, output folder, NAME, folder of the
+    result layer). A stage with no file of its own (in memory, anonymous) needs ``out_dir``;
+    its NAME is ``name`` or the luminaire prim's name, its result layer goes to ``out_dir``."""
+    if scene.stage_path:
+        stage_path = Path(scene.stage_path).absolute()
+        out = Path(out_dir).absolute() if out_dir is not None else stage_path.parent
+        return stage_path, out, name or stage_name(stage_path), stage_path.parent
+    if out_dir is None:
+        raise OutputError("the stage has no file of its own: name an output folder",
+                          scene.luminaire_path or None)
+    out = Path(out_dir).absolute()
+    name = name or scene.luminaire_path.rstrip("/").rsplit("/", 1)[-1] or "luminaire"
+    return None, out, name, out
+
+
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
-                  wait: float = DEFAULT_LOCK_WAIT) -> ResultRecord:
+                  wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
+                  sublayer: bool = True) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
-    :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage; return
-    the record. Waits up to ``wait`` s for another run publishing the same stage."""
+    :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage file
+    (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
+    return the record. Waits up to ``wait`` s for another run publishing the same NAME."""
     scene = result.scene
-    stage_path = Path(scene.stage_path).absolute()
-    out = Path(out_dir).absolute() if out_dir is not None else stage_path.parent
-    name = stage_name(stage_path)
-    layer_dir = stage_path.parent
+    stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
              **photometric_paths(out, name),
-             "result_layer": result_layer_path(stage_path)}
+             "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
     pictures = plotting_available()
     if not pictures:
         warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
@@ -121,12 +137,13 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                         "count": acc.counts().astype(np.float64),
                         "relativeError": np.minimum(est.texel_error, 1e30)}
             meta = {**exr_metadata(result, record), "runId": tx.run_id,
-                    "stagePath": str(stage_path)}
+                    "stagePath": str(stage_path or "")}
             write_intensity_exr(staged["intensity_map"], channels, meta)
             text = result_layer_text(stage_path, scene.luminaire_path,
                                      record.layer_values(layer_dir),
                                      photometric_light(scene, ph, paths["ies"], layer_dir),
-                                     layer_dir, {"runId": tx.run_id, "stage": str(stage_path)})
+                                     layer_dir,
+                                     {"runId": tx.run_id, "stage": str(stage_path or "")})
             write_layer_file(stage_path, staged["result_layer"], text)
             tx.commit(last=paths["result_layer"])
         except Interrupted as exc:
@@ -137,12 +154,13 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
             tx.abort()
             raise
         reload_if_open(paths["result_layer"])
-        with signals_held():
-            sublayer_into_root(stage_path, paths["result_layer"])
+        if sublayer and stage_path is not None:
+            with signals_held():
+                sublayer_into_root(stage_path, paths["result_layer"])
     return record
 
 
-def check_ownership(stage_path: Path, paths: dict[str, Path]) -> None:
+def check_ownership(stage_path: Path | None, paths: dict[str, Path]) -> None:
     """Refuse to overwrite outputs that belong to another stage of the same NAME (say
     ``lamp.usda`` and ``lamp.usdc`` in one folder, or two stages with one ``--out``)."""
     from .exr import read_exr_metadata
@@ -151,13 +169,13 @@ def check_ownership(stage_path: Path, paths: dict[str, Path]) -> None:
     if exr.exists():
         meta = read_exr_metadata(exr) or {}
         other = meta.get("stagePath")
-        if other and Path(other) != stage_path:
+        if other and (stage_path is None or Path(other) != stage_path):
             raise OutputError(f"holds the result of another stage, {other}; write this "
                               f"stage's outputs to a folder of their own (--out)", str(exr))
     layer = paths["result_layer"]
     if layer.exists():
         other = layer_data(layer).get("stage")
-        if other and Path(other) != stage_path:
+        if other and (stage_path is None or Path(other) != stage_path):
             raise OutputError(f"is the result layer of another stage, {other}; rename one "
                               "of the stages (their results would share this file)",
                               str(layer))

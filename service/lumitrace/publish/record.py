@@ -31,13 +31,14 @@ def input_hash(result: TraceResult) -> str:
 
 class ResultRecord(Mapping[str, Any]):
     """An immutable mapping from the keys of :data:`RESULT_FIELDS` to values (None where a
-    figure does not exist, such as the beam angle of a map with no beam)."""
+    figure does not exist, such as the beam angle of a map with no beam, or the relative
+    error of a map no light reached: a non-finite float is stored as None)."""
 
     def __init__(self, values: Mapping[str, Any]):
         unknown = sorted(set(values) - set(_FIELDS))
         if unknown:
             raise KeyError(f"unknown result field(s): {', '.join(unknown)}")
-        self._values = MappingProxyType({k: values.get(k) for k in _FIELDS})
+        self._values = MappingProxyType({k: _defined(values.get(k)) for k in _FIELDS})
 
     def __getitem__(self, key: str) -> Any:
         return self._values[key]
@@ -84,6 +85,13 @@ class ResultRecord(Mapping[str, Any]):
                 v = list(v)
             (out.setdefault(f.group, {}) if f.group else out)[f.key] = v
         return out
+
+
+def _defined(value: Any) -> Any:
+    """``value``, or None where it is a float that is not a number (an undefined figure)."""
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None
+    return value
 
 
 def trace_figures(result: TraceResult) -> dict[str, Any]:

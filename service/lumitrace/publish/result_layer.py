@@ -90,14 +90,17 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
     return layer_path
 
 
-def result_layer_text(stage: Path, luminaire_path: str | None, results: Mapping[str, Any],
-                      light: Mapping[str, Any] | None, layer_dir: Path,
-                      layer_data: Mapping[str, str] | None = None) -> str:
+def result_layer_text(stage: Path | None, luminaire_path: str | None,
+                      results: Mapping[str, Any], light: Mapping[str, Any] | None,
+                      layer_dir: Path, layer_data: Mapping[str, str] | None = None) -> str:
     """The result layer as usda text (see :func:`write_result_layer`); ``layer_data`` goes
-    into its customLayerData (the run id and stage it belongs to). Checks every value and
-    raises :class:`ResultValueError` before anything is written."""
-    if not stage.is_file():
+    into its customLayerData (the run id and stage it belongs to). ``stage`` is None for a
+    stage with no file of its own (``luminaire_path`` is then required). Checks every value
+    and raises :class:`ResultValueError` before anything is written."""
+    if stage is not None and not stage.is_file():
         raise OutputError("no such stage file", str(stage))
+    if stage is None and not luminaire_path:
+        raise ResultValueError("a stage with no file needs the luminaire's prim path")
     values = convert_results(results, layer_dir)
     if light is not None:
         missing = sorted({"ies", "flux", "radius", "position"} - set(light))
@@ -107,9 +110,9 @@ def result_layer_text(stage: Path, luminaire_path: str | None, results: Mapping[
     return _result_layer_text(stage, prim_path, values, light, layer_data)
 
 
-def write_layer_file(stage: Path, path: Path, text: str) -> None:
-    """Write layer text atomically with the stage's (or the old layer's) file mode."""
-    mode = file_mode(path if path.exists() else stage)
+def write_layer_file(stage: Path | None, path: Path, text: str) -> None:
+    """Write layer text atomically with the old layer's (or the stage's) file mode."""
+    mode = file_mode(path if path.exists() or stage is None else stage)
     try:
         with atomic_path(path) as tmp:
             tmp.write_text(text, encoding="utf-8")
@@ -218,7 +221,7 @@ def _luminaire_path(stage: Path, luminaire_path: str | None):
     return path
 
 
-def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | None = None,
+def _result_layer_text(stage: Path | None, prim_path, values: dict, light: Mapping | None = None,
                        layer_data: Mapping[str, str] | None = None) -> str:
     from pxr import Sdf
 
@@ -227,7 +230,9 @@ def _result_layer_text(stage: Path, prim_path, values: dict, light: Mapping | No
                   "bool": Sdf.ValueTypeNames.Bool, "string": Sdf.ValueTypeNames.String}
     layer = Sdf.Layer.CreateAnonymous(".usda")
     layer.documentation = (f"lumitrace result for {stage.name}, sublayered into it; "
-                           "rewritten by every run.")
+                           "rewritten by every run." if stage is not None else
+                           f"lumitrace result for the luminaire {prim_path} of a stage with "
+                           "no file of its own; rewritten by every run.")
     if layer_data:
         layer.customLayerData = {f"lumitrace:{k}": str(v) for k, v in layer_data.items()}
     spec = Sdf.CreatePrimInLayer(layer, prim_path)

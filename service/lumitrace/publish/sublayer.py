@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 from ..errors import OutputError, OutputWarning
-from .transaction import fsync_path
+from ..atomic import fsync_path
 from .usda_text import insert_sublayer_text
 
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
+from ..atomic import fsync_path
 from ..errors import OutputError
 
 #: Signals held while the staged files are renamed into place.
@@ -44,20 +45,6 @@ _LOCK = ".lumitrace.lock"
 def new_run_id() -> str:
     """A short unique id for one run's set of files."""
     return uuid.uuid4().hex[:16]
-
-
-def fsync_path(path: Path) -> None:
-    """Flush a file's or a folder's data to disk (where the platform allows)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def _lock_path(folder: Path, name: str) -> Path:

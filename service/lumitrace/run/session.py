@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from ..errors import warn
 from ..film.accumulate import Accumulator
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
@@ -21,6 +22,11 @@ from .settings import TraceSettings
 
 #: Photons in the first iteration; later iterations double up to a full round of batches.
 FIRST_ITERATION = 1 << 15
+#: A session stopped only by time or error ends once this many photons left no light
+#: outside the luminaire: its error is undefined and would never reach a target.
+NO_ESCAPE_PHOTONS = 1 << 20
+#: Share of the emitted flux cut by the depth limit above which the result says so.
+CUT_WARNING_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -93,6 +99,15 @@ def _round_jobs(done: list[int], targets: list[float], shares: list[float],
     return jobs
 
 
+def _warn_cut(acc: Accumulator, settings: TraceSettings) -> None:
+    """Warn when the depth limit cut a noticeable share of the emitted flux."""
+    f = acc.fluxes()
+    if f["emitted"] > 0 and f["cut"] > CUT_WARNING_FRACTION * f["emitted"]:
+        warn(f"{f['cut'] / f['emitted']:.1%} of the emitted flux was cut by the depth limit "
+             f"({settings.max_depth} bounces): the light output ratio and the map lack it; "
+             "raise the depth limit or check for a light trap")
+
+
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
         progress: Callable[[Progress], None] | None = None,
         frame: TracingFrame | None = None) -> TraceResult:
@@ -138,7 +153,12 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 break
             if settings.target_error is not None and err <= settings.target_error:
                 break
+            if budget is None and acc.photons >= NO_ESCAPE_PHOTONS and not any(t.escaped for t in acc.emitters):
+                warn(f"no light escaped the luminaire in {acc.photons:,} photons: stopping "
+                     "(light output ratio 0, the map's error is undefined)")
+                break
     if est is None:
         est = estimate(acc, settings.threshold)
+    _warn_cut(acc, settings)
     return TraceResult(scene=scene, settings=settings, accumulator=acc, iterations=iteration,
                        seconds=time.perf_counter() - start, prepare_seconds=t_prep, estimate=est)

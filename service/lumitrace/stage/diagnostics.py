@@ -3,13 +3,15 @@ composition errors judged (an error within the luminaire, a warning elsewhere), 
 error texts made readable."""
 from __future__ import annotations
 
+import os
 import re
 from typing import Callable
 
-from pxr import Pcp, Usd, UsdUtils
+from pxr import Pcp, Sdf, Usd, UsdUtils
 
 from ..errors import StageError
 from ..filenames import RESULT_LAYER_SUFFIX
+from .validate import check_layer_file
 
 _NAMESPACE = re.compile(r"pxrInternal_v\d+_\d+(?:_\d+)?__pxrReserved__::")
 #: The session layer USD adds to layer stacks in messages: ",@anon:0x...:NAME-session.usda@".
@@ -75,6 +77,28 @@ def check_composition(stage: Usd.Stage, root: Usd.Prim, layer_where: str,
         warn(f"{where}: composition error: {message}")
 
 
+def check_sublayers(stage: Usd.Stage, layer_where: str) -> None:
+    """A sublayer that cannot be opened (missing, unparsable, a cycle) is bad input, unless
+    it is a result layer of ours (the next run writes it again)."""
+    for error in stage.GetCompositionErrors():
+        what = _FATAL_COMPOSITION.get(error.errorType)
+        if what is None or error.errorType not in _SUBLAYER_ERRORS:
+            continue
+        message = _ANON_LAYER.sub("", tf_message(error))
+        if RESULT_LAYER_SUFFIX not in message:
+            _check_sublayer_files(stage.GetRootLayer())  # names a bad file's line if it can
+            raise StageError(f"{what}: {message}", layer_where, "subLayers")
+
+
+def _check_sublayer_files(layer: Sdf.Layer) -> None:
+    """Run the file checks of :func:`validate.check_layer_file` on the sublayers of
+    ``layer`` that exist on disk, so that a parse failure is reported with its line."""
+    for sub in layer.subLayerPaths:
+        path = layer.ComputeAbsolutePath(sub)
+        if path and os.path.isfile(path):
+            check_layer_file(path)
+
+
 def _arc_property(message: str) -> str:
     """The composition arc a Pcp message is about, as the metadata field that authors it."""
     text = message.lower()
@@ -85,15 +109,27 @@ def _arc_property(message: str) -> str:
     return "references"
 
 
+def _safe_str(value) -> str:
+    try:
+        return str(value)
+    except UnicodeDecodeError:
+        return "(message not readable: it quotes bytes that are not UTF-8)"
+
+
 def tf_message(error) -> str:
     """The readable part of a pxr error (Tf.ErrorException or a composition error)."""
-    text = _NAMESPACE.sub("", str(error)).strip()
+    try:
+        text = str(error)
+    except UnicodeDecodeError:  # a message quoting bytes that are not UTF-8
+        text = " ".join(a.decode("utf-8", "replace") if isinstance(a, bytes) else
+                        _safe_str(a) for a in getattr(error, "args", ()))
+    text = _NAMESPACE.sub("", text).strip()
     messages = []
     for chunk in re.split(r"\s*Error in ", text):
         _, sep, body = chunk.partition(" : '")
         if sep:
             messages.append(body.strip().rstrip("'"))
-    message = messages[0] if messages else text or repr(error)
+    message = messages[0] if messages else text or "(USD gave no readable message)"
     # parser internals between "parse error" and the offending text
     message = re.sub(r" matching .*? at '", " at '", message, flags=re.DOTALL)
     return " ".join(message.split())[:300]

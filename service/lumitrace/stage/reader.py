@@ -54,7 +54,7 @@ from .. import schema
 from ..errors import StageError
 from ..scene import Emitter, Scene
 from . import validate
-from .diagnostics import UsdDiagnostics, check_composition, tf_message
+from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
 from .lights import light_kind, read_light
 from .materials import BoundMaterials
@@ -161,6 +161,8 @@ class _Reader:
     # -- top level ----------------------------------------------------------------------
 
     def read(self, luminaire: str | None) -> Scene:
+        # a sublayer that cannot be opened explains a missing luminaire: say that first
+        check_sublayers(self.stage, self.stage_file or self.label)
         root = self._luminaire_prim(luminaire)
         # our own photometric stand-in is never traced: read the modelled luminaire
         with modelled_luminaire(self.stage, root, self._warn) as stage:

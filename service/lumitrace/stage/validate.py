@@ -80,6 +80,26 @@ def check_layer_file(path) -> None:
             raise StageError(f"text layer of {size / 2**30:.1f} GiB is larger than the "
                              f"{MAX_TEXT_LAYER_BYTES / 2**30:g} GiB a text layer may have: "
                              "save it as binary .usdc", where)
+        check_utf8(file)
+
+
+def check_utf8(path) -> None:
+    """A text layer must be UTF-8 throughout (USD's parser rejects any other byte, even in a
+    comment); the error names the line and column of the first bad byte."""
+    where = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise StageError(f"cannot read: {exc.strerror or exc}", where) from exc
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise StageError(f"line {line}, column {column}: byte 0x{data[exc.start]:02x} is not "
+                         "UTF-8 (a text layer must be UTF-8 throughout, comments included)",
+                         where) from None
 
 
 def check_stage_units(meters_per_unit: float, where: str) -> None:

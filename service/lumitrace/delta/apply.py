@@ -1,0 +1,352 @@
+"""Applying a batch of scene deltas to the edits layer: all of them or none.
+
+Every delta is authored in the edits layer through a USD edit target; every problem found
+(a prim that is not there, a value of the wrong type, an asset path leaving the stage's
+folder) is collected, and any problem restores the layer exactly as it was.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdUtils
+
+from ..schema import MATERIAL_RANGES
+from ..stage.diagnostics import tf_message
+from .protocol import DeltaError, Problem
+
+
+class _Bad(Exception):
+    """One problem with one delta: ``why``, and where (a prim path and property)."""
+
+    def __init__(self, why: str, where: str = ""):
+        super().__init__(why)
+        self.why = why
+        self.where = where
+
+
+def apply_deltas(stage: Usd.Stage, edits: Sdf.Layer, deltas: list[dict[str, Any]],
+                 stage_dir: str | os.PathLike) -> None:
+    """Author ``deltas`` (already schema-valid) in ``edits``, a layer of ``stage``'s session
+    layer stack. Raises :class:`DeltaError` listing every problem, with ``edits`` restored;
+    asset paths must resolve inside ``stage_dir``."""
+    backup = edits.ExportToString()
+    ctx = _Context(stage, edits, Path(stage_dir).resolve())
+    problems: list[Problem] = []
+    try:
+        for i, delta in enumerate(deltas):
+            try:
+                with Usd.EditContext(stage, Usd.EditTarget(edits)):
+                    _OPS[delta["op"]](ctx, delta)
+            except _Bad as bad:
+                where = f"/deltas/{i}" + (f" {bad.where}" if bad.where else "")
+                problems.append(Problem(where, bad.why))
+            except Tf.ErrorException as exc:
+                problems.append(Problem(f"/deltas/{i} {delta.get('path', '')}".strip(),
+                                        f"USD refused it: {tf_message(exc)}"))
+    except BaseException:
+        edits.ImportFromString(backup)
+        raise
+    if problems:
+        edits.ImportFromString(backup)
+        raise DeltaError(problems, 422)
+
+
+class _Context:
+    def __init__(self, stage: Usd.Stage, edits: Sdf.Layer, stage_dir: Path):
+        self.stage = stage
+        self.edits = edits
+        self.stage_dir = stage_dir
+
+    def prim(self, path: str) -> Usd.Prim:
+        prim = self.stage.GetPrimAtPath(path)
+        if not prim:
+            raise _Bad("no prim at this path in the stage", path)
+        return prim
+
+    def asset(self, value: str, where: str) -> str:
+        """An asset path that resolves inside the stage's folder, as written."""
+        check_asset_path(value, self.stage_dir, where)
+        return value
+
+
+def check_asset_path(value: str, stage_dir: Path, where: str = "") -> None:
+    """Refuse an asset path that is a URL or resolves outside ``stage_dir``."""
+    if not isinstance(value, str) or not value:
+        raise _Bad("an asset path must be a non-empty string", where)
+    if "://" in value or value.startswith(("@", "\\\\")):
+        raise _Bad(f"asset path {value!r} must be a file path inside the stage's folder",
+                   where)
+    target = Path(value) if os.path.isabs(value) else stage_dir / value
+    resolved = target.resolve()
+    if resolved != stage_dir and stage_dir not in resolved.parents:
+        raise _Bad(f"asset path {value!r} leaves the stage's folder", where)
+
+
+# ------------------------------------------------------------------------------------------
+# Values
+# ------------------------------------------------------------------------------------------
+
+def _typed_value(value: Any, type_name: Sdf.ValueTypeName, ctx: _Context, where: str) -> Any:
+    """The JSON ``value`` as the Python value USD takes for ``type_name``."""
+    scalar = type_name.scalarType if type_name.isArray else type_name
+    if scalar == Sdf.ValueTypeNames.Asset:
+        items = value if type_name.isArray else [value]
+        if not isinstance(items, list):
+            raise _Bad(f"expects a list of asset paths, got {type(value).__name__}", where)
+        paths = [Sdf.AssetPath(ctx.asset(v, where)) for v in items]
+        return paths if type_name.isArray else paths[0]
+    if scalar in (Sdf.ValueTypeNames.String, Sdf.ValueTypeNames.Token):
+        ok = all(isinstance(v, str) for v in (value if type_name.isArray else [value]))
+        if not ok or (type_name.isArray and not isinstance(value, list)):
+            raise _Bad(f"expects {type_name} (text), got {json_type(value)}", where)
+        return value
+    if scalar == Sdf.ValueTypeNames.Bool:
+        if not isinstance(value, bool):
+            raise _Bad(f"expects a boolean, got {json_type(value)}", where)
+        return value
+    # numbers, vectors, matrices and their arrays: numbers only, finite
+    if not type_name.isArray and scalar in _NUMBERS and not (
+            isinstance(value, (int, float)) and not isinstance(value, bool)):
+        raise _Bad(f"expects {type_name} (a number), got {json_type(value)}", where)
+    if not _numeric(value):
+        raise _Bad(f"expects {type_name} (numbers), got {json_type(value)}", where)
+    if not _finite(value):
+        raise _Bad("values must be finite numbers", where)
+    converted = type_name.type.pythonClass
+    if converted is not None and not type_name.isArray and isinstance(value, list):
+        try:
+            return converted(*value) if len(value) in (2, 3, 4) and not isinstance(
+                value[0], list) else converted(value)
+        except (TypeError, Tf.ErrorException) as exc:
+            raise _Bad(f"expects {type_name}: {exc}", where) from None
+    return value
+
+
+_NUMBERS = {Sdf.ValueTypeNames.Float, Sdf.ValueTypeNames.Double, Sdf.ValueTypeNames.Half,
+            Sdf.ValueTypeNames.Int, Sdf.ValueTypeNames.UInt, Sdf.ValueTypeNames.Int64,
+            Sdf.ValueTypeNames.UInt64, Sdf.ValueTypeNames.UChar, Sdf.ValueTypeNames.TimeCode}
+
+
+def json_type(value: Any) -> str:
+    """The JSON name of a value's type (for messages)."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    return type(value).__name__
+
+
+def _numeric(value: Any) -> bool:
+    if isinstance(value, bool):
+        return False
+    if isinstance(value, (int, float)):
+        return True
+    return isinstance(value, list) and all(_numeric(v) for v in value)
+
+
+def _finite(value: Any) -> bool:
+    if isinstance(value, list):
+        return all(_finite(v) for v in value)
+    return math.isfinite(value)
+
+
+def _attribute(ctx: _Context, prim: Usd.Prim, name: str, type_hint: str | None,
+               where: str) -> Usd.Attribute:
+    """The attribute ``name`` of ``prim``: existing, from an applied schema, from one of our
+    API schemas (applied for it), or created with ``type_hint``."""
+    attr = prim.GetAttribute(name)
+    if attr and attr.GetTypeName():
+        return attr
+    api = _api_defining(name)
+    if api is not None:
+        prim.ApplyAPI(api)
+        attr = prim.GetAttribute(name)
+        if attr:
+            return attr
+    if prim.HasRelationship(name):
+        raise _Bad("is a relationship, not an attribute (bind materials with 'bind')", where)
+    if not type_hint:
+        raise _Bad("the prim has no such attribute: give 'type' (an Sdf value type such as "
+                   "float or color3f) to create one", where)
+    type_name = Sdf.ValueTypeNames.Find(type_hint)
+    if not type_name:
+        raise _Bad(f"unknown value type {type_hint!r}", where)
+    return prim.CreateAttribute(name, type_name, custom=True)
+
+
+def _api_defining(name: str) -> str | None:
+    """The lumitrace API schema whose definition holds property ``name``, if any."""
+    if not name.startswith("lumitrace:") or name.startswith("lumitrace:result:"):
+        return None
+    registry = Usd.SchemaRegistry()
+    for api in ("LumitraceMaterialAPI", "LumitraceEmitterAPI"):
+        definition = registry.FindAppliedAPIPrimDefinition(api)
+        if definition is not None and name in definition.GetPropertyNames():
+            return api
+    return None
+
+
+def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
+               type_hint: str | None) -> None:
+    where = f"{prim.GetPath()}.{name}"
+    if name.startswith("lumitrace:result:"):
+        raise _Bad("result attributes are written by lumitrace, not by deltas", where)
+    attr = _attribute(ctx, prim, name, type_hint, where)
+    if attr.GetVariability() == Sdf.VariabilityUniform and name.startswith("xformOp"):
+        raise _Bad("set transforms with 'transform'", where)
+    typed = _typed_value(value, attr.GetTypeName(), ctx, where)
+    bounds = MATERIAL_RANGES.get(name)
+    if bounds is not None and isinstance(typed, (int, float)) and not isinstance(typed, bool):
+        lo, hi = bounds
+        if not lo <= typed <= hi:
+            raise _Bad(f"must be in [{lo:g}, {hi:g}], got {typed!r}", where)
+    if attr.GetTypeName() == Sdf.ValueTypeNames.Token:
+        allowed = attr.GetMetadata("allowedTokens")
+        if allowed and typed not in list(allowed):
+            raise _Bad(f"must be one of {', '.join(map(str, allowed))}, got {typed!r}", where)
+    try:
+        ok = attr.Set(typed)
+    except Tf.ErrorException as exc:
+        raise _Bad(f"expects {attr.GetTypeName()}: {tf_message(exc)}", where) from None
+    if not ok:
+        raise _Bad(f"expects {attr.GetTypeName()}, got {json_type(value)}", where)
+
+
+# ------------------------------------------------------------------------------------------
+# The operations
+# ------------------------------------------------------------------------------------------
+
+def _op_set(ctx: _Context, d: dict) -> None:
+    _set_value(ctx, ctx.prim(d["path"]), d["property"], d["value"], d.get("type"))
+
+
+def transform_matrix(d: dict) -> Gf.Matrix4d:
+    """The local transform a 'transform' delta gives (USD's row-vector convention)."""
+    if "matrix" in d:
+        return Gf.Matrix4d(*[float(x) for row in d["matrix"] for x in row])
+    s = d.get("scale", (1.0, 1.0, 1.0))
+    r = d.get("rotate", (0.0, 0.0, 0.0))
+    t = d.get("translate", (0.0, 0.0, 0.0))
+    m = Gf.Matrix4d().SetScale(Gf.Vec3d(*map(float, s)))
+    for axis, angle in zip(((1, 0, 0), (0, 1, 0), (0, 0, 1)), r):
+        if angle:
+            m = m * Gf.Matrix4d().SetRotate(Gf.Rotation(Gf.Vec3d(*axis), float(angle)))
+    return m * Gf.Matrix4d().SetTranslate(Gf.Vec3d(*map(float, t)))
+
+
+#: The op a 'transform' delta authors (its suffix keeps it apart from the stage's ops).
+TRANSFORM_OP_SUFFIX = "lumitraceDelta"
+
+
+def _op_transform(ctx: _Context, d: dict) -> None:
+    prim = ctx.prim(d["path"])
+    xf = UsdGeom.Xformable(prim)
+    if not xf:
+        raise _Bad(f"a {prim.GetTypeName() or 'typeless'} prim has no transform", d["path"])
+    values = [float(x) for row in d.get("matrix", []) for x in row]
+    values += [float(x) for k in ("translate", "rotate", "scale") for x in d.get(k, [])]
+    if not all(math.isfinite(v) for v in values):
+        raise _Bad("values must be finite numbers", d["path"])
+    m = transform_matrix(d)
+    if abs(m.GetDeterminant()) < 1e-300:
+        raise _Bad("the transform is singular (a zero scale)", d["path"])
+    xf.ClearXformOpOrder()
+    op = xf.AddTransformOp(UsdGeom.XformOp.PrecisionDouble, TRANSFORM_OP_SUFFIX)
+    op.Set(m)
+
+
+def _op_bind(ctx: _Context, d: dict) -> None:
+    prim = ctx.prim(d["path"])
+    material = ctx.stage.GetPrimAtPath(d["material"])
+    if not material:
+        raise _Bad("no material prim at this path", d["material"])
+    if not material.IsA(UsdShade.Material):
+        raise _Bad(f"is a {material.GetTypeName() or 'typeless'} prim, not a Material",
+                   d["material"])
+    UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(material))
+
+
+def _op_add(ctx: _Context, d: dict) -> None:
+    path = Sdf.Path(d["path"])
+    if ctx.stage.GetPrimAtPath(path):
+        raise _Bad("a prim already exists at this path", d["path"])
+    parent = path.GetParentPath()
+    if parent != Sdf.Path.absoluteRootPath and not ctx.stage.GetPrimAtPath(parent):
+        raise _Bad("its parent prim does not exist", str(parent))
+    prim = ctx.stage.DefinePrim(path, d["type"])
+    registry = Usd.SchemaRegistry()
+    for api in d.get("apiSchemas", []):
+        if not registry.FindAppliedAPIPrimDefinition(api.split(":")[0]):
+            raise _Bad(f"unknown applied API schema {api!r}", d["path"])
+        prim.ApplyAPI(api)
+    for name, value in d.get("properties", {}).items():
+        _set_value(ctx, prim, name, value, None)
+
+
+def _op_remove(ctx: _Context, d: dict) -> None:
+    prim = ctx.prim(d["path"])
+    path = prim.GetPath()
+    if ctx.edits.GetPrimAtPath(path):
+        ctx.stage.RemovePrim(path)  # what the deltas authored on it, or the prim they added
+    if ctx.stage.GetPrimAtPath(path):  # defined by the stage's own layers: deactivate
+        ctx.stage.GetPrimAtPath(path).SetActive(False)
+
+
+def _op_active(ctx: _Context, d: dict) -> None:
+    prim = ctx.prim(d["path"])
+    if prim.IsPseudoRoot():
+        raise _Bad("the pseudo-root cannot be deactivated", d["path"])
+    prim.SetActive(bool(d["active"]))
+
+
+def _op_variant(ctx: _Context, d: dict) -> None:
+    prim = ctx.prim(d["path"])
+    sets = prim.GetVariantSets()
+    if not sets.HasVariantSet(d["set"]):
+        have = ", ".join(sets.GetNames()) or "none"
+        raise _Bad(f"no variant set {d['set']!r} (the prim has: {have})", d["path"])
+    vset = sets.GetVariantSet(d["set"])
+    names = vset.GetVariantNames()
+    if d["selection"] not in names:
+        raise _Bad(f"variant set {d['set']!r} has no variant {d['selection']!r} "
+                   f"(it has: {', '.join(names)})", d["path"])
+    vset.SetVariantSelection(d["selection"])
+
+
+def _op_layer(ctx: _Context, d: dict) -> None:
+    fragment = Sdf.Layer.CreateAnonymous(".usda")
+    try:
+        ok = fragment.ImportFromString(d["usda"])
+    except Tf.ErrorException as exc:
+        raise _Bad(f"not a valid USDA layer: {tf_message(exc)}") from None
+    if not ok:
+        raise _Bad("not a valid USDA layer")
+    bad: list[str] = []
+
+    def check(path: str) -> str:
+        try:
+            check_asset_path(path, ctx.stage_dir)
+        except _Bad as b:
+            bad.append(b.why)
+        return path
+    UsdUtils.ModifyAssetPaths(fragment, check)
+    if bad:
+        raise _Bad("; ".join(bad))
+    merged = Sdf.Layer.CreateAnonymous(".usda")
+    merged.TransferContent(fragment)
+    UsdUtils.StitchLayers(merged, ctx.edits)  # the fragment's opinions win
+    merged.customLayerData = dict(ctx.edits.customLayerData)
+    ctx.edits.TransferContent(merged)
+
+
+_OPS: dict[str, Callable[[_Context, dict], None]] = {
+    "set": _op_set, "transform": _op_transform, "bind": _op_bind, "add": _op_add,
+    "remove": _op_remove, "active": _op_active, "variant": _op_variant, "layer": _op_layer,
+}

@@ -1,0 +1,116 @@
+"""The edits layer: the accepted scene deltas of a stage, on disk beside it as
+``NAME.lumitrace-edits.usda``, applied over the stage as a sublayer of its session layer.
+
+Its opinions are the strongest of the composed stage (stronger than the root layer and its
+sublayers), so an accepted delta always shows. The stage's own files are never edited by a
+delta: :func:`merge_edits` folds the edits into the root layer when a user keeps them, and
+:func:`discard_edits` removes the file when they do not.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pxr import Sdf, Usd, UsdUtils
+
+from ..atomic import atomic_path, fsync_path, write_text_durably
+from ..errors import StageError
+from ..filenames import edits_layer_path
+
+#: customLayerData key holding the last accepted revision.
+REVISION_KEY = "lumitrace:revision"
+
+
+def open_edits_layer(path: str | os.PathLike) -> Sdf.Layer:
+    """The edits layer at ``path``, created empty (in memory only) when there is none."""
+    path = Path(path).absolute()
+    if path.exists():
+        layer = Sdf.Layer.FindOrOpen(str(path))
+        if layer is None:
+            raise StageError("cannot open the edits layer", str(path))
+        layer.Reload(force=True)
+        return layer
+    layer = Sdf.Layer.FindOrOpen(str(path)) or Sdf.Layer.CreateNew(str(path))
+    if layer is None:
+        raise StageError("cannot create the edits layer", str(path))
+    layer.documentation = ("lumitrace scene deltas accepted by the service, applied over "
+                           "the stage as its strongest layer")
+    return layer
+
+
+def open_with_edits(stage_path: str | os.PathLike,
+                    edits: str | os.PathLike | Sdf.Layer | None = None) -> Usd.Stage:
+    """Open the stage with an edits layer (default: its own, when it exists) composed over
+    it: a new anonymous session layer sublayers the edits layer, so that nothing the
+    reader authors in the session layer ever reaches the edits."""
+    stage_path = Path(stage_path).absolute()
+    if edits is None:
+        default = edits_layer_path(stage_path)
+        edits = default if default.exists() else None
+    session = Sdf.Layer.CreateAnonymous("lumitrace-session.usda")
+    if edits is not None:
+        layer = edits if isinstance(edits, Sdf.Layer) else open_edits_layer(edits)
+        session.subLayerPaths.append(layer.identifier)
+    root = Sdf.Layer.FindOrOpen(str(stage_path))
+    stage = Usd.Stage.Open(root, session, Usd.Stage.LoadAll) if root is not None else None
+    if stage is None:
+        raise StageError("cannot open as a USD stage", str(stage_path))
+    return stage
+
+
+def revision_of(layer: Sdf.Layer) -> int:
+    """The last revision recorded in the edits layer (0 for none)."""
+    value = layer.customLayerData.get(REVISION_KEY, 0)
+    return int(value) if isinstance(value, int) else 0
+
+
+def save_edits(layer: Sdf.Layer, revision: int) -> None:
+    """Record ``revision`` in the layer and write it to its file durably (atomic rename,
+    file and folder flushed), so that a delta answered as accepted survives a crash."""
+    data = dict(layer.customLayerData)
+    data[REVISION_KEY] = int(revision)
+    layer.customLayerData = data
+    write_text_durably(layer.realPath or layer.identifier, layer.ExportToString())
+
+
+def merge_edits(stage_path: str | os.PathLike) -> Path:
+    """Fold the stage's edits layer into its root layer (the edits win), then remove the
+    edits layer. Returns the root layer's path."""
+    stage_path = Path(stage_path).absolute()
+    path = edits_layer_path(stage_path)
+    if not path.exists():
+        raise StageError("no edits layer to merge", str(path))
+    root = Sdf.Layer.FindOrOpen(str(stage_path))
+    edits = Sdf.Layer.FindOrOpen(str(path))
+    if root is None or edits is None:
+        raise StageError("cannot open the stage or its edits layer", str(stage_path))
+    strong = Sdf.Layer.CreateAnonymous(".usda")
+    strong.TransferContent(edits)
+    strong.customLayerData = {k: v for k, v in edits.customLayerData.items()
+                              if k != REVISION_KEY}
+    UsdUtils.StitchLayers(strong, root)  # strong's opinions win, root's fill in
+    # the root keeps its own layer metadata (sublayers, units, default prim)
+    for key in ("subLayers", "defaultPrim", "metersPerUnit", "upAxis", "documentation"):
+        if root.pseudoRoot.HasInfo(key):
+            strong.pseudoRoot.SetInfo(key, root.pseudoRoot.GetInfo(key))
+    with atomic_path(stage_path) as tmp:  # keeps the suffix: .usda text, .usdc binary
+        if not strong.Export(str(tmp)):
+            raise StageError("cannot write the merged stage", str(stage_path))
+        fsync_path(tmp)
+    fsync_path(stage_path.parent)
+    root.Reload(force=True)
+    discard_edits(stage_path)
+    return stage_path
+
+
+def discard_edits(stage_path: str | os.PathLike) -> bool:
+    """Remove the stage's edits layer; True when there was one."""
+    path = edits_layer_path(stage_path)
+    try:
+        path.unlink()
+    except FileNotFoundError:
+        return False
+    layer = Sdf.Layer.Find(str(path))
+    if layer is not None:
+        layer.Clear()
+    return True
