@@ -21,11 +21,13 @@ RANKS = {
     "scene": 1, "schema": 1.2,  # the schema names the scene's scattering models as tokens
     "__init__": 1.5,  # registers the schema on import; anything may read __version__
     "stage": 2, "film": 2,
+    "delta": 2.5,  # edits the stage, reads it back through the stage reader
     "trace": 3, "photometry": 3,
     "run": 4,
     "publish": 5,
-    "report": 6,
+    "report": 6, "serve": 6,
     "cli": 7,
+    "client": 0,  # the standard library only: it runs in a DCC's own Python
 }
 
 

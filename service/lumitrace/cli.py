@@ -75,6 +75,41 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--json", action="store_true",
                    help="print one JSON summary object as the last line of stdout")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.add_argument("--edits", type=Path, default=None, metavar="LAYER",
+                   help="compose this edits layer over the stage, as the service does with "
+                        "NAME.lumitrace-edits.usda (default: none)")
+
+    v = sub.add_parser("serve", help="the live service: watch the stage, accept scene deltas, "
+                                     "refine and write results as it goes",
+                       description="Trace the stage progressively and keep its results up to "
+                                   "date: layer files saved on disk and scene deltas posted "
+                                   "over HTTP start a new revision. Accepted deltas live in "
+                                   "NAME.lumitrace-edits.usda beside the stage.")
+    v.add_argument("stage", type=Path)
+    v.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1; another needs --token)")
+    v.add_argument("--port", type=int, default=8650, help="port (default 8650; 0 picks one)")
+    vstop = v.add_mutually_exclusive_group()
+    vstop.add_argument("--photons", type=_positive_int,
+                       help="photons per revision (default: trace to --target-error)")
+    vstop.add_argument("--target-error", type=_positive_float, metavar="E",
+                       help="estimated relative RMS error at which a revision is done "
+                            "(default 0.02)")
+    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--resolution", type=_positive_int, default=64)
+    v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
+    v.add_argument("--threads", type=_positive_int, default=None)
+    v.add_argument("--token", default=None,
+                   help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
+    v.add_argument("--out", type=Path, default=None, help="output folder (default: beside "
+                                                           "the stage)")
+
+    e = sub.add_parser("edits", help="keep or drop the deltas a service accepted",
+                       description="merge: fold NAME.lumitrace-edits.usda into the stage's "
+                                   "root layer (the edits win) and remove it; discard: remove "
+                                   "it. Stop the service first.")
+    e.add_argument("action", choices=("merge", "discard"))
+    e.add_argument("stage", type=Path)
 
     r = sub.add_parser("report", help="convergence report: error against time, raw against filtered",
                        description="Trace the stage and record after every iteration the elapsed "
@@ -186,7 +221,15 @@ def cmd_trace(args) -> int:
                              threshold=args.threshold, seed=args.seed, max_depth=args.max_depth,
                              threads=args.threads or default_threads(), workers=args.workers)
     preflight(args.stage, args.out)
-    scene = read_stage(args.stage)
+    if args.edits is not None:
+        from .delta.edits import open_with_edits
+        from .stage.reader import scene_from_stage
+
+        if not args.edits.is_file():
+            raise LumitraceError("edits layer not found", str(args.edits))
+        scene = scene_from_stage(open_with_edits(args.stage, args.edits))
+    else:
+        scene = read_stage(args.stage)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
@@ -204,6 +247,38 @@ def cmd_trace(args) -> int:
         sys.stdout = open(os.devnull, "w")  # nothing more to say there, even at exit
         raise LumitraceError(f"the outputs were written, but the summary could not be "
                              f"printed: {exc.strerror or exc}", "standard output") from None
+    return 0
+
+
+def cmd_serve(args) -> int:
+    from .run.settings import DEFAULT_TARGET_ERROR, TraceSettings, default_threads
+    from .serve.server import serve
+
+    target = args.target_error if args.photons is None else None
+    settings = TraceSettings(photons=args.photons,
+                             target_error=target if target is not None or args.photons
+                             else DEFAULT_TARGET_ERROR,
+                             resolution=args.resolution, threshold=args.threshold,
+                             seed=args.seed, threads=args.threads or default_threads(),
+                             workers="threads")
+    preflight(args.stage, args.out)
+    if not 0 <= args.port <= 65535:
+        raise LumitraceError(f"--port must be 0..65535, got {args.port}")
+    token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
+    return serve(args.stage, settings, args.host, args.port, token, args.out)
+
+
+def cmd_edits(args) -> int:
+    from .delta.edits import discard_edits, merge_edits
+    from .filenames import edits_layer_path
+
+    path = edits_layer_path(args.stage)
+    if args.action == "merge":
+        merge_edits(args.stage)
+        print(f"merged {path.name} into {args.stage} and removed it")
+    else:
+        print(f"removed {path.name}" if discard_edits(args.stage) else
+              f"no edits layer ({path.name}) to discard")
     return 0
 
 
@@ -331,6 +406,10 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_report(args)
         if args.command == "bench":
             return cmd_bench(args)
+        if args.command == "serve":
+            return cmd_serve(args)
+        if args.command == "edits":
+            return cmd_edits(args)
     except LumitraceError as exc:
         print(f"lumitrace: error: {exc}", file=sys.stderr)
         return 2

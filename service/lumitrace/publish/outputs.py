@@ -102,20 +102,26 @@ def output_place(scene, out_dir: str | os.PathLike | None,
 
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
-                  sublayer: bool = True) -> ResultRecord:
+                  sublayer: bool = True, pictures: bool = True,
+                  extra: dict | None = None) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
     :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage file
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
-    return the record. Waits up to ``wait`` s for another run publishing the same NAME."""
+    return the record. Waits up to ``wait`` s for another run publishing the same NAME.
+    ``pictures`` False skips the polar curve and photometric solid (the slow part; the
+    record then names none); ``extra`` adds entries to the EXR header and the result
+    layer's customLayerData (the service's revision)."""
     scene = result.scene
     stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
              **photometric_paths(out, name),
              "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
-    pictures = plotting_available()
-    if not pictures:
+    drawable = plotting_available()
+    if pictures and not drawable:
         warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
              "installed (install lumitrace[plot])", OutputWarning)
+    pictures = pictures and drawable
+    if not pictures:
         paths.pop("polar_diagram")
         paths.pop("photometric_solid")
     est = result.estimate
@@ -136,14 +142,15 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
             channels = {"Y": est.filtered, "raw.Y": est.raw,
                         "count": acc.counts().astype(np.float64),
                         "relativeError": np.minimum(est.texel_error, 1e30)}
-            meta = {**exr_metadata(result, record), "runId": tx.run_id,
+            meta = {**exr_metadata(result, record), **(extra or {}), "runId": tx.run_id,
                     "stagePath": str(stage_path or "")}
             write_intensity_exr(staged["intensity_map"], channels, meta)
             text = result_layer_text(stage_path, scene.luminaire_path,
                                      record.layer_values(layer_dir),
                                      photometric_light(scene, ph, paths["ies"], layer_dir),
                                      layer_dir,
-                                     {"runId": tx.run_id, "stage": str(stage_path or "")})
+                                     {**(extra or {}), "runId": tx.run_id,
+                                      "stage": str(stage_path or "")})
             write_layer_file(stage_path, staged["result_layer"], text)
             tx.commit(last=paths["result_layer"])
         except Interrupted as exc:

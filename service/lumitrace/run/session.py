@@ -108,6 +108,64 @@ def _warn_cut(acc: Accumulator, settings: TraceSettings) -> None:
              "raise the depth limit or check for a light trap")
 
 
+class Refinement:
+    """The progressive state of one scene: its accumulator, the photons each emitter has
+    traced and the iteration count. :meth:`step` traces one round of batches; the service
+    drives it round by round (and drops it when the scene changes), :func:`run` to the end."""
+
+    def __init__(self, scene: Scene, settings: TraceSettings):
+        self.scene = scene
+        self.settings = settings
+        self.accumulator = Accumulator(scene, settings.resolution)
+        fluxes = [e.flux for e in scene.emitters]
+        self.shares = [f / sum(fluxes) for f in fluxes]
+        self.budget = settings.budget()
+        self.targets = (allocate(fluxes, self.budget) if self.budget is not None
+                        else [math.inf] * len(fluxes))
+        self.done = [0] * len(fluxes)
+        threads = max(1, int(settings.threads))
+        self.full_round = threads * settings.batch_size * 2
+        self.round_photons = min(FIRST_ITERATION, self.full_round)
+        self.iteration = 0
+        self.estimate: MapEstimate | None = None
+
+    def next_jobs(self) -> list[BatchJob]:
+        """The batch jobs of the next round (empty when the photon budget is spent)."""
+        return _round_jobs(self.done, self.targets, self.shares, self.round_photons,
+                           self.settings)
+
+    def add_round(self, tallies) -> MapEstimate:
+        """Add a round's tallies; estimate the map and its error."""
+        for tally in tallies:
+            self.accumulator.add(tally)
+            self.done[tally.emitter] += tally.photons
+        self.iteration += 1
+        self.round_photons = min(2 * self.round_photons, self.full_round)
+        self.estimate = estimate(self.accumulator, self.settings.threshold)
+        return self.estimate
+
+    def no_escape(self) -> bool:
+        """True once a session without a photon budget has traced
+        :data:`NO_ESCAPE_PHOTONS` photons and none of them left the luminaire."""
+        acc = self.accumulator
+        return (self.budget is None and acc.photons >= NO_ESCAPE_PHOTONS
+                and not any(t.escaped for t in acc.emitters))
+
+    def rescale(self, scene: Scene) -> None:
+        """Take ``scene``, which differs from this one in emitter fluxes only: the counts
+        stay and scale with the new fluxes (photons are analog), nothing is retraced."""
+        for i, e in enumerate(scene.emitters):
+            self.accumulator.rescale(i, e.flux)
+        self.scene = scene
+        self.estimate = estimate(self.accumulator, self.settings.threshold)
+
+    def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
+        est = self.estimate or estimate(self.accumulator, self.settings.threshold)
+        return TraceResult(scene=self.scene, settings=self.settings,
+                           accumulator=self.accumulator, iterations=self.iteration,
+                           seconds=seconds, prepare_seconds=prepare_seconds, estimate=est)
+
+
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
         progress: Callable[[Progress], None] | None = None,
         frame: TracingFrame | None = None) -> TraceResult:
@@ -119,46 +177,28 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     t0 = time.perf_counter()
     ps = prepared or prepare(scene, frame)
     t_prep = time.perf_counter() - t0
-    acc = Accumulator(scene, settings.resolution)
-    fluxes = [e.flux for e in scene.emitters]
-    shares = [f / sum(fluxes) for f in fluxes]
-    budget = settings.budget()
-    targets = allocate(fluxes, budget) if budget is not None else [math.inf] * len(fluxes)
-    done = [0] * len(fluxes)
+    r = Refinement(scene, settings)
     threads = max(1, int(settings.threads))
-    full_round = threads * settings.batch_size * 2
-    round_photons = min(FIRST_ITERATION, full_round)
-    iteration = 0
-    est = None
-
-    mode = workers.choose(settings.workers, threads, budget)
+    mode = workers.choose(settings.workers, threads, r.budget)
     with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:
         start = time.perf_counter()
         while True:
-            jobs = _round_jobs(done, targets, shares, round_photons, settings)
+            jobs = r.next_jobs()
             if not jobs:
                 break
-            for tally in trace_jobs(jobs):
-                acc.add(tally)
-                done[tally.emitter] += tally.photons
-            iteration += 1
-            round_photons = min(2 * round_photons, full_round)
-            est = estimate(acc, settings.threshold)
+            est = r.add_round(trace_jobs(jobs))
             elapsed = time.perf_counter() - start
             err = est.error
             if progress is not None:
-                progress(Progress(iteration, acc.photons, elapsed, err, budget, est,
-                                  acc.snapshot()))
+                progress(Progress(r.iteration, r.accumulator.photons, elapsed, err, r.budget,
+                                  est, r.accumulator.snapshot()))
             if settings.seconds is not None and elapsed >= settings.seconds:
                 break
             if settings.target_error is not None and err <= settings.target_error:
                 break
-            if budget is None and acc.photons >= NO_ESCAPE_PHOTONS and not any(t.escaped for t in acc.emitters):
-                warn(f"no light escaped the luminaire in {acc.photons:,} photons: stopping "
-                     "(light output ratio 0, the map's error is undefined)")
+            if r.no_escape():
+                warn(f"no light escaped the luminaire in {r.accumulator.photons:,} photons: "
+                     "stopping (light output ratio 0, the map's error is undefined)")
                 break
-    if est is None:
-        est = estimate(acc, settings.threshold)
-    _warn_cut(acc, settings)
-    return TraceResult(scene=scene, settings=settings, accumulator=acc, iterations=iteration,
-                       seconds=time.perf_counter() - start, prepare_seconds=t_prep, estimate=est)
+    _warn_cut(r.accumulator, settings)
+    return r.result(time.perf_counter() - start, t_prep)

@@ -1,0 +1,119 @@
+"""The HTTP face of the service (aiohttp): status, deltas, the event stream, results.
+
+Every answer is JSON (the event stream excepted); every failure is a 4xx or 5xx JSON body
+``{"error": ..., "problems": [{"where", "why"}, ...]}`` and never stops the service.
+"""
+from __future__ import annotations
+
+import asyncio
+import hmac
+import json
+from typing import Any
+
+from aiohttp import web
+
+from ..delta.protocol import DeltaError, delta_schema, parse_request
+from ..errors import LumitraceError
+from .engine import Engine
+from .events import EventLog
+from .live import LiveStage
+
+#: Largest request body accepted (bytes): a layer fragment or a mesh's points fit.
+MAX_BODY_BYTES = 8 << 20
+#: Seconds between keep-alive comments on an idle event stream.
+KEEPALIVE_SECONDS = 15.0
+
+
+def _json(data: Any, status: int = 200) -> web.Response:
+    return web.json_response(data, status=status,
+                             dumps=lambda d: json.dumps(d, allow_nan=False, default=str))
+
+
+def _problem(status: int, message: str, problems=()) -> web.Response:
+    return _json({"error": message, "problems": [p.as_dict() for p in problems]}, status)
+
+
+def make_app(live: LiveStage, engine: Engine, events: EventLog,
+             token: str | None = None) -> web.Application:
+    """The aiohttp application of a running service."""
+
+    @web.middleware
+    async def guard(request: web.Request, handler):
+        if token is not None:
+            given = request.headers.get("Authorization", "")
+            if not hmac.compare_digest(given.encode(), f"Bearer {token}".encode()):
+                return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
+                                     "TOKEN)")
+        try:
+            return await handler(request)
+        except web.HTTPException as exc:
+            if exc.status >= 400:
+                return _problem(exc.status, exc.reason)
+            raise
+        except (asyncio.CancelledError, ConnectionResetError):
+            raise
+        except Exception as exc:  # the service keeps serving whatever a request does
+            events.publish("error", message=f"{request.method} {request.path}: {exc!r}")
+            return _problem(500, f"internal error: {type(exc).__name__}: {exc}")
+
+    async def status(_request: web.Request) -> web.Response:
+        return _json({"revision": live.revision, "stage": str(live.stage_path),
+                      "edits_layer": str(live.edits_path), **engine.status()})
+
+    async def deltas(request: web.Request) -> web.Response:
+        try:
+            raw = await request.read()
+        except web.HTTPRequestEntityTooLarge:
+            return _problem(413, f"request body larger than {MAX_BODY_BYTES} bytes")
+        try:
+            body = parse_request(raw)
+            revision = await live.acall(live.apply, body["deltas"], body.get("base_revision"))
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+        except LumitraceError as exc:
+            return _problem(422, str(exc))
+        engine.submit(revision)
+        return _json({"revision": revision.number, "effect": revision.effect.as_dict(),
+                      "edits_layer": str(live.edits_path)})
+
+    async def results(_request: web.Request) -> web.Response:
+        record, written = engine.record, engine.written
+        if record is None:
+            return _problem(404, "no result written yet")
+        return _json({"revision": written.get("revision"),
+                      "input_hash": written.get("input_hash"),
+                      "pictures": written.get("pictures"), **record.summary()})
+
+    async def schema(_request: web.Request) -> web.Response:
+        return _json(delta_schema())
+
+    async def stream(request: web.Request) -> web.StreamResponse:
+        last = request.headers.get("Last-Event-ID") or request.query.get("last_id") or "0"
+        try:
+            last_id = max(0, int(last))
+        except ValueError:
+            return _problem(400, f"Last-Event-ID must be an event id, got {last!r}")
+        response = web.StreamResponse(headers={"Content-Type": "text/event-stream",
+                                               "Cache-Control": "no-cache"})
+        await response.prepare(request)
+        oldest = events.oldest_id()
+        if last_id and oldest > last_id + 1:
+            await response.write(f"event: gap\ndata: {json.dumps({'missed_before': oldest})}"
+                                 "\n\n".encode())
+        try:
+            while not events.closed:
+                batch = await events.wait(last_id, KEEPALIVE_SECONDS)
+                if not batch:
+                    await response.write(b": keep-alive\n\n")
+                    continue
+                await response.write(b"".join(e.sse() for e in batch))
+                last_id = batch[-1].id
+        except (ConnectionResetError, asyncio.CancelledError):
+            pass
+        return response
+
+    app = web.Application(middlewares=[guard], client_max_size=MAX_BODY_BYTES)
+    app.add_routes([web.get("/status", status), web.post("/deltas", deltas),
+                    web.get("/events", stream), web.get("/results", results),
+                    web.get("/schema", schema)])
+    return app

@@ -1,0 +1,239 @@
+"""The service's tracing engine: one thread refining the newest revision round by round.
+
+A new revision abandons the round in flight (its photons are dropped, never mixed into the
+new revision's map); a burst of revisions coalesces into the newest. A flux-only edit
+rescales the counts and traces nothing. Results are written after each of the first
+iterations of a revision, then at most every :data:`WRITE_INTERVAL` seconds, and with the
+pictures once the revision is done (converged or its photon budget spent) or the service
+stops.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from ..errors import LumitraceError
+from ..film.convergence import MapEstimate
+from ..publish.outputs import write_outputs
+from ..publish.record import ResultRecord
+from ..run.session import Refinement
+from ..run.settings import TraceSettings
+from ..trace.prepared import prepare
+from ..trace.tracer import trace_batch
+from .events import EventLog
+from .live import LiveStage, Revision
+
+#: Iterations of a revision after each of which the cheap outputs are written.
+EAGER_WRITES = 3
+#: Seconds between writes of the cheap outputs after the first iterations.
+WRITE_INTERVAL = 2.0
+
+
+class Engine:
+    """Refines :attr:`revision` in a thread; :meth:`submit` hands it a newer one."""
+
+    def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
+                 out_dir: Path | None = None):
+        self.live = live
+        self.settings = replace(settings, workers="threads")
+        self.events = events
+        self.out_dir = out_dir
+        self._cv = threading.Condition()
+        self._pending: Revision | None = None
+        self._stopping = False
+        self._thread = threading.Thread(target=self._main, name="lumitrace-engine",
+                                        daemon=True)
+        # state, read by status() under the lock
+        self.revision: Revision | None = None
+        self.refinement: Refinement | None = None
+        self.done = False
+        self.started = 0.0
+        self.written: dict[str, Any] = {}
+        self.record: ResultRecord | None = None
+        self._last_write = 0.0
+        self._written_full = False
+        self.error: str | None = None
+
+    # -- control (any thread) -----------------------------------------------------------
+
+    def start(self, first: Revision) -> None:
+        self._pending = first
+        self._thread.start()
+
+    def submit(self, revision: Revision) -> None:
+        """Make ``revision`` the one to refine (the newest wins)."""
+        with self._cv:
+            if self._pending is None or revision.number >= self._pending.number:
+                self._pending = revision
+            self._cv.notify_all()
+
+    def stop(self, timeout: float | None = None) -> None:
+        """Stop refining, write the final result (with pictures) and end the thread."""
+        with self._cv:
+            self._stopping = True
+            self._cv.notify_all()
+        self._thread.join(timeout)
+
+    def _interrupted(self) -> bool:
+        return self._stopping or self._pending is not None
+
+    # -- status ---------------------------------------------------------------------------
+
+    def status(self) -> dict[str, Any]:
+        with self._cv:
+            r, rev = self.refinement, self.revision
+            acc = r.accumulator if r is not None else None
+            est = r.estimate if r is not None else None
+            elapsed = max(time.perf_counter() - self.started, 1e-9)
+            return {
+                "traced_revision": rev.number if rev else None,
+                "state": ("stopping" if self._stopping else "starting" if r is None else
+                          "done" if self.done else "tracing"),
+                "photons": acc.photons if acc else 0,
+                "iterations": r.iteration if r else 0,
+                "relative_error": _finite(est.error) if est else None,
+                "converged": bool(est and est.error <= self.settings.convergence_target),
+                "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
+                "written_revision": self.written.get("revision"),
+                "written_photons": self.written.get("photons"),
+                "written_pictures": self.written.get("pictures"),
+                "last_error": self.error,
+            }
+
+    # -- the thread -----------------------------------------------------------------------
+
+    def _main(self) -> None:
+        threads = max(1, int(self.settings.threads))
+        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lumitrace-trace") \
+                as pool:
+            while True:
+                with self._cv:
+                    while (self._pending is None and not self._stopping
+                           and (self.refinement is None or self.done)):
+                        self._cv.wait()
+                    if self._stopping:
+                        break
+                    pending, self._pending = self._pending, None
+                if pending is not None:
+                    self._take(pending)
+                    continue
+                self._round(pool)
+        self._final_write()
+
+    def _take(self, rev: Revision) -> None:
+        """Start refining ``rev``: a rescale for a flux-only edit, the same photons for an
+        edit the tracer does not see, a new refinement otherwise."""
+        old = self.refinement
+        kind = rev.effect.kind
+        self.events.publish("revision", revision=rev.number, source=rev.source,
+                            effect=rev.effect.as_dict(), layers=list(rev.layers))
+        if old is not None and kind == "none":
+            with self._cv:
+                self.revision = rev
+                old.scene = rev.scene
+            if self.done:
+                self._write(pictures=True)
+            return
+        if old is not None and kind == "flux":
+            with self._cv:
+                old.rescale(rev.scene)
+                self.revision = rev
+            self._write(pictures=self.done)
+            return
+        refinement = Refinement(rev.scene, self.settings)
+        t0 = time.perf_counter()
+        self._prepared = prepare(rev.scene)
+        with self._cv:
+            self.revision, self.refinement, self.done = rev, refinement, False
+            self.started = t0
+            self._written_full = False
+            self._last_write = 0.0
+
+    def _round(self, pool: ThreadPoolExecutor) -> None:
+        r, ps = self.refinement, self._prepared
+        jobs = r.next_jobs()
+        if not jobs:
+            self._finish()
+            return
+        futures = [pool.submit(trace_batch, ps, job) for job in jobs]
+        tallies = []
+        for f in futures:
+            if self._interrupted():
+                for g in futures:
+                    g.cancel()
+                for g in futures:  # let running batches end before the scene changes
+                    if not g.cancelled():
+                        g.exception()
+                return  # the round is dropped: its photons never reach the map
+            tallies.append(f.result())
+        with self._cv:
+            est = r.add_round(tallies)
+        acc = r.accumulator
+        elapsed = time.perf_counter() - self.started
+        self.events.publish("iteration", revision=self.revision.number,
+                            iteration=r.iteration, photons=acc.photons,
+                            relative_error=_finite(est.error), seconds=elapsed,
+                            photons_per_second=acc.photons / max(elapsed, 1e-9))
+        if self._reached(est):
+            self._finish()
+        elif r.iteration <= EAGER_WRITES or \
+                time.perf_counter() - self._last_write >= WRITE_INTERVAL:
+            self._write(pictures=False)
+
+    def _reached(self, est: MapEstimate) -> bool:
+        s = self.settings
+        if s.target_error is not None and est.error <= s.target_error:
+            return True
+        return self.refinement.no_escape() or not self.refinement.next_jobs()
+
+    def _finish(self) -> None:
+        with self._cv:
+            self.done = True
+        est = self.refinement.estimate
+        self.events.publish("done", revision=self.revision.number,
+                            photons=self.refinement.accumulator.photons,
+                            relative_error=_finite(est.error) if est else None,
+                            converged=bool(est and est.error <= self.settings.convergence_target))
+        self._write(pictures=True)
+
+    def _final_write(self) -> None:
+        if self.refinement is not None and self.refinement.accumulator.photons and \
+                not self._written_full:
+            self._write(pictures=True)
+
+    def _write(self, pictures: bool) -> None:
+        """Publish the current refinement's result (one transaction, on the USD thread)."""
+        r, rev = self.refinement, self.revision
+        if r is None or not r.accumulator.photons:
+            return
+        result = r.result(time.perf_counter() - self.started)
+        extra = {"revision": rev.number}
+        t0 = time.perf_counter()
+        try:
+            record = self.live.call(self.live.write, lambda: write_outputs(
+                result, self.out_dir, pictures=pictures, extra=extra))
+        except LumitraceError as exc:
+            self.error = str(exc)
+            self.events.publish("error", revision=rev.number, message=str(exc))
+            return
+        now = time.perf_counter()
+        self._last_write = now
+        with self._cv:
+            self.record = record
+            self._written_full = pictures
+            self.written = {"revision": rev.number, "photons": r.accumulator.photons,
+                            "pictures": pictures, "input_hash": record["input_hash"]}
+            self.error = None
+        self.events.publish("written", revision=rev.number, photons=r.accumulator.photons,
+                            relative_error=record["relative_error"], pictures=pictures,
+                            input_hash=record["input_hash"], seconds=now - t0,
+                            outputs=record.summary().get("outputs", {}))
+
+
+def _finite(value: float) -> float | None:
+    """JSON has no Inf or NaN: an undefined error is null."""
+    return value if value == value and abs(value) != float("inf") else None

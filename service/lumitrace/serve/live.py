@@ -1,0 +1,200 @@
+"""The live stage: opened once with its edits layer composed over it, changed by deltas and
+by layer files edited on disk, read into a new scene at each revision.
+
+USD stages are not safe to edit from several threads, so every call that touches USD
+(deltas, reloads, reading the scene, writing the result layer) runs on one thread of its
+own: :meth:`LiveStage.call` from threads, :meth:`LiveStage.acall` from the event loop.
+"""
+from __future__ import annotations
+
+import asyncio
+import functools
+import hashlib
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from pxr import Sdf, Tf
+
+from ..delta.apply import apply_deltas
+from ..delta.edits import open_edits_layer, open_with_edits, revision_of, save_edits
+from ..delta.effect import Effect, classify
+from ..delta.notices import ChangedPaths
+from ..delta.protocol import DeltaError, Problem
+from ..errors import LumitraceError, StageError
+from ..filenames import RESULT_LAYER_SUFFIX, edits_layer_path
+from ..scene import Scene
+from ..stage import validate
+from ..stage.diagnostics import tf_message
+from ..stage.reader import scene_from_stage
+
+
+class LayerUnreadable(LumitraceError):
+    """A layer file could not be read (perhaps half-written by a program saving it): the
+    caller retries, and keeps the last good revision meanwhile."""
+
+
+@dataclass(frozen=True)
+class Revision:
+    """One state of the live stage: its number, scene and the effect of reaching it."""
+
+    number: int
+    scene: Scene
+    effect: Effect
+    source: str  # "start", "delta" or "file"
+    layers: tuple[str, ...] = ()  # the layer files whose edit made it
+
+
+def file_digest(path: Path) -> str | None:
+    """sha256 of a file's bytes (None when it cannot be read)."""
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+class LiveStage:
+    """The service's stage; see the module docstring for the threading rule."""
+
+    def __init__(self, stage_path: str | Path, luminaire: str | None = None):
+        self.stage_path = Path(stage_path).absolute()
+        self.edits_path = edits_layer_path(self.stage_path)
+        self.luminaire = luminaire
+        self._usd = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lumitrace-usd")
+        self.call(self._open)
+
+    # -- threading ----------------------------------------------------------------------
+
+    def call(self, fn: Callable[..., Any], *args, **kwargs) -> Any:
+        """Run ``fn`` on the USD thread and wait for it (from any other thread)."""
+        return self._usd.submit(fn, *args, **kwargs).result()
+
+    async def acall(self, fn: Callable[..., Any], *args, **kwargs) -> Any:
+        """Run ``fn`` on the USD thread without blocking the event loop."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._usd, functools.partial(fn, *args, **kwargs))
+
+    def close(self) -> None:
+        self.call(self._close)
+        self._usd.shutdown(wait=True)
+
+    # -- on the USD thread --------------------------------------------------------------
+
+    def _open(self) -> None:
+        if not self.stage_path.is_file():
+            raise StageError("stage file not found", str(self.stage_path))
+        validate.check_layer_file(self.stage_path)
+        self.edits = open_edits_layer(self.edits_path)
+        self.stage = open_with_edits(self.stage_path, self.edits)
+        self.changes = ChangedPaths(self.stage)
+        self.scene = scene_from_stage(self.stage, self.luminaire)
+        self.revision = revision_of(self.edits)
+        self.known: dict[Path, str | None] = {}
+        self._remember_files()
+
+    def _close(self) -> None:
+        self.changes.close()
+
+    def layer_files(self) -> set[Path]:
+        """Files on disk of the layers the stage uses (root, sublayers, references,
+        payloads, the edits layer), our result layer left out."""
+        files = set()
+        for layer in self.stage.GetUsedLayers():
+            if layer.anonymous or not layer.realPath:
+                continue
+            path = Path(layer.realPath).absolute()
+            if not path.name.endswith(RESULT_LAYER_SUFFIX):
+                files.add(path)
+        files.add(self.edits_path)
+        return files
+
+    def _remember_files(self) -> None:
+        self.known = {p: file_digest(p) for p in self.layer_files()}
+
+    def folders(self) -> set[Path]:
+        """The folders to watch (those of :meth:`layer_files`)."""
+        return {p.parent for p in self.layer_files()}
+
+    def start(self) -> Revision:
+        """The revision the service starts from (the edits layer's last one)."""
+        return Revision(self.revision, self.scene, Effect("topology"), "start")
+
+    def apply(self, deltas: list[dict], base_revision: int | None = None) -> Revision:
+        """Apply a batch of deltas (all or none), persist the edits layer durably and read
+        the new scene. Raises :class:`DeltaError` with every problem; nothing changes then."""
+        if base_revision is not None and base_revision != self.revision:
+            raise DeltaError([Problem("/base_revision", f"the service is at revision "
+                                      f"{self.revision}, not {base_revision}")], 409)
+        backup = self.edits.ExportToString()
+        self.changes.take()
+        apply_deltas(self.stage, self.edits, deltas, self.stage_path.parent)
+        try:
+            scene = scene_from_stage(self.stage, self.luminaire)
+        except StageError as exc:
+            self.edits.ImportFromString(backup)
+            raise DeltaError([Problem(exc.where or "/", exc.message if not exc.prop else
+                                      f"{exc.prop}: {exc.message}")], 422) from None
+        revision = self.revision + 1
+        try:
+            save_edits(self.edits, revision)
+        except OSError as exc:
+            self.edits.ImportFromString(backup)
+            raise DeltaError([Problem(str(self.edits_path), f"cannot save the edits layer: "
+                                      f"{exc.strerror or exc}")], 507) from None
+        self.known[self.edits_path] = file_digest(self.edits_path)
+        effect = classify(self.scene, scene, self.changes.take())
+        self.scene, self.revision = scene, revision
+        return Revision(revision, scene, effect, "delta")
+
+    def reload(self, paths: set[Path]) -> Revision | None:
+        """Reload the used layers among ``paths`` whose content changed (``force``: USD
+        compares modification times only) and read the new scene; None when nothing the
+        stage uses changed (our own writes, other files). Raises :class:`LayerUnreadable`
+        for a file that cannot be read now, :class:`StageError` for a bad new scene."""
+        files = self.layer_files()
+        changed = []
+        for path in sorted({Path(p).absolute() for p in paths} & files):
+            digest = file_digest(path)
+            if digest is not None and digest != self.known.get(path):
+                changed.append((path, digest))
+        if not changed:
+            return None
+        self.changes.take()
+        for path, _ in changed:
+            try:
+                validate.check_layer_file(path)
+            except StageError as exc:
+                raise LayerUnreadable(exc.message, str(path)) from None
+            layer = Sdf.Layer.Find(str(path))
+            if layer is None:
+                continue
+            try:
+                ok = layer.Reload(force=True)
+            except Tf.ErrorException as exc:
+                raise LayerUnreadable(f"cannot be read: {tf_message(exc)}", str(path)) from None
+            if not ok:
+                raise LayerUnreadable("cannot be read", str(path))
+        for path, digest in changed:
+            self.known[path] = digest
+        if self.edits_path in {p for p, _ in changed}:
+            self.revision = max(self.revision, revision_of(self.edits))
+        scene = scene_from_stage(self.stage, self.luminaire)
+        self._remember_files()  # new sublayers or references are watched from now on
+        effect = classify(self.scene, scene, self.changes.take())
+        self.revision += 1
+        self.scene = scene
+        return Revision(self.revision, scene, effect, "file",
+                        tuple(str(p) for p, _ in changed))
+
+    def write(self, write: Callable[[], Any]) -> Any:
+        """Run ``write`` (publishing outputs, which may add the result sublayer to the root
+        layer) and take note of the root layer it changed, so that the watcher does not see
+        our own write as an edit; an edit someone saved just before is still seen."""
+        root = self.stage_path
+        before = file_digest(root)
+        try:
+            return write()
+        finally:
+            if before == self.known.get(root):
+                self.known[root] = file_digest(root)

@@ -1,0 +1,106 @@
+"""``lumitrace serve``: the live stage, the engine, the watcher and the HTTP app in one
+process, started and stopped cleanly (SIGINT, SIGTERM and SIGHUP write a final result)."""
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import signal
+import socket
+import sys
+import warnings
+from pathlib import Path
+
+from aiohttp import web
+
+from ..errors import LumitraceError, LumitraceWarning
+from ..run.settings import TraceSettings
+from .app import make_app
+from .engine import Engine
+from .events import EventLog
+from .live import LiveStage
+from .watcher import watch_layers
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8650
+
+
+def is_loopback(host: str) -> bool:
+    """Whether every address ``host`` names is a loopback address."""
+    try:
+        infos = socket.getaddrinfo(host, None)
+    except socket.gaierror:
+        return False
+    return bool(infos) and all(ipaddress.ip_address(i[4][0].split("%")[0]).is_loopback
+                               for i in infos)
+
+
+def check_binding(host: str, token: str | None) -> None:
+    """A host other than loopback needs a token: the service would otherwise accept
+    edits from anyone who can reach it."""
+    if not is_loopback(host) and not token:
+        raise LumitraceError(f"--host {host} is reachable from other machines: give --token "
+                             "(clients then send 'Authorization: Bearer TOKEN')")
+
+
+def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
+          port: int = DEFAULT_PORT, token: str | None = None,
+          out_dir: Path | None = None) -> int:
+    """Run the service until a signal; return the exit status (0)."""
+    check_binding(host, token)
+    events = EventLog()
+    live = LiveStage(stage)
+    engine = Engine(live, settings, events, out_dir)
+    try:
+        asyncio.run(_main(live, engine, events, host, port, token))
+    finally:
+        live.close()
+    return 0
+
+
+def _route_warnings(events: EventLog) -> None:
+    """lumitrace warnings become events (and lines on stderr), each time they happen."""
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, LumitraceWarning):
+            events.publish("warning", message=str(message))
+            print(f"warning: {message}", file=sys.stderr, flush=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+    warnings.showwarning = show
+    warnings.simplefilter("always", LumitraceWarning)
+
+
+async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
+                token: str | None) -> None:
+    loop = asyncio.get_running_loop()
+    events.bind(loop)
+    _route_warnings(events)
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        loop.add_signal_handler(sig, stop.set)
+    runner = web.AppRunner(make_app(live, engine, events, token), handle_signals=False,
+                           access_log=None)
+    await runner.setup()
+    site = web.TCPSite(runner, host, port, reuse_address=True)
+    await site.start()
+    bound = runner.addresses[0]
+    url = f"http://{bound[0] if ':' not in bound[0] else '[' + bound[0] + ']'}:{bound[1]}/"
+    print(f"lumitrace: serving {live.stage_path} at {url} (revision {live.revision}, edits "
+          f"in {live.edits_path.name})", flush=True)
+    events.publish("started", url=url, revision=live.revision, stage=str(live.stage_path))
+    engine.start(live.start())
+    watcher = asyncio.create_task(watch_layers(live, engine.submit, events, stop))
+    await stop.wait()
+    events.publish("stopping", revision=live.revision)
+    await loop.run_in_executor(None, engine.stop)
+    events.close()
+    watcher.cancel()
+    try:
+        await watcher
+    except (asyncio.CancelledError, Exception):
+        pass
+    await runner.cleanup()
+    print(f"lumitrace: stopped; last result written for revision "
+          f"{engine.written.get('revision')} ({engine.written.get('photons') or 0:,} photons)",
+          flush=True)

@@ -1,0 +1,61 @@
+"""Layer files edited on disk, seen with ``watchfiles`` and turned into revisions.
+
+The watcher follows the folders of every layer the stage uses; a change to a file that is
+not one of them, or to one whose content is what the service last read or wrote, is
+ignored. A file that cannot be read (a program half-way through saving it) is retried for
+:data:`RETRY_SECONDS`, then reported, and the last good revision stays.
+"""
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Callable
+
+from ..errors import StageError
+from .events import EventLog
+from .live import LayerUnreadable, LiveStage, Revision
+
+#: Debounce of the file watcher (ms): saves closer together than this are one change.
+DEBOUNCE_MS = 30
+#: How long an unreadable layer file is retried before it is reported (s).
+RETRY_SECONDS = 3.0
+RETRY_STEP = 0.1
+
+
+async def watch_layers(live: LiveStage, submit: Callable[[Revision], None],
+                       events: EventLog, stop: asyncio.Event) -> None:
+    """Watch until ``stop`` is set; ``submit`` gets each new revision."""
+    from watchfiles import awatch
+
+    while not stop.is_set():
+        folders = await live.acall(live.folders)
+        async for changes in awatch(*sorted(map(str, folders)), stop_event=stop,
+                                    debounce=DEBOUNCE_MS, step=10, recursive=False,
+                                    watch_filter=None, yield_on_timeout=False):
+            paths = {Path(p).absolute() for _, p in changes}
+            await _reload(live, paths, submit, events)
+            if await live.acall(live.folders) != folders:
+                break  # a layer in a new folder: watch it too
+
+
+async def _reload(live: LiveStage, paths: set[Path], submit, events: EventLog) -> None:
+    waited = 0.0
+    while True:
+        try:
+            revision = await live.acall(live.reload, paths)
+        except LayerUnreadable as exc:
+            if waited >= RETRY_SECONDS:
+                events.publish("error", message=f"{exc} (keeping revision {live.revision})",
+                               where=exc.where)
+                return
+            await asyncio.sleep(RETRY_STEP)
+            waited += RETRY_STEP
+            continue
+        except StageError as exc:
+            events.publish("error", message=f"the edited stage cannot be traced: {exc} "
+                                            f"(keeping revision {live.revision})",
+                           where=exc.where)
+            return
+        if revision is not None:
+            submit(revision)
+        return
