@@ -83,13 +83,24 @@ def check_request(body: Any) -> dict[str, Any]:
     raise DeltaError(problems, 422)
 
 
+class _NotJson(ValueError):
+    pass
+
+
+def _not_json(constant: str):
+    raise _NotJson(constant)
+
+
 def parse_request(raw: bytes) -> dict[str, Any]:
     """Decode and validate a request body (UTF-8 JSON); 400 for what is not JSON at all."""
     try:
-        body = json.loads(raw.decode("utf-8"))
+        body = json.loads(raw.decode("utf-8"), parse_constant=_not_json)
     except UnicodeDecodeError as exc:
         raise DeltaError([Problem("/", f"body is not UTF-8: {exc.reason} at byte "
                                        f"{exc.start}")], 400) from None
+    except _NotJson as exc:
+        raise DeltaError([Problem("/", f"body is not JSON: {exc} is not a JSON value (JSON "
+                                       "numbers are finite)")], 400) from None
     except json.JSONDecodeError as exc:
         raise DeltaError([Problem("/", f"body is not JSON: {exc.msg} at line {exc.lineno} "
                                        f"column {exc.colno}")], 400) from None

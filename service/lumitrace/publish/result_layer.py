@@ -28,6 +28,7 @@ from ..errors import OutputError
 from ..filenames import result_layer_path
 from ..schema import EMITTER_API, LUMINAIRE_API, LUMINOUS_FLUX, RESULT_KINDS, RESULT_PREFIX
 from .sublayer import ResultLayerWarning, file_mode, reload_if_open, sublayer_into_root
+from ..stage.diagnostics import tf_message
 
 __all__ = ["ResultLayerWarning", "ResultValueError", "RESULT_KINDS", "convert_results",
            "result_layer_path", "write_result_layer"]
@@ -299,7 +300,8 @@ def _open_copy(path: Path, metadata_only: bool = False):
     try:
         layer = Sdf.Layer.OpenAsAnonymous(str(path), metadataOnly=metadata_only)
     except Tf.ErrorException as exc:
-        raise OutputError(f"cannot read the stage's root layer: {exc}", str(path)) from exc
+        raise OutputError(f"cannot read the stage's root layer: {tf_message(exc)}",
+                          str(path)) from exc
     if layer is None:
         raise OutputError("cannot read the stage's root layer", str(path))
     return layer

@@ -11,6 +11,7 @@ from pathlib import Path
 from ..errors import OutputError, OutputWarning
 from ..atomic import fsync_path
 from .usda_text import insert_sublayer_text
+from ..stage.diagnostics import tf_message
 
 
 class ResultLayerWarning(OutputWarning):
@@ -51,7 +52,8 @@ def _open_bytes_copy(data: bytes, stage: Path):
                 return layer
         layer = Sdf.Layer.OpenAsAnonymous(str(stage))
     except (Tf.ErrorException, UnicodeDecodeError) as exc:
-        raise OutputError(f"cannot read the stage's root layer: {exc}", str(stage)) from exc
+        raise OutputError(f"cannot read the stage's root layer: {tf_message(exc)}",
+                          str(stage)) from exc
     if layer is None:
         raise OutputError("cannot read the stage's root layer", str(stage))
     return layer

@@ -93,6 +93,9 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             last_id = max(0, int(last))
         except ValueError:
             return _problem(400, f"Last-Event-ID must be an event id, got {last!r}")
+        if request.query.get("format") == "json":  # the history so far, not a stream
+            return _json({"events": [e.as_dict() for e in events.since(last_id)],
+                          "oldest_id": events.oldest_id()})
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream",
                                                "Cache-Control": "no-cache"})
         await response.prepare(request)

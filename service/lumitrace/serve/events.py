@@ -24,11 +24,17 @@ class Event:
     data: dict[str, Any]
     time: float
 
+    def as_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "event": self.kind,
+                "data": json.loads(self._data_json())}
+
+    def _data_json(self) -> str:
+        return json.dumps({**self.data, "time": self.time}, allow_nan=False,
+                          default=_json_default)
+
     def sse(self) -> bytes:
         """The event as a server-sent-events frame."""
-        body = json.dumps({**self.data, "time": self.time}, allow_nan=False,
-                          default=_json_default)
-        return f"id: {self.id}\nevent: {self.kind}\ndata: {body}\n\n".encode()
+        return f"id: {self.id}\nevent: {self.kind}\ndata: {self._data_json()}\n\n".encode()
 
 
 def _json_default(obj):

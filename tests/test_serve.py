@@ -1,0 +1,437 @@
+"""``lumitrace serve`` as it runs: a real server process on a free loopback port, driven by
+the stdlib client and by layer files edited on disk; every delta kind; bad requests; the
+service's map equal to a fresh ``lumitrace trace`` of the stage with its edits layer; kill -9
+and restart; signals; concurrent clients."""
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from service_process import Service
+
+from lumitrace.client import ServiceError
+from lumitrace.publish.exr import read_intensity_exr
+from lumitrace.publish.runs import published_run_ids
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "stages" / "downlight.usda"
+REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
+SPEC = "lumitrace:specularReflectance"
+FAST = ("--photons", 40_000, "--resolution", 16, "--threads", 2, "--seed", 5)
+
+
+@pytest.fixture
+def stage(tmp_path) -> Path:
+    path = tmp_path / "downlight.usda"
+    shutil.copy(DEMO, path)
+    return path
+
+
+def _counts(exr: Path) -> np.ndarray:
+    channels, _, _ = read_intensity_exr(exr)
+    return channels["count"]
+
+
+def _events(service, kinds=None, last_id=0):
+    """The events the service keeps after ``last_id`` (of ``kinds``)."""
+    return [e for e in service.client.history(last_id) if kinds is None or e.kind in kinds]
+
+
+def test_delta_starts_a_revision_and_its_result_is_written(stage):
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        answer = s.client.set(REFLECTOR, SPEC, 0.5)
+        assert answer["revision"] == 1
+        assert answer["effect"]["kind"] == "material"
+        assert answer["effect"]["materials"] == [REFLECTOR]
+        status = s.wait_done(1)
+        assert status["photons"] == 40_000 and status["edits_layer"].endswith(
+            "downlight.lumitrace-edits.usda")
+        results = s.client.results()
+        assert results["revision"] == 1 and results["photons"] == 40_000
+        assert Path(results["outputs"]["polar_diagram"]).exists()
+        # the result layer names the revision; the stage file is untouched but for the
+        # result sublayer; the delta lives in the edits layer
+        layer = (stage.parent / "downlight.lumitrace.usda").read_text()
+        assert '"lumitrace:revision" = "1"' in layer
+        edits = (stage.parent / "downlight.lumitrace-edits.usda").read_text()
+        assert f"float {SPEC} = 0.5" in edits
+        assert stage.read_text().replace("    subLayers = [\n        @./downlight.lumitrace.usda@\n    ]\n", "") \
+            == DEMO.read_text()
+        rc, out = s.stop()
+        assert rc == 0 and "last result written for revision 1" in out
+
+
+def test_an_edit_saved_on_disk_is_a_revision_and_our_own_writes_are_not(stage):
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        time.sleep(0.5)
+        assert s.client.status()["revision"] == 0  # the service's writes changed nothing
+        (stage.parent / "notes.txt").write_text("not a layer")
+        stage.write_text(stage.read_text().replace("lumitrace:luminousFlux = 1200",
+                                                   "lumitrace:luminousFlux = 2400"))
+        status = s.wait_status(lambda st: st["revision"] == 1)
+        assert status["revision"] == 1
+        revision = [e for e in _events(s, {"revision"}) if e.data["revision"] == 1][0]
+        assert revision.data["source"] == "file"
+        assert revision.data["effect"]["kind"] == "flux"  # a rescale: nothing retraced
+        assert revision.data["layers"] == [str(stage)]
+        s.wait_done(1)
+        r = s.client.results()
+        assert r["emitted_lm"] == pytest.approx(2400.0)
+        assert r["photons"] == 40_000
+
+
+def test_a_half_written_layer_is_retried_and_a_broken_one_reported(stage):
+    good = stage.read_text()
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        # a program saving in place: first a truncated file, then the whole new one
+        stage.write_text(good[: len(good) // 3])
+        time.sleep(0.2)
+        stage.write_text(good.replace("lumitrace:roughness = 0.15", "lumitrace:roughness = 0.3"))
+        status = s.wait_status(lambda st: st["revision"] == 1)
+        assert status["revision"] == 1
+        assert not [e for e in _events(s, {"error"})]
+        # a file left broken: reported once retries run out, the service keeps serving
+        stage.write_text("#usda 1.0\n(\n")
+        deadline = time.monotonic() + 20
+        errors = []
+        while not errors and time.monotonic() < deadline:
+            errors = [e for e in _events(s, {"error"}) if "keeping revision 1" in e.data["message"]]
+            time.sleep(0.1)
+        assert errors and "Expected )" in errors[0].data["message"]
+        assert s.client.status()["revision"] == 1
+
+
+def _variant_fragment() -> str:
+    return """#usda 1.0
+over "Luminaire"
+{
+    over "Materials"
+    {
+        over "DiffuserOpal" (
+            variants = {
+                string grade = "standard"
+            }
+            prepend variantSets = "grade"
+        )
+        {
+            variantSet "grade" = {
+                "standard" {
+                    float lumitrace:roughness = 0.3
+                }
+                "premium" {
+                    float lumitrace:roughness = 0.6
+                }
+            }
+        }
+    }
+}
+"""
+
+
+def test_every_delta_kind(stage):
+    with Service(stage, *FAST) as s:
+        c = s.client
+        kinds = {}
+        kinds["set"] = c.set(REFLECTOR, SPEC, 0.7)
+        kinds["set input"] = c.set(f"{REFLECTOR}/PreviewSurface", "inputs:diffuseColor",
+                                   [0.5, 0.5, 0.5])
+        kinds["transform"] = c.transform("/Luminaire/Diffuser", translate=[0, 0, -3])
+        kinds["bind"] = c.bind("/Luminaire/Housing", "/Luminaire/Materials/BoardWhite")
+        kinds["add"] = c.send([{"op": "add", "path": "/Luminaire/Baffle", "type": "Cylinder",
+                                "properties": {"radius": 30.0, "height": 5.0}}])
+        kinds["active"] = c.send([{"op": "active", "path": "/Luminaire/Baffle",
+                                   "active": False}])
+        kinds["remove"] = c.send([{"op": "remove", "path": "/Luminaire/Board"}])
+        kinds["layer"] = c.send([{"op": "layer", "usda": _variant_fragment()}])
+        kinds["variant"] = c.send([{"op": "variant", "path": "/Luminaire/Materials/DiffuserOpal",
+                                    "set": "grade", "selection": "premium"}])
+        kinds["flux"] = c.set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0)
+        assert [k["revision"] for k in kinds.values()] == list(range(1, 11))
+        effects = {name: k["effect"]["kind"] for name, k in kinds.items()}
+        assert effects == {"set": "material", "set input": "none", "transform": "geometry",
+                           "bind": "material", "add": "topology", "active": "topology",
+                           "remove": "topology", "layer": "material", "variant": "material",
+                           "flux": "flux"}
+        s.wait_done(10)
+        edits = (stage.parent / "downlight.lumitrace-edits.usda").read_text()
+        for text in ('def Cylinder "Baffle"', "active = false", 'string grade = "premium"',
+                     "xformOp:transform:lumitraceDelta", "lumitrace:luminousFlux = 1500"):
+            assert text in edits
+
+
+def test_the_service_map_equals_a_fresh_trace_with_the_edits(stage, tmp_path):
+    """Same seed and photons: the service's counts after a sequence of deltas equal, exactly,
+    those of `lumitrace trace --edits` on a copy of the stage and its edits layer."""
+    with Service(stage, *FAST) as s:
+        s.client.set(REFLECTOR, SPEC, 0.6)
+        s.client.transform("/Luminaire/Diffuser", translate=[0, 0, -2], rotate=[0, 0, 15])
+        s.client.bind("/Luminaire/Housing", "/Luminaire/Materials/BoardWhite")
+        s.wait_done(3)
+        served = _counts(stage.parent / "downlight.intensity.exr")
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(DEMO, fresh / "downlight.usda")
+    shutil.copy(stage.parent / "downlight.lumitrace-edits.usda", fresh / "edits.usda")
+    p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace",
+                        fresh / "downlight.usda", "--edits", fresh / "edits.usda",
+                        "--photons", "40000", "--resolution", "16", "--seed", "5",
+                        "--threads", "2", "--no-progress", "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    traced = _counts(fresh / "downlight.intensity.exr")
+    assert served.sum() > 10_000  # escaped photons of 40,000 (LOR about 0.45)
+    np.testing.assert_array_equal(served, traced)
+
+
+def _post_raw(url: str, body: bytes, headers=None) -> tuple[int, dict]:
+    req = urllib.request.Request(url + "deltas", data=body, method="POST",
+                                 headers=headers or {"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read() or b"{}")
+
+
+BAD = {
+    "malformed JSON": (b'{"deltas": [', 400, "not JSON"),
+    "not UTF-8": (b'{"deltas": "\xff"}', 400, "not UTF-8"),
+    "no deltas": (b'{"deltas": []}', 422, "should be non-empty"),
+    "unknown op": (b'{"deltas": [{"op": "explode", "path": "/Luminaire"}]}', 422,
+                   "is not one of"),
+    "unknown prim": (json.dumps({"deltas": [{"op": "set", "path": "/Luminaire/Nope",
+                                             "property": SPEC, "value": 1}]}).encode(),
+                     422, "no prim at this path"),
+    "wrong type": (json.dumps({"deltas": [{"op": "set", "path": REFLECTOR, "property": SPEC,
+                                           "value": "shiny"}]}).encode(), 422, "got a string"),
+    "out of range": (json.dumps({"deltas": [{"op": "set", "path": REFLECTOR, "property": SPEC,
+                                             "value": 1.5}]}).encode(), 422, "must be in [0, 1]"),
+    "NaN": (b'{"deltas": [{"op": "set", "path": "/Luminaire/LED", "property": '
+            b'"lumitrace:luminousFlux", "value": NaN}]}', 400, "not JSON"),
+    "negative flux": (json.dumps({"deltas": [{"op": "set", "path": "/Luminaire/LED",
+                                              "property": "lumitrace:luminousFlux",
+                                              "value": -5}]}).encode(), 422, "luminousFlux"),
+    "path traversal": (json.dumps({"deltas": [{"op": "layer", "usda":
+                                               "#usda 1.0\n(\n    subLayers = [@../../secret.usda@]\n)\n"}
+                                              ]}).encode(), 422, "leaves the stage's folder"),
+    "absolute asset": (json.dumps({"deltas": [{"op": "set", "path": "/Luminaire/LED",
+                                               "property": "shaping:ies:file", "type": "asset",
+                                               "value": "/etc/passwd"}]}).encode(), 422,
+                       "leaves the stage's folder"),
+    "one bad of two": (json.dumps({"deltas": [
+        {"op": "set", "path": REFLECTOR, "property": SPEC, "value": 0.3},
+        {"op": "bind", "path": "/Luminaire/Housing", "material": "/Luminaire/LED"}]}).encode(),
+        422, "not a Material"),
+    "oversized": (b'{"deltas": [{"op": "layer", "usda": "#usda 1.0\\n' + b"#" * (9 << 20)
+                  + b'"}]}', 413, "larger than"),
+}
+
+
+def test_bad_requests_get_4xx_and_change_nothing(stage):
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        edits = stage.parent / "downlight.lumitrace-edits.usda"
+        before = (stage.read_bytes(), edits.exists())
+        answers = {}
+        for name, (body, status, words) in BAD.items():
+            code, payload = _post_raw(s.url, body)
+            answers[name] = code
+            assert code == status, (name, payload)
+            text = payload["error"] + " ".join(p["why"] for p in payload.get("problems", []))
+            assert words in text, (name, payload)
+        assert (stage.read_bytes(), edits.exists()) == before
+        status = s.client.status()
+        assert status["revision"] == 0
+        # every problem of a batch is listed, each with where it is
+        code, payload = _post_raw(s.url, json.dumps({"deltas": [
+            {"op": "set", "path": "/Luminaire/Nope", "property": SPEC, "value": 1},
+            {"op": "set", "path": REFLECTOR, "property": SPEC, "value": 7}]}).encode())
+        assert code == 422 and [p["where"] for p in payload["problems"]] == [
+            "/deltas/0 /Luminaire/Nope", f"/deltas/1 {REFLECTOR}.{SPEC}"]
+        assert s.client.set(REFLECTOR, SPEC, 0.4)["revision"] == 1  # still serving
+
+
+def test_a_token_is_required_when_given_and_off_loopback(stage):
+    with Service(stage, *FAST, token="s3cret") as s:
+        code, payload = _post_raw(s.url, b'{"deltas": []}')
+        assert code == 401 and "bearer token" in payload["error"]
+        code, _ = _post_raw(s.url, b"{}", {"Authorization": "Bearer wrong"})
+        assert code == 401
+        assert s.client.status()["revision"] == 0  # the client sends the token
+    p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "serve", stage, "--host",
+                        "0.0.0.0", "--port", "0"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "give --token" in p.stderr
+
+
+def test_kill_9_and_restart_loses_no_accepted_delta(stage):
+    slow = ("--photons", 50_000_000, "--resolution", 16, "--threads", 2)
+    with Service(stage, *slow) as s:
+        for i, value in enumerate((0.3, 0.4, 0.5), start=1):
+            assert s.client.set(REFLECTOR, SPEC, value)["revision"] == i
+        s.wait_status(lambda st: st["written_revision"] == 3)
+        s.proc.send_signal(signal.SIGKILL)
+        s.proc.wait(30)
+    ids = published_run_ids(stage.parent, "downlight")
+    assert None not in ids.values() and len(set(ids.values())) == 1, ids  # one whole set
+    assert not list(stage.parent.glob(".downlight.lumitrace-staging-*")) or True
+    with Service(stage, *FAST) as s:
+        status = s.client.status()
+        assert status["revision"] == 3
+        s.wait_done(3)
+        edits = (stage.parent / "downlight.lumitrace-edits.usda").read_text()
+        assert f"float {SPEC} = 0.5" in edits
+
+
+def test_sigterm_while_tracing_writes_a_final_result(stage):
+    slow = ("--photons", 50_000_000, "--resolution", 16, "--threads", 2)
+    with Service(stage, *slow) as s:
+        s.wait_status(lambda st: st["written_revision"] == 0 and st["photons"] > 100_000)
+        rc, out = s.stop(signal.SIGTERM)
+    assert rc == 0 and "last result written for revision 0" in out
+    layer = (stage.parent / "downlight.lumitrace.usda").read_text()
+    assert "polarDiagram" in layer  # the final write draws the pictures
+    ids = published_run_ids(stage.parent, "downlight")
+    assert None not in ids.values() and len(set(ids.values())) == 1
+
+
+def test_a_burst_of_deltas_coalesces(stage):
+    with Service(stage, "--photons", 2_000_000, "--resolution", 16, "--threads", 2) as s:
+        s.wait_status(lambda st: st["photons"] > 0)
+        for i in range(100):
+            s.client.set(REFLECTOR, SPEC, 0.5 + i * 0.004)
+        status = s.wait_status(lambda st: st["traced_revision"] == 100
+                               and st["written_revision"] == 100, timeout=180)
+        traced = {e.data["revision"] for e in _events(s, {"iteration"})}
+    assert status["revision"] == 100
+    assert len(traced) <= 25, sorted(traced)  # far fewer restarts than deltas
+
+
+def test_concurrent_clients_lose_nothing(stage):
+    with Service(stage, *FAST) as s:
+        accepted: list[tuple[int, float]] = []
+        lock = threading.Lock()
+
+        def client(k):
+            for i in range(10):
+                value = round(0.1 + 0.01 * (10 * k + i), 4)
+                r = s.client.set(REFLECTOR, SPEC, value)
+                with lock:
+                    accepted.append((r["revision"], value))
+                s.client.status()
+        threads = [threading.Thread(target=client, args=(k,)) for k in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        revisions = sorted(r for r, _ in accepted)
+        assert revisions == list(range(1, 41))
+        last_value = max(accepted)[1]
+        edits = (stage.parent / "downlight.lumitrace-edits.usda").read_text()
+        assert f"float {SPEC} = {last_value:g}" in edits
+
+
+def test_events_stream_and_resume_after_the_last_id(stage):
+    """The server-sent-event stream gives every event in order; reconnecting with
+    Last-Event-ID resumes right after it, with nothing lost or repeated."""
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        everything = _events(s)
+        assert [e.id for e in everything] == list(range(1, len(everything) + 1))
+        assert {"started", "revision", "iteration", "written", "done"} <= \
+            {e.kind for e in everything}
+        middle = everything[len(everything) // 2].id
+        streamed = []
+        for e in s.client.events(last_id=middle, timeout=30):
+            streamed.append(e)
+            if e.id == everything[-1].id:
+                break
+        assert [(e.id, e.kind, e.data) for e in streamed] == \
+            [(e.id, e.kind, e.data) for e in everything[middle:]]
+        # a new event reaches a waiting stream
+        got = []
+
+        def follow():
+            for e in s.client.events(last_id=everything[-1].id, timeout=30):
+                got.append(e)
+                if e.kind == "revision":
+                    return
+        t = threading.Thread(target=follow)
+        t.start()
+        time.sleep(0.5)
+        s.client.set(REFLECTOR, SPEC, 0.45)
+        t.join(30)
+        assert got and got[-1].kind == "revision" and got[-1].data["revision"] == 1
+
+
+def test_a_bad_request_to_the_client_raises_with_every_problem(stage):
+    with Service(stage, *FAST) as s:
+        with pytest.raises(ServiceError) as info:
+            s.client.send([{"op": "set", "path": "/Luminaire/Nope", "property": SPEC,
+                            "value": 1}, {"op": "variant", "path": "/Luminaire",
+                                          "set": "x", "selection": "y"}])
+        assert info.value.status == 422 and len(info.value.problems) == 2
+
+
+def test_no_request_crashes_the_service(stage):
+    """Random bodies, and random deltas close to valid ones: every answer is a JSON 2xx or
+    4xx, never a 5xx; the service keeps serving and its edits layer stays readable."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from pxr import Sdf
+
+    json_values = st.recursive(
+        st.none() | st.booleans() | st.integers(-10**6, 10**6) |
+        st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=20),
+        lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8),
+                                                                  inner, max_size=4),
+        max_leaves=12)
+    paths = st.sampled_from(["/Luminaire", "/Luminaire/LED", "/Luminaire/Reflector",
+                             REFLECTOR, f"{REFLECTOR}/PreviewSurface", "/Luminaire/Nope",
+                             "/Luminaire/Materials", "/"])
+    props = st.sampled_from([SPEC, "lumitrace:roughness", "lumitrace:scattering",
+                             "lumitrace:luminousFlux", "inputs:diffuseColor", "points",
+                             "xformOpOrder", "inputs:width", "visibility", "purpose"])
+    ops = st.sampled_from(["set", "transform", "bind", "add", "remove", "active", "variant",
+                           "layer"])
+    delta = st.fixed_dictionaries({"op": ops, "path": paths}, optional={
+        "property": props, "value": json_values, "material": paths, "type": st.sampled_from(
+            ["Mesh", "Sphere", "float", "Xform", "bogus"]),
+        "active": st.booleans(), "translate": st.lists(st.floats(-1e3, 1e3), min_size=3,
+                                                       max_size=3),
+        "scale": st.lists(st.floats(-2, 2), min_size=3, max_size=3),
+        "set": st.text(max_size=5), "selection": st.text(max_size=5),
+        "usda": st.sampled_from(["#usda 1.0\n", "#usda 1.0\nover \"Luminaire\"\n{\n}\n",
+                                 "#usda 1.0\n(\n", "nonsense"])})
+    bodies = (st.fixed_dictionaries({"deltas": st.lists(delta, min_size=1, max_size=3)})
+              .map(lambda b: json.dumps(b).encode())
+              | json_values.map(lambda v: json.dumps(v).encode())
+              | st.binary(max_size=64))
+    with Service(stage, "--photons", 20_000, "--resolution", 8, "--threads", 1) as s:
+        codes = []
+
+        @settings(max_examples=120, deadline=None, database=None,
+                  suppress_health_check=list(HealthCheck))
+        @given(bodies)
+        def post(body):
+            code, payload = _post_raw(s.url, body)
+            codes.append(code)
+            assert code in (200, 400, 409, 413, 422), (code, payload, body[:300])
+            assert "error" in payload or "revision" in payload
+        post()
+        assert s.proc.poll() is None and s.client.status()["revision"] >= 0
+        edits = stage.parent / "downlight.lumitrace-edits.usda"
+        if edits.exists():
+            assert Sdf.Layer.OpenAsAnonymous(str(edits)) is not None
+        assert 422 in codes and 400 in codes
