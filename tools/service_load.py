@@ -198,6 +198,7 @@ def main(argv=None) -> int:
     p.add_argument("--deltas", type=int, default=25, help="deltas per client")
     p.add_argument("--repeats", type=int, default=3, help="edits timed for the latencies")
     p.add_argument("--events", type=int, default=20_000)
+    p.add_argument("--only", choices=("latency", "load", "events"), default=None)
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if not (1 <= args.clients <= 32 and 1 <= args.deltas <= 500 and 1 <= args.repeats <= 10):
@@ -206,10 +207,12 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         (tmp / "a").mkdir()
         (tmp / "b").mkdir()
-        report = {"latency_s": measure_latency(tmp / "a", args.repeats),
-                  "load": measure_load(tmp / "b", args.clients, args.deltas),
-                  "event_stream": measure_events(args.events)}
-    if args.json:
+        runs = {"latency_s": lambda: measure_latency(tmp / "a", args.repeats),
+                "load": lambda: measure_load(tmp / "b", args.clients, args.deltas),
+                "event_stream": lambda: measure_events(args.events)}
+        report = {k: f() for k, f in runs.items()
+                  if args.only is None or k.startswith(args.only[:4])}
+    if args.only or args.json:
         print(json.dumps(report, indent=2))
         return 0
     lat, load, ev = report["latency_s"], report["load"], report["event_stream"]

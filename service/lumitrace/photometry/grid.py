@@ -60,10 +60,7 @@ class CGammaGrid:
         if self.symmetry == "none" and src_c[-1] < 360.0 - 1e-9:
             src_c = np.append(src_c, 360.0)
             src = np.vstack([src, src[:1]])
-        out = np.empty((len(c), len(self.gamma)))
-        for j in range(len(self.gamma)):
-            out[:, j] = np.interp(c, src_c, src[:, j])
-        return out
+        return _interp_rows(c, src_c, src)
 
     def flux(self) -> float:
         """Luminous flux (lm) by zonal integration: gamma zones between sample midpoints,
@@ -79,6 +76,17 @@ class CGammaGrid:
         """(cd, C deg, gamma deg) of the highest intensity."""
         i, j = np.unravel_index(int(np.argmax(self.candela)), self.candela.shape)
         return float(self.candela[i, j]), float(self.c[i]), float(self.gamma[j])
+
+
+def _interp_rows(x: np.ndarray, xp: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``np.interp`` of every column of ``rows`` (len(xp), n) at ``x`` at once: linear
+    between the rows, clamped to the first and last beyond them."""
+    x = np.clip(x, xp[0], xp[-1])
+    if len(xp) == 1:
+        return np.repeat(rows[:1], len(x), axis=0)
+    i = np.clip(np.searchsorted(xp, x, side="right") - 1, 0, len(xp) - 2)
+    slope = (rows[i + 1] - rows[i]) / (xp[i + 1] - xp[i])[:, None]
+    return rows[i] + slope * (x - xp[i])[:, None]
 
 
 def _c_step(c: np.ndarray) -> float:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import os
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -103,14 +104,18 @@ def output_place(scene, out_dir: str | os.PathLike | None,
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
                   sublayer: bool = True, pictures: bool = True,
-                  extra: dict | None = None) -> ResultRecord:
+                  extra: dict | None = None,
+                  on_stage: Callable[[Callable[[], None]], None] | None = None
+                  ) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
     :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage file
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
     return the record. Waits up to ``wait`` s for another run publishing the same NAME.
     ``pictures`` False skips the polar curve and photometric solid (the slow part; the
     record then names none); ``extra`` adds entries to the EXR header and the result
-    layer's customLayerData (the service's revision)."""
+    layer's customLayerData (the service's revision). ``on_stage(step)`` runs the steps
+    that touch layers open in this process (reloading the result layer, sublayering it):
+    a service passes the runner of its USD thread; by default they run here."""
     scene = result.scene
     stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
@@ -160,11 +165,17 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         except BaseException:
             tx.abort()
             raise
-        reload_if_open(paths["result_layer"])
-        if sublayer and stage_path is not None:
-            with signals_held():
-                sublayer_into_root(stage_path, paths["result_layer"])
+        def stage_steps() -> None:
+            reload_if_open(paths["result_layer"])
+            if sublayer and stage_path is not None:
+                with signals_held():
+                    sublayer_into_root(stage_path, paths["result_layer"])
+        (on_stage or _here)(stage_steps)
     return record
+
+
+def _here(step: Callable[[], None]) -> None:
+    step()
 
 
 def check_ownership(stage_path: Path | None, paths: dict[str, Path]) -> None:

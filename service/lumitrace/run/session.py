@@ -113,7 +113,8 @@ class Refinement:
     traced and the iteration count. :meth:`step` traces one round of batches; the service
     drives it round by round (and drops it when the scene changes), :func:`run` to the end."""
 
-    def __init__(self, scene: Scene, settings: TraceSettings):
+    def __init__(self, scene: Scene, settings: TraceSettings,
+                 first_round: int = FIRST_ITERATION):
         self.scene = scene
         self.settings = settings
         self.accumulator = Accumulator(scene, settings.resolution)
@@ -125,7 +126,7 @@ class Refinement:
         self.done = [0] * len(fluxes)
         threads = max(1, int(settings.threads))
         self.full_round = threads * settings.batch_size * 2
-        self.round_photons = min(FIRST_ITERATION, self.full_round)
+        self.round_photons = min(first_round, self.full_round)
         self.iteration = 0
         self.estimate: MapEstimate | None = None
 

@@ -31,6 +31,15 @@ from .live import LiveStage, Revision
 EAGER_WRITES = 3
 #: Seconds between writes of the cheap outputs after the first iterations.
 WRITE_INTERVAL = 2.0
+#: Revisions closer together than this (s) are a burst: the engine then waits for
+#: :data:`BURST_QUIET` s without a new one (at most :data:`BURST_WAIT` s) before tracing,
+#: so that a burst costs a few restarts, while a single edit starts at once.
+BURST_GAP = 0.15
+BURST_QUIET = 0.05
+BURST_WAIT = 0.5
+#: Photons of a revision's first round: small, so that the first result after an edit is
+#: on disk quickly (later rounds double up to a full round of batches).
+FIRST_ROUND = 8192
 
 
 class Engine:
@@ -44,6 +53,7 @@ class Engine:
         self.out_dir = out_dir
         self._cv = threading.Condition()
         self._pending: Revision | None = None
+        self._arrivals: list[float] = [0.0, 0.0]  # the last two submit times
         self._stopping = False
         self._thread = threading.Thread(target=self._main, name="lumitrace-engine",
                                         daemon=True)
@@ -69,6 +79,7 @@ class Engine:
         with self._cv:
             if self._pending is None or revision.number >= self._pending.number:
                 self._pending = revision
+            self._arrivals = [self._arrivals[-1], time.monotonic()]
             self._cv.notify_all()
 
     def stop(self, timeout: float | None = None) -> None:
@@ -113,16 +124,35 @@ class Engine:
             while True:
                 with self._cv:
                     while (self._pending is None and not self._stopping
-                           and (self.refinement is None or self.done)):
+                           and (self.refinement is None or self.done)
+                           and not self._pictures_due()):
                         self._cv.wait()
                     if self._stopping:
                         break
+                    if self._pending is not None:
+                        self._settle_burst()
                     pending, self._pending = self._pending, None
                 if pending is not None:
                     self._take(pending)
-                    continue
-                self._round(pool)
+                elif self._pictures_due():
+                    self._write(pictures=True)
+                else:
+                    self._round(pool)
         self._final_write()
+
+    def _settle_burst(self) -> None:
+        """In a burst of revisions, wait (holding the lock's condition) until it pauses."""
+        start = time.monotonic()
+        while (not self._stopping and self._arrivals[1] - self._arrivals[0] < BURST_GAP
+               and time.monotonic() - start < BURST_WAIT):
+            quiet = time.monotonic() - self._arrivals[1]
+            if quiet >= BURST_QUIET:
+                return
+            self._cv.wait(BURST_QUIET - quiet)
+
+    def _pictures_due(self) -> bool:
+        """A done revision whose last write had no pictures (after a rescale, say)."""
+        return self.refinement is not None and self.done and not self._written_full
 
     def _take(self, rev: Revision) -> None:
         """Start refining ``rev``: a rescale for a flux-only edit, the same photons for an
@@ -136,15 +166,15 @@ class Engine:
                 self.revision = rev
                 old.scene = rev.scene
             if self.done:
-                self._write(pictures=True)
+                self._write(pictures=False)  # the pictures follow when nothing is pending
             return
         if old is not None and kind == "flux":
             with self._cv:
                 old.rescale(rev.scene)
                 self.revision = rev
-            self._write(pictures=self.done)
+            self._write(pictures=False)  # at once; the pictures follow if it is done
             return
-        refinement = Refinement(rev.scene, self.settings)
+        refinement = Refinement(rev.scene, self.settings, FIRST_ROUND)
         t0 = time.perf_counter()
         self._prepared = prepare(rev.scene)
         with self._cv:
@@ -198,7 +228,8 @@ class Engine:
                             photons=self.refinement.accumulator.photons,
                             relative_error=_finite(est.error) if est else None,
                             converged=bool(est and est.error <= self.settings.convergence_target))
-        self._write(pictures=True)
+        if self._pending is None:
+            self._write(pictures=True)
 
     def _final_write(self) -> None:
         if self.refinement is not None and self.refinement.accumulator.photons and \
@@ -214,9 +245,11 @@ class Engine:
         extra = {"revision": rev.number}
         t0 = time.perf_counter()
         try:
-            record = self.live.call(self.live.write, lambda: write_outputs(
-                result, self.out_dir, pictures=pictures, extra=extra))
+            record = write_outputs(result, self.out_dir, pictures=pictures, extra=extra,
+                                   on_stage=lambda step: self.live.call(self.live.write, step))
         except LumitraceError as exc:
+            if pictures:
+                self._written_full = True  # not retried in a loop: the next revision will
             self.error = str(exc)
             self.events.publish("error", revision=rev.number, message=str(exc))
             return
