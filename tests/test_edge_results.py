@@ -11,8 +11,8 @@ import pytest
 from stress_cases import add_mesh, add_sphere_light, box, new_stage
 
 from lumitrace.publish.exr import read_exr_metadata
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 ISOTROPIC = ROOT / "stages" / "reference" / "isotropic.usda"
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "service" / "lumitrace"
 
 #: Rank of each part of the package along the data flow. A module may import its own
@@ -145,3 +145,25 @@ def test_maps_are_bit_identical_to_the_flat_layout(name):
         h.update(np.ascontiguousarray(t.counts, dtype="<i8").tobytes())
         h.update(np.array([t.photons, t.absorbed, t.cut], dtype="<i8").tobytes())
     assert h.hexdigest() == FLAT_LAYOUT_HASHES[name]
+
+
+def test_tests_mirror_the_package():
+    """Test folders are named for the package's parts; test modules import shared code from
+    ``tests/helpers`` (or the stress library in ``tools/``), never from each other, and
+    ``tools/`` imports nothing from ``tests/``."""
+    tests = ROOT / "tests"
+    parts = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
+    assert folders - {"helpers", "data"} <= parts, folders - parts
+    test_modules = {p.stem for p in tests.rglob("test_*.py")}
+    for path in list(tests.rglob("*.py")) + list((ROOT / "tools").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                top = name.split(".")[0]
+                assert top not in test_modules, f"{path.relative_to(ROOT)} imports {name}"
+                if path.parent.name == "tools":
+                    assert top not in ("tests", "helpers", "conftest"), \
+                        f"{path.relative_to(ROOT)} imports {name}"

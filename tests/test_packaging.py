@@ -1,8 +1,7 @@
 """The wheel carries every subpackage and the schema plugin."""
 import tomllib
-from pathlib import Path
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_subpackage_is_listed_in_pyproject():

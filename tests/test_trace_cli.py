@@ -14,10 +14,9 @@ from pxr import Sdf, Usd, UsdGeom, UsdLux
 from lumitrace.publish.exr import read_intensity_exr
 from lumitrace.report.references import expected_intensity, read_expectation
 from lumitrace.film.texel_quadrature import texel_integrals
-from test_reference_stages import chi2_pvalue
+from helpers.reference import chi2_pvalue
+from helpers.paths import REFERENCE, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-REFERENCE = ROOT / "stages" / "reference"
 
 
 def lumitrace(*args, cwd=None) -> subprocess.CompletedProcess:

@@ -21,8 +21,8 @@ from service_process import Service
 from lumitrace.client import ServiceError
 from lumitrace.publish.exr import read_intensity_exr
 from lumitrace.publish.runs import published_run_ids
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "stages" / "downlight.usda"
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
 SPEC = "lumitrace:specularReflectance"

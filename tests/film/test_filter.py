@@ -7,7 +7,7 @@ import pytest
 from lumitrace.film.convergence import estimate, relative_rms
 from lumitrace.film.cubemap import canonical_texels, texel_directions, texel_solid_angles
 from lumitrace.film.pullpush import pull_push
-from test_reference_stages import expected_counts, trace
+from helpers.reference import expected_counts, trace
 
 RES = 32
 

@@ -10,45 +10,11 @@ from numpy.testing import assert_allclose
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 from lumitrace.errors import StageError
-from lumitrace.scene import Scene
 from lumitrace.stage import (light_flux, luminance, preview_surface_values, read_stage,
                              scene_from_stage, shaping_fraction)
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
-QUAD = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
-
-
-# -- helpers ---------------------------------------------------------------------------
-
-def new_stage(tmp_path, name="luminaire.usda", meters_per_unit=1.0, up_axis="Z"):
-    stage = Usd.Stage.CreateNew(str(tmp_path / name))
-    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
-    UsdGeom.SetStageUpAxis(stage, up_axis)
-    root = UsdGeom.Xform.Define(stage, "/Luminaire")
-    stage.SetDefaultPrim(root.GetPrim())
-    return stage
-
-
-def add_mesh(stage, path, points=QUAD, counts=(4,), indices=(0, 1, 2, 3), scale=1.0):
-    mesh = UsdGeom.Mesh.Define(stage, path)
-    mesh.CreatePointsAttr([Gf.Vec3f(*(scale * c for c in p)) for p in points])
-    mesh.CreateFaceVertexCountsAttr(list(counts))
-    mesh.CreateFaceVertexIndicesAttr(list(indices))
-    return mesh
-
-
-def add_disk(stage, path="/Luminaire/Led", flux=1000.0, radius=0.05):
-    light = UsdLux.DiskLight.Define(stage, path)
-    light.CreateRadiusAttr(radius)
-    if flux is not None:
-        light.GetPrim().ApplyAPI("LumitraceEmitterAPI")
-        light.GetPrim().GetAttribute("lumitrace:luminousFlux").Set(flux)
-    return light
-
-
-def read(stage, **kwargs) -> Scene:
-    stage.Save()
-    return read_stage(stage.GetRootLayer().realPath, **kwargs)
+from helpers.stages import QUAD, add_disk, add_mesh, expect_error, new_stage, read  # noqa: F401
 
 
 def normals(triangles):
@@ -531,15 +497,6 @@ def test_unsupported_lights_are_skipped_with_a_warning(tmp_path):
 
 
 # -- errors ----------------------------------------------------------------------------
-
-def expect_error(stage, *fragments, **kwargs):
-    with pytest.raises(StageError) as info:
-        read(stage, **kwargs)
-    message = str(info.value)
-    for fragment in fragments:
-        assert fragment in message, message
-    return message
-
 
 def test_missing_unreadable_and_empty_stages(tmp_path):
     with pytest.raises(StageError, match="not found") as info:

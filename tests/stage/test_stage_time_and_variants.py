@@ -14,7 +14,7 @@ from lumitrace.stage import read_stage, scene_from_stage
 from lumitrace.stage import representation, validate
 from pxr import Gf, Sdf, Usd, UsdGeom
 
-from test_stage_reader import QUAD, add_disk, add_mesh, expect_error, new_stage, read
+from helpers.stages import QUAD, add_disk, add_mesh, expect_error, new_stage, read
 
 RADIUS = 0.05
 DISK_AREA = math.pi * RADIUS ** 2

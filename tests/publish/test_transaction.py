@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 DISC = ROOT / "stages" / "reference" / "lambertian_disc.usda"
 OUTPUTS = (".intensity.exr", ".ies", ".ldt", ".polar.png", ".solid.png", ".lumitrace.usda")
 

@@ -7,13 +7,12 @@ world -Z: the right-handed frame with nadir down and C0 along +X).
 """
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _y_up_disc(tmp_path: Path) -> Path:

@@ -5,15 +5,15 @@ import json
 import subprocess
 import sys
 import textwrap
-from pathlib import Path
 
 import pytest
 
 import lumitrace  # noqa: F401  (registers the schema before pxr composes anything)
 from lumitrace import schema
 from pxr import Sdf, Usd
+from helpers.paths import ROOT
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = ROOT
 
 
 def test_registry_knows_the_api_schemas():

@@ -15,8 +15,8 @@ from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
 from lumitrace.photometry.quantities import figures
 from lumitrace.report.references import expected_intensity, read_expectation
 from lumitrace.film.texel_quadrature import texel_integrals
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 RES = 64
 
 

@@ -1,7 +1,6 @@
 """Engine guarantees: determinism, exact bookkeeping, flux conservation, unit invariance."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +9,8 @@ from pxr import Usd, UsdGeom
 from lumitrace.film.cubemap import texel_solid_angles
 from lumitrace.run.session import TraceSettings, run
 from lumitrace.stage.reader import read_stage
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 DOWNLIGHT = ROOT / "stages" / "downlight.usda"
 
 

@@ -16,8 +16,8 @@ from lumitrace.publish import result_layer as writer
 from lumitrace.publish.result_layer import (RESULT_KINDS, ResultLayerWarning, result_layer_path,
                                     write_result_layer)
 from pxr import Sdf, Usd, UsdGeom, UsdUtils
+from helpers.paths import STAGES
 
-STAGES = Path(__file__).resolve().parents[1] / "stages"
 
 TYPES = {"asset": "asset", "int64": "int64", "int": "int", "double": "double",
          "bool": "bool", "string": "string"}

@@ -2,18 +2,17 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
+from helpers.paths import REFERENCE
 from lumitrace.report.references import (expected_figures, expected_intensity, fresnel_reflectance_sp,
                                   fresnel_unpolarised, lambertian_slab_flux, read_expectation,
                                   slab_transmittance)
 
-REFERENCE = Path(__file__).resolve().parents[1] / "stages" / "reference"
 STAGE_KINDS = {
     "isotropic.usda": "isotropic",
     "lambertian_disc.usda": "lambertian",

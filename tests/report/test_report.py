@@ -10,8 +10,8 @@ import pytest
 
 from lumitrace.report.metrics import psnr, ssim
 from lumitrace.report.convergence_report import ReportSettings, _crossing_time, run_report
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_crossing_time_interpolates_in_log_log():

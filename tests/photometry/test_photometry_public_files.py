@@ -7,14 +7,14 @@ zonal integral of its candela table must give back.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
+from helpers.paths import DATA
 
-DATA = Path(__file__).resolve().parent / "data" / "photometry"
+DATA = DATA / "photometry"
 BEGA = DATA / "bega_50988_lm63_1995.ies"
 STATED_FLUX = 1218.0  # lm, from the file's [LAMP] keyword
 

@@ -7,18 +7,15 @@ to skip them where those cannot be installed.
 """
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from lumitrace.film import cubemap as cm
+from helpers.paths import TESTS
 
-HERE = Path(__file__).resolve().parent
+HERE = TESTS
 FOUR_PI = 4.0 * np.pi
 
 
