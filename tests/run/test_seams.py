@@ -9,7 +9,6 @@ import pytest
 from helpers.paths import ROOT
 
 
-
 @pytest.fixture(scope="module")
 def downlight():
     from lumitrace.stage.reader import read_stage
@@ -119,3 +118,19 @@ def test_results_of_a_stage_with_no_file_go_to_the_named_folder(tmp_path):
     assert prim.GetAttribute("lumitrace:result:photons").Get() == 20_000
     exr = prim.GetAttribute("lumitrace:result:intensityMap").Get()
     assert Path(exr.resolvedPath) == out / f"{name}.intensity.exr"
+
+
+def test_a_run_that_would_not_fit_in_memory_is_refused_at_once(downlight, monkeypatch):
+    """Estimated before tracing and refused with the figures, instead of being killed."""
+    from lumitrace.errors import LumitraceError
+    from lumitrace.run import memory
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+
+    need = memory.estimate_bytes(1, 1024, 2, 10**6)
+    assert 500 * 2**20 < need < 3 * 2**30  # one emitter at 1024: dense counts and maps
+    many = memory.estimate_bytes(100_000, 64, 2, 2_000_000)
+    assert many < 200 * 2**20  # 100,000 emitters: sparse counts follow the photons
+    monkeypatch.setattr(memory, "available_bytes", lambda: 256 * 2**20)
+    with pytest.raises(LumitraceError, match=r"needs about \d\.\d GiB .* 0\.2 GiB is available"):
+        run(downlight, TraceSettings(photons=1000, resolution=1024, threads=2))

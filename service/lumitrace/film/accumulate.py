@@ -17,6 +17,85 @@ from ..scene import Scene
 from .tally import BatchTally
 
 
+#: Above this many bytes of dense per-emitter counts (emitters x 2 x texels x 8), each
+#: emitter keeps only its nonzero texels: memory then follows the photons, not the number
+#: of emitters (10,000 lights at resolution 64 would need 3.9 GB dense).
+DENSE_COUNTS_BYTES = 256 << 20
+
+
+class SparseCounts:
+    """An emitter's (2, texels) int64 counts kept as its nonzero texels: sorted texel
+    indices ``idx`` and their counts ``val`` (2, len(idx)). Exact, like the dense array."""
+
+    __slots__ = ("ntex", "idx", "val")
+
+    def __init__(self, ntex: int, idx: np.ndarray | None = None,
+                 val: np.ndarray | None = None):
+        self.ntex = ntex
+        self.idx = np.zeros(0, np.int64) if idx is None else idx
+        self.val = np.zeros((2, 0), np.int64) if val is None else val
+
+    @classmethod
+    def from_dense(cls, dense: np.ndarray) -> "SparseCounts":
+        idx = np.flatnonzero(dense.any(axis=0))
+        return cls(dense.shape[1], idx, dense[:, idx].copy())
+
+    def copy(self) -> "SparseCounts":
+        return SparseCounts(self.ntex, self.idx.copy(), self.val.copy())
+
+    def sum(self, axis=None):
+        if axis is None:
+            return self.val.sum()
+        return self.dense().sum(axis=axis)
+
+    def dense(self) -> np.ndarray:
+        out = np.zeros((2, self.ntex), np.int64)
+        out[:, self.idx] = self.val
+        return out
+
+    def covers(self, other) -> bool:
+        """Whether every count of ``other`` (dense or sparse) is at most this one's."""
+        nz, v = _nonzero(other)
+        pos = np.searchsorted(self.idx, nz)
+        if not (pos < len(self.idx)).all() or not np.array_equal(self.idx[pos], nz):
+            return False
+        return bool((v <= self.val[:, pos]).all())
+
+    def add(self, other, sign: int) -> None:
+        """Add (sign 1) or subtract (sign -1) counts, dense or sparse."""
+        nz, v = _nonzero(other)
+        merged = np.union1d(self.idx, nz)
+        val = np.zeros((2, len(merged)), np.int64)
+        val[:, np.searchsorted(merged, self.idx)] = self.val
+        val[:, np.searchsorted(merged, nz)] += sign * v
+        keep = val.any(axis=0)
+        self.idx, self.val = merged[keep], val[:, keep]
+
+
+def _nonzero(counts) -> tuple[np.ndarray, np.ndarray]:
+    """(texel indices, counts (2, k)) of the nonzero texels of dense or sparse counts."""
+    if isinstance(counts, SparseCounts):
+        return counts.idx, counts.val
+    nz = np.flatnonzero(counts.any(axis=0))
+    return nz, counts[:, nz]
+
+
+def compact(counts: np.ndarray):
+    """A batch's dense counts, or their sparse form when that is much smaller (a batch of
+    a few photons in a large map): what worker processes send back."""
+    return SparseCounts.from_dense(counts) if \
+        np.count_nonzero(counts.any(axis=0)) * 4 < counts.shape[1] else counts
+
+
+
+def _half(counts, half: int | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(values, texel indices or None for dense) of the counts of a half, or both."""
+    if isinstance(counts, SparseCounts):
+        v = counts.val.sum(axis=0) if half is None else counts.val[half]
+        return v, counts.idx
+    return (counts.sum(axis=0) if half is None else counts[half]), None
+
+
 @dataclass
 class EmitterTally:
     """Running totals of one emitter's photons."""
@@ -45,7 +124,9 @@ class Accumulator:
     def __init__(self, scene: Scene, resolution: int):
         self.resolution = int(resolution)
         ntex = 6 * self.resolution * self.resolution
-        self.emitters = [EmitterTally(e.path, e.flux, counts=np.zeros((2, ntex), np.int64))
+        sparse = len(scene.emitters) * 2 * ntex * 8 > DENSE_COUNTS_BYTES
+        self.emitters = [EmitterTally(e.path, e.flux, counts=SparseCounts(ntex) if sparse
+                                      else np.zeros((2, ntex), np.int64))
                          for e in scene.emitters]
         self._solid_angles = texel_solid_angles(self.resolution)
 
@@ -57,7 +138,12 @@ class Accumulator:
         """Take a batch's photons out again, exactly as :meth:`add` put them in (the batch
         must have been added): the accumulator is then as if it never had been."""
         t = self.emitters[batch.emitter]
-        if batch.photons > t.photons or np.any(batch.counts > t.counts):
+        if isinstance(t.counts, SparseCounts):
+            covered = t.counts.covers(batch.counts)
+        else:
+            nz, v = _nonzero(batch.counts)
+            covered = not np.any(v > t.counts[:, nz])
+        if batch.photons > t.photons or not covered:
             raise ValueError(f"batch of emitter {batch.emitter} from photon {batch.start} "
                              "was not added to this accumulator")
         self._apply(batch, -1)
@@ -65,7 +151,11 @@ class Accumulator:
     def _apply(self, batch: BatchTally, sign: int) -> None:
         t = self.emitters[batch.emitter]
         t.photons += sign * batch.photons
-        if sign > 0:
+        if isinstance(t.counts, SparseCounts):
+            t.counts.add(batch.counts, sign)
+        elif isinstance(batch.counts, SparseCounts):
+            t.counts[:, batch.counts.idx] += sign * batch.counts.val
+        elif sign > 0:
             t.counts += batch.counts
         else:
             t.counts -= batch.counts
@@ -104,8 +194,14 @@ class Accumulator:
     def counts(self, half: int | None = None) -> np.ndarray:
         """Photons that escaped into each texel, all emitters, (6R, R) int64; ``half`` 0 or
         1 counts only that pseudo-random half of the photons."""
-        c = sum(t.counts for t in self.emitters)
-        return (c.sum(axis=0) if half is None else c[half]).reshape(self.shape)
+        out = np.zeros(self.shape[0] * self.shape[1], np.int64)
+        for t in self.emitters:
+            v, idx = _half(t.counts, half)
+            if idx is None:
+                out += v
+            else:
+                out[idx] += v
+        return out.reshape(self.shape)
 
     def texel_flux(self, half: int | None = None) -> np.ndarray:
         """Flux (lm) that left the luminaire through each texel's solid angle, (6R, R).
@@ -116,10 +212,12 @@ class Accumulator:
         flux = np.zeros(self.shape[0] * self.shape[1])
         for t in self.emitters:
             if t.photons:
-                if half is None:
-                    flux += t.counts.sum(axis=0) * t.photon_flux
+                v, idx = _half(t.counts, half)
+                w = t.photon_flux if half is None else 2.0 * t.photon_flux
+                if idx is None:
+                    flux += v * w
                 else:
-                    flux += t.counts[half] * (2.0 * t.photon_flux)
+                    flux[idx] += v * w
         return flux.reshape(self.shape)
 
     def flux_variance(self) -> np.ndarray:
@@ -128,8 +226,13 @@ class Accumulator:
         var = np.zeros(self.shape[0] * self.shape[1])
         for t in self.emitters:
             if t.photons:
-                n = t.counts.sum(axis=0).astype(np.float64)
-                var += t.photon_flux ** 2 * n * (1.0 - n / t.photons)
+                v, idx = _half(t.counts, None)
+                n = v.astype(np.float64)
+                term = t.photon_flux ** 2 * n * (1.0 - n / t.photons)
+                if idx is None:
+                    var += term
+                else:
+                    var[idx] += term
         return var.reshape(self.shape)
 
     def intensity(self) -> np.ndarray:

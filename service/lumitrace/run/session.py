@@ -18,6 +18,7 @@ from ..scene import Scene
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
 from . import workers
+from .memory import check_memory
 from .settings import TraceSettings
 
 #: Photons in the first iteration; later iterations double up to a full round of batches.
@@ -175,6 +176,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     ``frame`` pins the normalised tracing frame (default: the scene's own bounds);
     ``progress`` is called after every iteration with an immutable snapshot.
     """
+    check_memory(len(scene.emitters), settings.resolution, settings.threads, settings.budget())
     t0 = time.perf_counter()
     ps = prepared or prepare(scene, frame)
     t_prep = time.perf_counter() - t0

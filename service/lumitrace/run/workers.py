@@ -15,6 +15,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator
 
+from ..film.accumulate import compact
 from ..film.tally import BatchTally
 from ..scene import Scene
 from ..trace.job import BatchJob
@@ -57,8 +58,16 @@ def _end_pool(pool: ProcessPoolExecutor) -> None:
         p.join(timeout=5)
 
 
+def _traced(ps: PreparedScene, job: BatchJob) -> BatchTally:
+    """The job's tally, its counts compacted: a batch of a few photons in a big map keeps
+    only the texels it hit while it waits to be added (many emitters: many small jobs)."""
+    tally = trace_batch(ps, job)
+    tally.counts = compact(tally.counts)
+    return tally
+
+
 def _run_job(job: BatchJob) -> BatchTally:
-    return trace_batch(_worker_scene, job)
+    return _traced(_worker_scene, job)
 
 
 def choose(mode: str, threads: int, budget: int | None) -> str:
@@ -87,7 +96,7 @@ def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int
         pool.shutdown(wait=True)
     elif mode == "threads":
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            yield lambda jobs: pool.map(lambda job: trace_batch(ps, job), jobs)
+            yield lambda jobs: pool.map(lambda job: _traced(ps, job), jobs)
     else:
         raise ValueError(f"workers must be auto, threads or processes, got {mode!r}")
 
