@@ -270,3 +270,41 @@ def test_summary_names_the_run_outputs(disc):
     summary = json.loads(out.strip().splitlines()[-1])
     for key in ("intensity_map", "ies", "ldt", "result_layer"):
         assert Path(summary["outputs"][key]).exists()
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A real 6 MiB tmpfs (needs root and mount; skipped with the reason otherwise)."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("a size-limited file system needs root and mount(8)")
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mount)],
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {p.stderr.strip()}")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
+    stage = small_disk / "disc.usda"
+    shutil.copy(DISC, stage)
+    rc, _, err = _trace(stage, "--resolution", 32)
+    assert rc == 0, err
+    first = assert_one_complete_set(small_disk, "disc")
+    stage_bytes = stage.read_bytes()
+    # fill the disk, leaving less than one run's outputs
+    free = shutil.disk_usage(small_disk).free
+    with open(small_disk / "filler", "wb") as fh:
+        fh.write(b"\0" * max(0, free - 64 * 1024))
+    rc, out, err = _trace(stage, "--resolution", 32, seed=2)
+    assert rc == 2, (out, err)
+    lines = [ln for ln in err.splitlines() if ln.startswith("lumitrace")]
+    assert len(lines) == 1 and "No space left on device" in lines[0], err
+    assert "Traceback" not in err
+    assert assert_one_complete_set(small_disk, "disc") == first  # the earlier set, whole
+    assert stage.read_bytes() == stage_bytes
+    assert not list(small_disk.glob(".disc.lumitrace-staging-*"))
