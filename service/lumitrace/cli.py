@@ -220,6 +220,7 @@ def cmd_trace(args) -> int:
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed, max_depth=args.max_depth,
                              threads=args.threads or default_threads(), workers=args.workers)
+    check_interrupted(defer=True)
     preflight(args.stage, args.out)
     if args.edits is not None:
         from .delta.edits import open_with_edits
@@ -232,12 +233,14 @@ def cmd_trace(args) -> int:
         scene = read_stage(args.stage)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    check_interrupted()
     bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
     try:
         result = run(scene, settings, progress=update)
     finally:
         if bar is not None:
             bar.close()
+    check_interrupted()
     record = write_outputs(result, args.out)
     text = json.dumps(record.summary()) if args.json else _summary_text(record, args.stage)
     try:
@@ -356,8 +359,26 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
+#: Signals received in this process: USD's module loader can swallow the exception a
+#: handler raises during an import, so the command also checks this between its phases.
+_RECEIVED: list[int] = []
+#: While True (imports and reading the stage, where USD loads its modules), a signal is
+#: only recorded; :func:`check_interrupted` acts on it once that phase is over.
+_DEFERRING = [True]
+
+
 def _raise_interrupted(signum, frame) -> None:
-    raise Interrupted(signum)
+    _RECEIVED.append(signum)
+    if not _DEFERRING[0]:
+        raise Interrupted(signum)
+
+
+def check_interrupted(defer: bool = False) -> None:
+    """Raise :class:`Interrupted` for a signal received earlier; from now on (unless
+    ``defer``) signals raise at once."""
+    _DEFERRING[0] = defer
+    if _RECEIVED:
+        raise Interrupted(_RECEIVED[0])
 
 
 def _interrupted_message(exc: Interrupted) -> str:
@@ -395,13 +416,19 @@ def preflight(stage: Path, out: Path | None) -> None:
                                  "stage's folder unless --out names another)", str(folder))
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, early_signals: list[int] | None = None) -> int:
+    """The command line; ``early_signals`` are signals the entry point caught before
+    lumitrace was imported (the run then stops before it starts)."""
     previous = {s: signal.signal(s, _raise_interrupted) for s in HANDLED_SIGNALS}
     try:
+        _RECEIVED.extend(early_signals or ())
+        check_interrupted(defer=True)
         args = build_parser().parse_args(argv)
         warnings.showwarning = _show_warning
         if args.command == "trace":
             return cmd_trace(args)
+        if args.command != "trace":  # the others have no USD-loading phase of their own
+            check_interrupted()
         if args.command == "report":
             return cmd_report(args)
         if args.command == "bench":

@@ -308,3 +308,21 @@ def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
     assert assert_one_complete_set(small_disk, "disc") == first  # the earlier set, whole
     assert stage.read_bytes() == stage_bytes
     assert not list(small_disk.glob(".disc.lumitrace-staging-*"))
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.2, 0.4, 0.6])
+def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay):
+    """SIGINT in the first moments (Python and USD loading their modules, which can swallow
+    a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs."""
+    p = subprocess.Popen([sys.executable, "-c",
+                          "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
+                          "trace", str(disc), "--photons", "400000", "--no-progress"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=120)
+    assert p.returncode == 130, (out, err)
+    assert err.strip().splitlines() == [
+        "lumitrace: SIGINT: interrupted; nothing was written, earlier outputs are unchanged"]
+    assert sorted(q.name for q in disc.parent.iterdir() if not q.name.endswith(".lock")) == \
+        ["disc.usda"]

@@ -1,0 +1,27 @@
+"""The ``lumitrace`` command's entry point: signals are caught from the first instant.
+
+Importing lumitrace loads USD, which takes a few tenths of a second and can swallow a
+KeyboardInterrupt raised meanwhile (the run would then go on and publish). So this small
+module, which imports only the standard library, records SIGINT, SIGTERM and SIGHUP before
+lumitrace is imported, and hands them to :func:`lumitrace.cli.main`.
+"""
+import signal
+import sys
+
+_early: list[int] = []
+
+
+def _record(signum, _frame) -> None:
+    _early.append(signum)
+
+
+def main() -> int:
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(s, _record)
+    from lumitrace.cli import main as cli_main
+
+    return cli_main(early_signals=_early)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
