@@ -28,6 +28,7 @@ class BatchTally:
     cut: int = 0
     segments: int = 0
     rays: list | None = None
+    records: object | None = None  # the photons' PhotonRecords, when asked for
 
     @property
     def escaped(self) -> int:

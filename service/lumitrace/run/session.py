@@ -17,6 +17,7 @@ from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
+from ..trace.records import PhotonRecords
 from . import workers
 from .memory import check_memory
 from .settings import TraceSettings
@@ -115,8 +116,14 @@ class Refinement:
     drives it round by round (and drops it when the scene changes), :func:`run` to the end."""
 
     def __init__(self, scene: Scene, settings: TraceSettings,
-                 first_round: int = FIRST_ITERATION):
+                 first_round: int = FIRST_ITERATION, records_cap: int | None = None):
+        """``records_cap`` (bytes): keep per-photon records for selective retracing (see
+        :mod:`lumitrace.run.incremental`) up to this size, then drop them."""
         self.scene = scene
+        self.records_cap = records_cap
+        self.records: list[PhotonRecords] | None = (
+            [PhotonRecords.empty() for _ in scene.emitters] if records_cap else None)
+        self.records_dropped = False
         self.settings = settings
         self.accumulator = Accumulator(scene, settings.resolution)
         fluxes = [e.flux for e in scene.emitters]
@@ -141,8 +148,24 @@ class Refinement:
         for tally in tallies:
             self.accumulator.add(tally)
             self.done[tally.emitter] += tally.photons
+            if self.records is not None:
+                self._keep_records(tally)
         self.iteration += 1
         self.round_photons = min(2 * self.round_photons, self.full_round)
+        self.estimate = estimate(self.accumulator, self.settings.threshold)
+        return self.estimate
+
+    def _keep_records(self, tally) -> None:
+        rec = self.records[tally.emitter]
+        if tally.records is None or len(rec) != tally.start:
+            raise ValueError(f"records of emitter {tally.emitter} do not follow on at photon "
+                             f"{tally.start}")
+        self.records[tally.emitter] = rec.extend(tally.records)
+        if sum(r.nbytes for r in self.records) > self.records_cap:
+            self.records, self.records_dropped = None, True
+
+    def reestimate(self) -> MapEstimate:
+        """Estimate the map again (after photons were retraced)."""
         self.estimate = estimate(self.accumulator, self.settings.threshold)
         return self.estimate
 

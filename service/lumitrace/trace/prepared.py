@@ -15,6 +15,7 @@ import numpy as np
 
 from ..scene import DIELECTRIC, Emitter, Scene
 from .sampling import cross, dot
+from .records import part_bits
 from .scattering import MaterialTable
 
 
@@ -53,6 +54,7 @@ class PreparedScene:
     polarised: bool
     table: MaterialTable | None
     embree: object = field(default=None, repr=False)
+    part_bits: np.ndarray = field(default=None, repr=False)  # (T,) uint64, see records
 
     @property
     def frame(self) -> TracingFrame:
@@ -124,4 +126,6 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
                          normals=normals, corners=v0,
                          material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          polarised=bool(np.any(kind == DIELECTRIC)),
-                         table=table, embree=embree)
+                         table=table, embree=embree,
+                         part_bits=np.take(part_bits(scene.parts), scene.part_index)
+                         if len(scene.parts) and tri.shape[0] else np.zeros(0, np.uint64))

@@ -17,6 +17,7 @@ from . import rng
 from .emission import emit
 from .job import MAX_DEPTH, BatchJob
 from .prepared import PreparedScene, TracingFrame, prepare
+from .records import CUT, PhotonRecords, exit_points, segment_cells
 from .sampling import dot
 from .scattering import UNPOLARISED, kind_runs, scatter
 
@@ -34,17 +35,25 @@ NEAR_HIT = 1e-6
 
 
 
-def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> BatchTally:
+def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
+                photons: np.ndarray | None = None, records: bool = False) -> BatchTally:
     """Trace the photons of ``job`` and tally them.
 
-    With ``record_rays`` every traced ray (float32 origins, directions) is kept, for the
-    benchmark that replays the same rays through bare Embree.
+    ``photons`` (indices of the job's emitter) traces those photons instead of the job's
+    range: an edit retraces exactly the photons it affects. With ``records`` the tally
+    carries a :class:`~lumitrace.trace.records.PhotonRecords` per photon (in ``photons``
+    order). With ``record_rays`` every traced ray (float32 origins, directions) is kept, for
+    the benchmark that replays the same rays through bare Embree.
     """
     e: Emitter = ps.scene.emitters[job.emitter]
     resolution, max_depth = job.resolution, job.max_depth
     key = rng.stream_key(job.seed, e.key)
-    idx = np.arange(job.first, job.stop, dtype=np.int64)
+    idx = (np.arange(job.first, job.stop, dtype=np.int64) if photons is None
+           else np.asarray(photons, dtype=np.int64))
     base = rng.photon_hash(key, idx)
+    rec = PhotonRecords.empty(idx.size) if records else None
+    pid = np.arange(idx.size) if records else None
+    nseg = np.zeros(idx.size, np.int64) if records else None
     p, d, n_emit = emit(e, key, idx, normals=True)
     # off the emitting surface along its normal, as off any surface: an offset along d would
     # vanish for grazing photons and start them inside a part the light lies on
@@ -52,7 +61,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> 
     # polarisation matters only where a dielectric can see it; drawn at first need
     pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
-    tally = BatchTally.empty(job.emitter, job.first, job.count, resolution, record_rays)
+    tally = BatchTally.empty(job.emitter, job.first, int(idx.size), resolution, record_rays)
 
     for depth in range(max_depth + 1):
         if base.size == 0:
@@ -65,17 +74,26 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> 
         tally.segments += base.size
         prim = hit["primID"]
         miss = prim < 0
+        if rec is not None:
+            nseg[pid] += 1
         if miss.any():
             # escapes per texel, in two halves split by the photon hash's lowest bit: two
             # independent estimates of the same map, for the error estimate
             half = (np.compress(miss, base) & np.uint64(1)).astype(np.int64)
             texel = texel_index(np.compress(miss, d, axis=1).T, resolution)
             tally.counts += np.bincount(texel + ntex * half, minlength=2 * ntex).reshape(2, ntex)
+            if rec is not None:
+                gone = np.compress(miss, pid)
+                om, dm = np.compress(miss, o, axis=1), np.compress(miss, d, axis=1)
+                rec.texel[gone] = texel
+                rec.cells[gone] |= segment_cells(om, exit_points(om, dm))
         h = np.flatnonzero(~miss)
         if h.size == 0:
             break
         if depth == max_depth:
             tally.cut += int(h.size)
+            if rec is not None:
+                rec.texel[np.take(pid, h)] = CUT
             break
         prim = np.take(prim, h)
         kind = np.take(ps.triangle_kind, prim)
@@ -87,6 +105,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> 
         base, o, d = np.take(base, h), np.take(o, h, axis=1), np.take(d, h, axis=1)
         if pol is not None:
             pol = np.take(pol, h, axis=1)
+        if rec is not None:
+            pid = np.take(pid, h)
         # Embree's float32 tfar puts the hit point up to a few ulps beyond the surface, along
         # the ray; near an edge that can be behind the adjoining face, and the normal offset
         # below does not undo it (light leaked out of closed boxes at their edges). Backing
@@ -95,6 +115,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> 
         t = np.take(hit["tfar"], h).astype(np.float64)
         p = o + (t - np.minimum(RAY_BACKOFF, 0.5 * t)) * d
         ng = np.take(ps.normals, prim, axis=1)
+        if rec is not None:
+            rec.parts[pid] |= np.take(ps.part_bits, prim)
+            rec.cells[pid] |= segment_cells(o, p)
         # A hit at about the ray's origin, on a face the float64 origin lies in front of
         # while the ray moves away from it, is no hit: the origin was just off this face
         # (an edge or corner away from the face it left) and float32 rounding put it on
@@ -120,8 +143,13 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False) -> 
         tally.absorbed += int(base.size - n_alive)
         if n_alive < base.size:
             base = np.compress(alive, base)
+            if rec is not None:
+                pid = np.compress(alive, pid)
             d, p, ng = (np.compress(alive, a, axis=1) for a in (d, p, ng))
             if pol is not None:
                 pol = np.compress(alive, pol, axis=1)
         o = p + (RAY_EPSILON * np.sign(dot(d, ng))) * ng
+    if rec is not None:
+        rec.segments[:] = np.minimum(nseg, np.iinfo(np.uint16).max)
+        tally.records = rec
     return tally
