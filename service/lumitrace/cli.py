@@ -39,6 +39,18 @@ def _non_negative_float(text: str) -> float:
     return v
 
 
+def _frame(text: str):
+    from .trace.prepared import TracingFrame
+
+    try:
+        cx, cy, cz, scale = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be four numbers CX,CY,CZ,SCALE, got {text}")
+    if not all(math.isfinite(v) for v in (cx, cy, cz, scale)) or scale <= 0:
+        raise argparse.ArgumentTypeError(f"must be finite with SCALE > 0, got {text}")
+    return TracingFrame((cx, cy, cz), scale)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="lumitrace",
@@ -75,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--json", action="store_true",
                    help="print one JSON summary object as the last line of stdout")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.add_argument("--frame", type=_frame, default=None, metavar="CX,CY,CZ,SCALE",
+                   help="the normalised tracing frame (world m) to trace in, as a service "
+                        "reports it, to reproduce its map exactly (default: the stage's own)")
     t.add_argument("--edits", type=Path, default=None, metavar="LAYER",
                    help="compose this edits layer over the stage, as the service does with "
                         "NAME.lumitrace-edits.usda (default: none)")
@@ -236,7 +251,7 @@ def cmd_trace(args) -> int:
     check_interrupted()
     bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
     try:
-        result = run(scene, settings, progress=update)
+        result = run(scene, settings, progress=update, frame=args.frame)
     finally:
         if bar is not None:
             bar.close()

@@ -179,7 +179,14 @@ def test_the_service_map_equals_a_fresh_trace_with_the_edits(stage, tmp_path):
         s.client.transform("/Luminaire/Diffuser", translate=[0, 0, -2], rotate=[0, 0, 15])
         s.client.bind("/Luminaire/Housing", "/Luminaire/Materials/BoardWhite")
         s.wait_done(3)
+        last = _events(s)[-1].id
+        s.client.set(REFLECTOR, SPEC, 0.8)  # after the budget is traced: a retrace
+        status = s.wait_done(4)
         served = _counts(stage.parent / "downlight.intensity.exr")
+        retraced = [e.data for e in _events(s, {"retrace"}, last_id=last)]
+    # the reflector's photons only, not all
+    assert len(retraced) == 1 and 0 < retraced[0]["photons"] < retraced[0]["of"] == 40_000
+    frame = ",".join(repr(v) for v in status["tracing_frame"])
     fresh = tmp_path / "fresh"
     fresh.mkdir()
     shutil.copy(DEMO, fresh / "downlight.usda")
@@ -187,7 +194,7 @@ def test_the_service_map_equals_a_fresh_trace_with_the_edits(stage, tmp_path):
     p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace",
                         fresh / "downlight.usda", "--edits", fresh / "edits.usda",
                         "--photons", "40000", "--resolution", "16", "--seed", "5",
-                        "--threads", "2", "--no-progress", "--json"],
+                        "--threads", "2", "--no-progress", "--json", "--frame", frame],
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     traced = _counts(fresh / "downlight.intensity.exr")

@@ -20,9 +20,10 @@ from ..errors import LumitraceError
 from ..film.convergence import MapEstimate
 from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord
+from ..run.incremental import retrace, select
 from ..run.session import Refinement
 from ..run.settings import TraceSettings
-from ..trace.prepared import prepare
+from ..trace.prepared import TracingFrame, prepare
 from ..trace.tracer import trace_batch
 from .events import EventLog
 from .live import LiveStage, Revision
@@ -37,6 +38,9 @@ WRITE_INTERVAL = 2.0
 BURST_GAP = 0.15
 BURST_QUIET = 0.05
 BURST_WAIT = 0.5
+#: Bytes of per-photon records kept for selective retracing (22 bytes a photon: 1 GiB
+#: holds about 49 million photons); above it, an edit restarts the trace.
+RECORDS_CAP = 1 << 30
 #: Photons of a revision's first round: small, so that the first result after an edit is
 #: on disk quickly (later rounds double up to a full round of batches).
 FIRST_ROUND = 8192
@@ -46,7 +50,7 @@ class Engine:
     """Refines :attr:`revision` in a thread; :meth:`submit` hands it a newer one."""
 
     def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
-                 out_dir: Path | None = None):
+                 out_dir: Path | None = None, records_cap: int = RECORDS_CAP):
         self.live = live
         self.settings = replace(settings, workers="threads")
         self.events = events
@@ -67,6 +71,9 @@ class Engine:
         self._last_write = 0.0
         self._written_full = False
         self.error: str | None = None
+        #: the session's pinned tracing frame (set by the first revision)
+        self.frame: TracingFrame | None = None
+        self.records_cap = records_cap
 
     # -- control (any thread) -----------------------------------------------------------
 
@@ -113,6 +120,9 @@ class Engine:
                 "written_photons": self.written.get("photons"),
                 "written_pictures": self.written.get("pictures"),
                 "last_error": self.error,
+                "tracing_frame": [*self.frame.center, self.frame.scale] if self.frame else None,
+                "records_bytes": (sum(x.nbytes for x in r.records)
+                                  if r is not None and r.records is not None else 0),
             }
 
     # -- the thread -----------------------------------------------------------------------
@@ -121,6 +131,7 @@ class Engine:
         threads = max(1, int(self.settings.threads))
         with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lumitrace-trace") \
                 as pool:
+            self._pool = pool
             while True:
                 with self._cv:
                     while (self._pending is None and not self._stopping
@@ -174,14 +185,46 @@ class Engine:
                 self.revision = rev
             self._write(pictures=False)  # at once; the pictures follow if it is done
             return
-        refinement = Refinement(rev.scene, self.settings, FIRST_ROUND)
+        if old is not None and self.frame is not None:
+            selection = select(old.records, old.scene, rev.scene, self.frame)
+            if selection.restart is None:
+                self._retrace(rev, selection)
+                return
+            self.events.publish("restart", revision=rev.number, reason=selection.restart)
+            if selection.restart.startswith("geometry moved outside"):
+                self.frame = None
+        self.frame = self.frame or TracingFrame.of(rev.scene)
+        refinement = Refinement(rev.scene, self.settings, FIRST_ROUND, self.records_cap)
         t0 = time.perf_counter()
-        self._prepared = prepare(rev.scene)
+        self._prepared = prepare(rev.scene, self.frame)
         with self._cv:
             self.revision, self.refinement, self.done = rev, refinement, False
             self.started = t0
             self._written_full = False
             self._last_write = 0.0
+
+    def _retrace(self, rev: Revision, selection) -> None:
+        """Retrace the photons the edit can change; the rest stay (see
+        :mod:`lumitrace.run.incremental`)."""
+        r = self.refinement
+        ps = prepare(rev.scene, self.frame)
+
+        def trace(work):
+            return self._pool.map(lambda item: trace_batch(ps, item[0], photons=item[1],
+                                                           records=True), work)
+        with self._cv:
+            done = retrace(r, rev.scene, selection, trace, self.settings.batch_size)
+            self._prepared = ps
+            self.revision = rev
+            self.done = False
+            self._written_full = False
+        self.events.publish("retrace", revision=rev.number, photons=done.photons,
+                            of=done.of, seconds=done.seconds)
+        if r.records_dropped:
+            self.events.publish("warning", revision=rev.number,
+                                message="photon records dropped above their memory cap: "
+                                        "the next edit restarts the trace")
+        self._write(pictures=False)
 
     def _round(self, pool: ThreadPoolExecutor) -> None:
         r, ps = self.refinement, self._prepared
@@ -189,7 +232,8 @@ class Engine:
         if not jobs:
             self._finish()
             return
-        futures = [pool.submit(trace_batch, ps, job) for job in jobs]
+        keep = r.records is not None
+        futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
         tallies = []
         for f in futures:
             if self._interrupted():
@@ -242,7 +286,7 @@ class Engine:
         if r is None or not r.accumulator.photons:
             return
         result = r.result(time.perf_counter() - self.started)
-        extra = {"revision": rev.number}
+        extra = {"revision": rev.number, "tracingFrame": [*self.frame.center, self.frame.scale]}
         t0 = time.perf_counter()
         try:
             record = write_outputs(result, self.out_dir, pictures=pictures, extra=extra,
