@@ -505,7 +505,59 @@ def downlight() -> Usd.Stage:
     return stage
 
 
+def _box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """A closed box (12 triangles), normals outward."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    pts = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1])
+                    for x in (lo[0], hi[0])])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = [(a, b, c) for q in quads for (a, b, c) in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]
+    centre = 0.5 * (lo + hi)
+    return pts, orient(pts, np.array(tris), lambda c: c - centre)
+
+
+def louvre() -> Usd.Stage:
+    """A linear louvre luminaire with many parts: a 4 x 8 array of LED packages on a
+    board, a specular louvre of 26 cross blades and 30 long blades (56 blades) below it,
+    side reflectors and a housing; 4000 lm."""
+    stage, lum = new_stage(0.001, "A louvre luminaire with many parts (for selective "
+                                  "retracing): 32 LEDs over a 56-blade specular louvre, "
+                                  "side reflectors, white board, dark housing; 4000 lm.")
+    board = make_material(stage, "BoardWhite", "diffuse", reflectance=0.85)
+    blade = make_material(stage, "LouvreSpecular", "glossy", specular_reflectance=0.9,
+                          roughness=0.05)
+    side = make_material(stage, "SideReflector", "mirror", specular_reflectance=0.92)
+    housing = make_material(stage, "HousingPaint", "diffuse", reflectance=0.1)
+    UsdGeom.Xform.Define(stage, "/Luminaire/LEDs")
+    for i in range(4):
+        for j in range(8):
+            led = UsdLux.RectLight.Define(stage, f"/Luminaire/LEDs/LED_{i}_{j}")
+            led.CreateWidthAttr(3.0)
+            led.CreateHeightAttr(3.0)
+            led.AddTranslateOp().Set(Gf.Vec3d(-105.0 + 30.0 * j, -45.0 + 30.0 * i, 39.5))
+            add_emitter(led, 125.0)
+    pts, tris = _box((-125.0, -62.0, 40.0), (125.0, 62.0, 41.6))
+    define_mesh(stage, "/Luminaire/Board", pts, tris, board)
+    UsdGeom.Xform.Define(stage, "/Luminaire/Louvre")
+    k = 0
+    for x in np.linspace(-120.0, 120.0, 26):  # cross blades, across the width
+        pts, tris = _box((x - 0.4, -60.0, 0.0), (x + 0.4, 60.0, 30.0))
+        define_mesh(stage, f"/Luminaire/Louvre/Blade_{k:02d}", pts, tris, blade)
+        k += 1
+    for y in np.linspace(-58.0, 58.0, 30):  # long blades, shallower, along the length
+        pts, tris = _box((-120.0, y - 0.3, 0.0), (120.0, y + 0.3, 8.0))
+        define_mesh(stage, f"/Luminaire/Louvre/Blade_{k:02d}", pts, tris, blade)
+        k += 1
+    for name, y in (("SideA", -61.0), ("SideB", 61.0)):
+        pts, tris = _box((-125.0, y - 0.5, 0.0), (125.0, y + 0.5, 40.0))
+        define_mesh(stage, f"/Luminaire/{name}", pts, tris, side)
+    pts, tris = _box((-128.0, -66.0, 41.6), (128.0, 66.0, 50.0))
+    define_mesh(stage, "/Luminaire/Housing", pts, tris, housing)
+    return stage
+
+
 STAGES: dict[str, Callable[[], Usd.Stage]] = {
+    "louvre.usda": louvre,
     "reference/isotropic.usda": isotropic,
     "reference/lambertian_disc.usda": lambertian_disc,
     "reference/integrating_sphere.usda": integrating_sphere,
