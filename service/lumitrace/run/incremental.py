@@ -29,8 +29,7 @@ from ..scene import Scene
 from ..trace import rng
 from ..trace.job import BatchJob
 from ..trace.prepared import TracingFrame
-from ..trace.records import (ABSORBED, CUT, PhotonRecords, inside_grid, part_bits,
-                             triangle_cells)
+from ..trace.records import ABSORBED, CUT, PhotonRecords, part_bits
 
 
 @dataclass(frozen=True)
@@ -76,7 +75,7 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
         if not all(np.array_equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__):
             changed_emitters.append(i)
     new_tri = _normalised(new.triangles, frame)
-    if not inside_grid(new_tri):
+    if not frame.grid.inside(new_tri):
         return Selection(restart="geometry moved outside the session's tracing frame")
     old_parts, new_parts = _part_triangles(old), _part_triangles(new)
     old_mats = {m.path: m for m in old.materials}
@@ -89,7 +88,7 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
         if a is None or b is None or not np.array_equal(a[0], b[0]):
             bits_of.append(name)  # moved, reshaped, added or removed
             if b is not None:
-                cells |= triangle_cells(_normalised(b[0], frame))
+                cells |= frame.grid.triangle_cells(_normalised(b[0], frame))
         elif not np.array_equal(a[1], b[1]) or changed_mats & (set(a[1]) | set(b[1])):
             bits_of.append(name)  # other material slots, or a material it uses changed
     bits = np.bitwise_or.reduce(part_bits(bits_of)) if bits_of else np.uint64(0)
@@ -134,6 +133,8 @@ def retrace(refinement, scene: Scene, selection: Selection,
     ``trace`` maps (job, photon indices) pairs to tallies with records, in order."""
     t0 = time.perf_counter()
     acc, s = refinement.accumulator, refinement.settings
+    # at least 8 pieces, so that every thread has work however few photons are retraced
+    chunk = max(1, min(chunk, max(1024, -(-selection.photons // 8))))
     work = []
     for e, rows in enumerate(selection.rows):
         if not len(rows):

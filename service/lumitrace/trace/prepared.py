@@ -15,16 +15,18 @@ import numpy as np
 
 from ..scene import DIELECTRIC, Emitter, Scene
 from .sampling import cross, dot
-from .records import part_bits
+from .records import CellGrid, part_bits
 from .scattering import MaterialTable
 
 
 @dataclass(frozen=True)
 class TracingFrame:
-    """The normalised tracing frame: ``p_traced = (p_world - center) / scale`` (world m)."""
+    """The normalised tracing frame: ``p_traced = (p_world - center) / scale`` (world m),
+    and the grid of the photons' cell masks over the luminaire (pinned with it)."""
 
     center: tuple[float, float, float]
     scale: float
+    grid: CellGrid = CellGrid()
 
     @classmethod
     def of(cls, scene: Scene) -> "TracingFrame":
@@ -34,7 +36,8 @@ class TracingFrame:
         scale = float(0.5 * (hi - lo).max())
         if not scale > 0.0:  # a lone point light: any scale will do
             scale = 1.0
-        return cls(tuple(float(c) for c in center), scale)
+        return cls(tuple(float(c) for c in center), scale,
+                   CellGrid.around((lo - center) / scale, (hi - center) / scale))
 
 
 @dataclass
@@ -55,10 +58,11 @@ class PreparedScene:
     table: MaterialTable | None
     embree: object = field(default=None, repr=False)
     part_bits: np.ndarray = field(default=None, repr=False)  # (T,) uint64, see records
+    grid: CellGrid = CellGrid()
 
     @property
     def frame(self) -> TracingFrame:
-        return TracingFrame(tuple(float(c) for c in self.center), self.scale)
+        return TracingFrame(tuple(float(c) for c in self.center), self.scale, self.grid)
 
     @property
     def triangle_count(self) -> int:
@@ -126,6 +130,6 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
                          normals=normals, corners=v0,
                          material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          polarised=bool(np.any(kind == DIELECTRIC)),
-                         table=table, embree=embree,
+                         table=table, embree=embree, grid=frame.grid,
                          part_bits=np.take(part_bits(scene.parts), scene.part_index)
                          if len(scene.parts) and tri.shape[0] else np.zeros(0, np.uint64))

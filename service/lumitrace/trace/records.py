@@ -4,9 +4,9 @@ the photons whose paths it can change and retrace exactly those.
 - ``texel``: where it escaped (the cube-map texel), or :data:`ABSORBED` / :data:`CUT`;
 - ``segments``: how many path segments it had (for the segment statistics);
 - ``parts``: a hash bitmask of the parts it hit (bit ``crc32(part path) % 64``);
-- ``cells``: a bitmask of the cells of a 4 x 4 x 4 grid over the normalised tracing frame
-  that the bounding boxes of its path segments overlap (escaping segments clipped to the
-  grid's box).
+- ``cells``: a bitmask of the cells of a 64-cell grid over the luminaire (pinned with the
+  tracing frame, :class:`CellGrid`) that the bounding boxes of its path segments overlap
+  (escaping segments clipped to the grid's box).
 
 Both masks are conservative: a collision of two parts on one bit, or a box wider than its
 segment, only retraces a photon whose path then comes out the same.
@@ -21,9 +21,6 @@ import numpy as np
 #: ``texel`` of a photon absorbed on a surface, and of one cut by the depth limit.
 ABSORBED = -1
 CUT = -2
-#: Cells per axis of the grid over the normalised frame ([-GRID_HALF, GRID_HALF] cubed).
-CELLS_PER_AXIS = 4
-GRID_HALF = 1.25  # a margin around the frame (geometry lies in [-1, 1]): edits may grow it
 #: Bytes of one photon's record.
 RECORD_BYTES = 4 + 2 + 8 + 8
 
@@ -76,56 +73,85 @@ def part_bits(parts: tuple[str, ...] | list[str]) -> np.ndarray:
     return np.array([part_bit(p) for p in parts], dtype=np.uint64)
 
 
-def _axis_masks() -> np.ndarray:
-    """(axis, lo, hi) -> the cells whose coordinate on ``axis`` lies in [lo, hi]."""
-    n = CELLS_PER_AXIS
-    cell = np.arange(n ** 3)
-    coord = np.stack([cell % n, (cell // n) % n, cell // (n * n)])
-    masks = np.zeros((3, n, n), np.uint64)
-    for axis in range(3):
-        for lo in range(n):
-            for hi in range(lo, n):
-                sel = (coord[axis] >= lo) & (coord[axis] <= hi)
-                masks[axis, lo, hi] = np.bitwise_or.reduce(
-                    np.left_shift(np.uint64(1), cell[sel].astype(np.uint64)))
-    return masks
+#: Cells of the grid (one bit each in ``cells``).
+GRID_CELLS = 64
+#: Room the grid leaves around the luminaire's bounds (normalised units: the frame's
+#: largest half-extent is 1), so that an edit may grow or move a part a little.
+GRID_MARGIN = 0.25
 
 
-_AXIS_MASKS = _axis_masks()
+@dataclass(frozen=True)
+class CellGrid:
+    """A grid of at most :data:`GRID_CELLS` cells over a box of the normalised frame, with
+    cells per axis chosen for the box's shape (a long luminaire gets more along its
+    length): ``lo``, ``hi`` (normalised) and ``n`` cells per axis."""
+
+    lo: tuple[float, float, float] = (-1.25, -1.25, -1.25)
+    hi: tuple[float, float, float] = (1.25, 1.25, 1.25)
+    n: tuple[int, int, int] = (4, 4, 4)
+
+    @classmethod
+    def around(cls, lo, hi) -> "CellGrid":
+        """The grid over the bounds ``lo``..``hi`` (normalised) with their margin."""
+        lo = np.asarray(lo, float) - GRID_MARGIN
+        hi = np.asarray(hi, float) + GRID_MARGIN
+        n = np.ones(3, int)
+        while n.prod() * 2 <= GRID_CELLS:
+            n[int(np.argmax((hi - lo) / n))] *= 2
+        return cls(tuple(map(float, lo)), tuple(map(float, hi)), tuple(map(int, n)))
+
+    def _index(self, x: np.ndarray) -> np.ndarray:
+        lo, hi, n = (np.asarray(v)[:, None] for v in (self.lo, self.hi, self.n))
+        return np.clip(np.floor((x - lo) / (hi - lo) * n), 0, n - 1).astype(np.int64)
+
+    def box_cells(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Cell masks (N,) uint64 of boxes ``lo``..``hi`` (3, N), normalised."""
+        a, b = self._index(lo), self._index(hi)
+        masks = _axis_masks(self.n)
+        return masks[0][a[0], b[0]] & masks[1][a[1], b[1]] & masks[2][a[2], b[2]]
+
+    def segment_cells(self, o: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Cell masks of segments ``o`` -> ``p`` (3, N)."""
+        return self.box_cells(np.minimum(o, p), np.maximum(o, p))
+
+    def exit_points(self, o: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Where rays from ``o`` along ``d`` (3, N) leave the grid's box."""
+        lo, hi = (np.asarray(v)[:, None] for v in (self.lo, self.hi))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(d > 0, (hi - o) / d, np.where(d < 0, (lo - o) / d, np.inf))
+        return o + np.maximum(np.min(t, axis=0), 0.0) * d
+
+    def triangle_cells(self, triangles: np.ndarray) -> np.uint64:
+        """The union of the cells the bounding boxes of ``triangles`` (T, 3, 3) overlap."""
+        if len(triangles) == 0:
+            return np.uint64(0)
+        return np.bitwise_or.reduce(self.box_cells(triangles.min(axis=1).T,
+                                                   triangles.max(axis=1).T))
+
+    def inside(self, triangles: np.ndarray) -> bool:
+        """Whether every triangle (T, 3, 3), normalised, lies within the grid's box."""
+        if len(triangles) == 0:
+            return True
+        pts = triangles.reshape(-1, 3)
+        return bool((pts >= np.array(self.lo)).all() and (pts <= np.array(self.hi)).all())
 
 
-def box_cells(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Cell masks (N,) uint64 of boxes ``lo``..``hi`` (3, N) in normalised coordinates."""
-    n = CELLS_PER_AXIS
-    scale = n / (2.0 * GRID_HALF)
-    a = np.clip(np.floor((lo + GRID_HALF) * scale), 0, n - 1).astype(np.int64)
-    b = np.clip(np.floor((hi + GRID_HALF) * scale), 0, n - 1).astype(np.int64)
-    return (_AXIS_MASKS[0, a[0], b[0]] & _AXIS_MASKS[1, a[1], b[1]]
-            & _AXIS_MASKS[2, a[2], b[2]])
+_MASKS: dict[tuple[int, int, int], list[np.ndarray]] = {}
 
 
-def segment_cells(o: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Cell masks of segments ``o`` -> ``p`` (3, N)."""
-    return box_cells(np.minimum(o, p), np.maximum(o, p))
-
-
-def exit_points(o: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Where rays from ``o`` along ``d`` (3, N) leave the grid's box (``o`` if outside)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(d > 0, (GRID_HALF - o) / d, np.where(d < 0, (-GRID_HALF - o) / d, np.inf))
-    t_exit = np.maximum(np.min(t, axis=0), 0.0)
-    return o + t_exit * d
-
-
-def triangle_cells(triangles: np.ndarray) -> np.uint64:
-    """The union of the cells the bounding boxes of ``triangles`` (T, 3, 3), normalised,
-    overlap."""
-    if len(triangles) == 0:
-        return np.uint64(0)
-    masks = box_cells(triangles.min(axis=1).T, triangles.max(axis=1).T)
-    return np.bitwise_or.reduce(masks)
-
-
-def inside_grid(triangles: np.ndarray) -> bool:
-    """Whether every triangle (T, 3, 3), normalised, lies within the grid's box."""
-    return bool(len(triangles) == 0 or np.abs(triangles).max() <= GRID_HALF)
+def _axis_masks(n: tuple[int, int, int]) -> list[np.ndarray]:
+    """Per axis, (lo, hi) -> the cells whose index on that axis lies in [lo, hi]."""
+    if n not in _MASKS:
+        cell = np.arange(n[0] * n[1] * n[2])
+        coord = np.stack([cell % n[0], (cell // n[0]) % n[1], cell // (n[0] * n[1])])
+        bits = np.left_shift(np.uint64(1), cell.astype(np.uint64))
+        out = []
+        for axis in range(3):
+            m = np.zeros((n[axis], n[axis]), np.uint64)
+            for lo in range(n[axis]):
+                for hi in range(lo, n[axis]):
+                    sel = (coord[axis] >= lo) & (coord[axis] <= hi)
+                    m[lo, hi] = np.bitwise_or.reduce(bits[sel])
+            out.append(m)
+        _MASKS[n] = out
+    return _MASKS[n]

@@ -17,7 +17,7 @@ from . import rng
 from .emission import emit
 from .job import MAX_DEPTH, BatchJob
 from .prepared import PreparedScene, TracingFrame, prepare
-from .records import CUT, PhotonRecords, exit_points, segment_cells
+from .records import CUT, PhotonRecords
 from .sampling import dot
 from .scattering import UNPOLARISED, kind_runs, scatter
 
@@ -86,7 +86,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                 gone = np.compress(miss, pid)
                 om, dm = np.compress(miss, o, axis=1), np.compress(miss, d, axis=1)
                 rec.texel[gone] = texel
-                rec.cells[gone] |= segment_cells(om, exit_points(om, dm))
+                rec.cells[gone] |= ps.grid.segment_cells(om, ps.grid.exit_points(om, dm))
         h = np.flatnonzero(~miss)
         if h.size == 0:
             break
@@ -117,7 +117,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         ng = np.take(ps.normals, prim, axis=1)
         if rec is not None:
             rec.parts[pid] |= np.take(ps.part_bits, prim)
-            rec.cells[pid] |= segment_cells(o, p)
+            rec.cells[pid] |= ps.grid.segment_cells(o, p)
         # A hit at about the ray's origin, on a face the float64 origin lies in front of
         # while the ray moves away from it, is no hit: the origin was just off this face
         # (an edge or corner away from the face it left) and float32 rounding put it on
