@@ -89,12 +89,7 @@ EDITS = st.lists(st.tuples(st.sampled_from(["material", "move", "points", "activ
 @given(EDITS)
 def test_incremental_retrace_equals_a_fresh_trace(edits):
     with tempfile.TemporaryDirectory() as tmp:
-        path = _luminaire(Path(tmp) / "lum.usda")
-        scene = read_stage(path)
-        frame = TracingFrame.of(scene)
-        r = Refinement(scene, SETTINGS, records_cap=1 << 30)
-        _refine(r, prepare(scene, frame))
-        stage = Usd.Stage.Open(str(path))
+        path, scene, frame, r, stage = _traced_luminaire(Path(tmp) / "lum.usda")
         for kind, part, x in edits:
             _edit(stage, kind, part, x)
             stage.GetRootLayer().Save()
@@ -115,13 +110,18 @@ def test_incremental_retrace_equals_a_fresh_trace(edits):
                 assert sel.photons == 0  # nothing the tracer sees: nothing retraced
 
 
-def test_a_material_edit_retraces_only_the_photons_that_met_the_part(tmp_path):
-    path = _luminaire(tmp_path / "lum.usda")
+def _traced_luminaire(path: Path, records_cap: int = 1 << 30):
+    """The test luminaire traced with records: (path, scene, frame, refinement, stage)."""
+    _luminaire(path)
     scene = read_stage(path)
     frame = TracingFrame.of(scene)
-    r = Refinement(scene, SETTINGS, records_cap=1 << 30)
+    r = Refinement(scene, SETTINGS, records_cap=records_cap)
     _refine(r, prepare(scene, frame))
-    stage = Usd.Stage.Open(str(path))
+    return path, scene, frame, r, Usd.Stage.Open(str(path))
+
+
+def test_a_material_edit_retraces_only_the_photons_that_met_the_part(tmp_path):
+    path, scene, frame, r, stage = _traced_luminaire(tmp_path / "lum.usda")
     _edit(stage, "material", PARTS[3], 0.2)  # the small baffle below the lens
     stage.GetRootLayer().Save()
     new = read_stage(path)
@@ -131,12 +131,7 @@ def test_a_material_edit_retraces_only_the_photons_that_met_the_part(tmp_path):
 
 
 def test_edits_that_need_a_restart_say_why(tmp_path):
-    path = _luminaire(tmp_path / "lum.usda")
-    scene = read_stage(path)
-    frame = TracingFrame.of(scene)
-    r = Refinement(scene, SETTINGS, records_cap=1 << 30)
-    _refine(r, prepare(scene, frame))
-    stage = Usd.Stage.Open(str(path))
+    path, scene, frame, r, stage = _traced_luminaire(tmp_path / "lum.usda")
     UsdGeom.Xformable(stage.GetPrimAtPath(PARTS[2])).AddTranslateOp().Set(Gf.Vec3d(0, 0, 1.0))
     stage.GetRootLayer().Save()
     assert select(r.records, scene, read_stage(path), frame).restart == \

@@ -20,7 +20,7 @@ from ..errors import LumitraceError
 from ..film.convergence import MapEstimate
 from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord
-from ..run.incremental import retrace, select
+from ..run.incremental import Selection, retrace, select
 from ..run.session import Refinement
 from ..run.settings import TraceSettings
 from ..trace.prepared import TracingFrame, prepare
@@ -41,6 +41,9 @@ BURST_WAIT = 0.5
 #: Bytes of per-photon records kept for selective retracing (22 bytes a photon: 1 GiB
 #: holds about 49 million photons); above it, an edit restarts the trace.
 RECORDS_CAP = 1 << 30
+#: Above this share of the traced photons, an edit is traced afresh rather than retraced:
+#: both give the same map, and a fresh trace shows its first result within one small round.
+RETRACE_MAX_SHARE = 0.5
 #: Photons of a revision's first round: small, so that the first result after an edit is
 #: on disk quickly (later rounds double up to a full round of batches).
 FIRST_ROUND = 8192
@@ -187,6 +190,11 @@ class Engine:
             return
         if old is not None and self.frame is not None:
             selection = select(old.records, old.scene, rev.scene, self.frame)
+            traced = old.accumulator.photons
+            if selection.restart is None and selection.photons > RETRACE_MAX_SHARE * traced:
+                selection = Selection(restart=f"the edit can change {selection.photons:,} of "
+                                              f"{traced:,} photons: a new trace shows a first "
+                                              "result sooner (the map is the same)")
             if selection.restart is None:
                 self._retrace(rev, selection)
                 return
