@@ -93,3 +93,23 @@ def test_depth_cut_is_a_warning(tmp_path):
     assert rc == 0, err
     assert summary["cut_lm"] == pytest.approx(summary["emitted_lm"])
     assert "100.0% of the emitted flux was cut by the depth limit (8 bounces)" in err
+
+
+def test_parts_no_photon_reaches_are_reported(tmp_path):
+    """A driver box on top of the demo's closed housing: no photon can reach it (escaped
+    photons never come back), and the run says so, naming it."""
+    from pxr import Usd
+
+    stage_path = tmp_path / "downlight.usda"
+    shutil.copy(ROOT / "stages" / "downlight.usda", stage_path)
+    stage = Usd.Stage.Open(str(stage_path))
+    p, f = box((-0.01, -0.01, 0.08), (0.01, 0.01, 0.09))
+    add_mesh(stage, "/Luminaire/Driver", p, f, 0.001, "diffuse", reflectance=0.5)
+    stage.GetRootLayer().Save()
+    rc, summary, err = _trace(stage_path, tmp_path / "out", "--photons", 50_000)
+    assert rc == 0, err
+    assert "1 part(s) no traced photon reached: /Luminaire/Driver" in err
+    iso = tmp_path / "isotropic.usda"
+    shutil.copy(ISOTROPIC, iso)
+    rc, summary, err = _trace(iso, tmp_path / "out2", "--photons", 1000)
+    assert "no traced photon reached" not in err

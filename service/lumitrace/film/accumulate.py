@@ -129,6 +129,17 @@ class Accumulator:
                                       else np.zeros((2, ntex), np.int64))
                          for e in scene.emitters]
         self._solid_angles = texel_solid_angles(self.resolution)
+        #: surface hits per part since the start (None once a batch without them, or a
+        #: removal, makes the count unknown): parts no photon reaches are reported
+        self.part_hits: np.ndarray | None = np.zeros(len(scene.parts), np.int64)
+        self.parts = tuple(scene.parts)
+
+    def unreached_parts(self) -> list[str] | None:
+        """Parts no traced photon hit (fully enclosed, behind an absorber, hidden), or None
+        when that is not known."""
+        if self.part_hits is None:
+            return None
+        return [p for p, n in zip(self.parts, self.part_hits) if n == 0]
 
     def add(self, batch: BatchTally) -> None:
         """Add a batch's photons (integer sums: exact and order-independent)."""
@@ -150,6 +161,11 @@ class Accumulator:
 
     def _apply(self, batch: BatchTally, sign: int) -> None:
         t = self.emitters[batch.emitter]
+        if sign > 0 and batch.part_hits is not None and self.part_hits is not None \
+                and len(batch.part_hits) == len(self.part_hits):
+            self.part_hits += batch.part_hits
+        else:
+            self.part_hits = None
         t.photons += sign * batch.photons
         if isinstance(t.counts, SparseCounts):
             t.counts.add(batch.counts, sign)
@@ -170,6 +186,8 @@ class Accumulator:
         copy.resolution = self.resolution
         copy._solid_angles = self._solid_angles
         copy.emitters = [dataclasses.replace(t, counts=t.counts.copy()) for t in self.emitters]
+        copy.part_hits = None if self.part_hits is None else self.part_hits.copy()
+        copy.parts = self.parts
         return copy
 
     def rescale(self, emitter: int, flux: float) -> None:

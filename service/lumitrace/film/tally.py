@@ -29,6 +29,7 @@ class BatchTally:
     segments: int = 0
     rays: list | None = None
     records: object | None = None  # the photons' PhotonRecords, when asked for
+    part_hits: np.ndarray | None = None  # surface hits per part (Scene.parts order)
 
     @property
     def escaped(self) -> int:

@@ -101,6 +101,16 @@ def _round_jobs(done: list[int], targets: list[float], shares: list[float],
     return jobs
 
 
+def _warn_unreached(acc: Accumulator) -> None:
+    """Warn about parts no photon reached: they cost triangles and change nothing."""
+    unreached = acc.unreached_parts() if acc.photons else None
+    if unreached:
+        more = f" and {len(unreached) - 3} more" if len(unreached) > 3 else ""
+        warn(f"{len(unreached)} part(s) no traced photon reached: "
+             f"{', '.join(unreached[:3])}{more} (fully enclosed, behind an absorber, or "
+             "out of the light's way)")
+
+
 def _warn_cut(acc: Accumulator, settings: TraceSettings) -> None:
     """Warn when the depth limit cut a noticeable share of the emitted flux."""
     f = acc.fluxes()
@@ -227,4 +237,5 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                      "stopping (light output ratio 0, the map's error is undefined)")
                 break
     _warn_cut(r.accumulator, settings)
+    _warn_unreached(r.accumulator)
     return r.result(time.perf_counter() - start, t_prep)

@@ -280,6 +280,12 @@ class Engine:
                             photons=self.refinement.accumulator.photons,
                             relative_error=_finite(est.error) if est else None,
                             converged=bool(est and est.error <= self.settings.convergence_target))
+        unreached = self.refinement.accumulator.unreached_parts()
+        if unreached:
+            self.events.publish("warning", revision=self.revision.number,
+                                message=f"{len(unreached)} part(s) no traced photon "
+                                        f"reached: {', '.join(unreached[:10])}",
+                                parts=unreached)
         if self._pending is None:
             self._write(pictures=True)
 

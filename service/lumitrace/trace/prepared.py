@@ -59,6 +59,7 @@ class PreparedScene:
     embree: object = field(default=None, repr=False)
     part_bits: np.ndarray = field(default=None, repr=False)  # (T,) uint64, see records
     grid: CellGrid = CellGrid()
+    part_index: np.ndarray = field(default=None, repr=False)  # (T,) part of each triangle
 
     @property
     def frame(self) -> TracingFrame:
@@ -131,5 +132,6 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
                          material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          polarised=bool(np.any(kind == DIELECTRIC)),
                          table=table, embree=embree, grid=frame.grid,
+                         part_index=np.asarray(scene.part_index, np.int64),
                          part_bits=np.take(part_bits(scene.parts), scene.part_index)
                          if len(scene.parts) and tri.shape[0] else np.zeros(0, np.uint64))

@@ -62,6 +62,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     pol = np.full_like(d, UNPOLARISED) if ps.polarised else None
     ntex = 6 * resolution * resolution
     tally = BatchTally.empty(job.emitter, job.first, int(idx.size), resolution, record_rays)
+    tally.part_hits = np.zeros(len(ps.scene.parts), np.int64)
 
     for depth in range(max_depth + 1):
         if base.size == 0:
@@ -90,6 +91,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         h = np.flatnonzero(~miss)
         if h.size == 0:
             break
+        if ps.part_index.size:  # hits per part: parts no photon reaches are reported
+            tally.part_hits += np.bincount(np.take(ps.part_index, np.take(prim, h)),
+                                           minlength=tally.part_hits.size)
         if depth == max_depth:
             tally.cut += int(h.size)
             if rec is not None:
