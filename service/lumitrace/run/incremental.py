@@ -133,8 +133,9 @@ def retrace(refinement, scene: Scene, selection: Selection,
     ``trace`` maps (job, photon indices) pairs to tallies with records, in order."""
     t0 = time.perf_counter()
     acc, s = refinement.accumulator, refinement.settings
-    # at least 8 pieces, so that every thread has work however few photons are retraced
-    chunk = max(1, min(chunk, max(1024, -(-selection.photons // 8))))
+    # a few pieces, so that every thread has work, but not small ones: a wave of photons
+    # has a fixed cost per bounce
+    chunk = max(1, min(chunk, max(8192, -(-selection.photons // 4))))
     work = []
     for e, rows in enumerate(selection.rows):
         if not len(rows):
