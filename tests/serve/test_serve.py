@@ -444,3 +444,41 @@ def test_no_request_crashes_the_service(stage):
         if edits.exists():
             assert Sdf.Layer.OpenAsAnonymous(str(edits)) is not None
         assert 422 in codes and 400 in codes
+
+
+def test_edits_merge_into_the_stage_or_are_discarded(stage, tmp_path):
+    """`lumitrace edits merge` folds the accepted deltas into the root layer (the stage then
+    reads as it did with the edits layer over it) and removes the edits layer; `discard`
+    removes it and leaves the stage as it was."""
+    from lumitrace.delta.edits import open_with_edits
+    from lumitrace.stage.reader import read_stage, scene_from_stage
+
+    with Service(stage, *FAST) as s:
+        s.client.set(REFLECTOR, SPEC, 0.55)
+        s.client.transform("/Luminaire/Diffuser", translate=[0, 0, -1.5])
+        s.client.send([{"op": "active", "path": "/Luminaire/Housing", "active": False}])
+        s.wait_done(3)
+        s.stop()
+    edits = stage.parent / "downlight.lumitrace-edits.usda"
+    keep = tmp_path / "kept_edits.usda"
+    shutil.copy(edits, keep)
+    with_edits = scene_from_stage(open_with_edits(stage, keep))
+    before = stage.read_bytes()
+    p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "edits", "discard", stage],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0 and not edits.exists() and stage.read_bytes() == before
+    shutil.copy(keep, edits)
+    p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "edits", "merge", stage],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert not edits.exists()
+    from pxr import Sdf
+
+    Sdf.Layer.Find(str(stage)).Reload(force=True)  # this process read the stage before
+    merged = read_stage(stage)
+    assert merged.parts == with_edits.parts and merged.materials == with_edits.materials
+    np.testing.assert_array_equal(merged.triangles, with_edits.triangles)
+    assert merged.content_hash() == with_edits.content_hash()
+    assert "/Luminaire/Housing" not in merged.parts
+    text = stage.read_text()
+    assert "lumitrace:revision" not in text and "@./downlight.lumitrace.usda@" in text

@@ -86,11 +86,15 @@ def merge_edits(stage_path: str | os.PathLike) -> Path:
         raise StageError("cannot open the stage or its edits layer", str(stage_path))
     strong = Sdf.Layer.CreateAnonymous(".usda")
     strong.TransferContent(edits)
-    strong.customLayerData = {k: v for k, v in edits.customLayerData.items()
-                              if k != REVISION_KEY}
     UsdUtils.StitchLayers(strong, root)  # strong's opinions win, root's fill in
-    # the root keeps its own layer metadata (sublayers, units, default prim)
-    for key in ("subLayers", "defaultPrim", "metersPerUnit", "upAxis", "documentation"):
+    _keep_child_order(strong, root, Sdf.Path.absoluteRootPath)
+    # the root keeps its own layer metadata (sublayers, units, default prim, its data)
+    strong.subLayerPaths[:] = list(root.subLayerPaths)
+    strong.defaultPrim = root.defaultPrim
+    strong.documentation = root.documentation
+    strong.customLayerData = dict(root.customLayerData)
+    for key in ("metersPerUnit", "upAxis", "startTimeCode", "endTimeCode",
+                "timeCodesPerSecond"):
         if root.pseudoRoot.HasInfo(key):
             strong.pseudoRoot.SetInfo(key, root.pseudoRoot.GetInfo(key))
     with atomic_path(stage_path) as tmp:  # keeps the suffix: .usda text, .usdc binary
@@ -101,6 +105,25 @@ def merge_edits(stage_path: str | os.PathLike) -> Path:
     root.Reload(force=True)
     discard_edits(stage_path)
     return stage_path
+
+
+def _keep_child_order(layer: Sdf.Layer, like: Sdf.Layer, parent: Sdf.Path) -> None:
+    """Order the children of ``parent`` in ``layer`` as in ``like`` (children only
+    ``layer`` has come last): the order of parts is the stage's, not the edits'."""
+    spec, ref = layer.GetObjectAtPath(parent), like.GetObjectAtPath(parent)
+    if spec is None or ref is None:
+        return
+    have = [c.name for c in spec.nameChildren]
+    want = [n for n in (c.name for c in ref.nameChildren) if n in have]
+    want += [n for n in have if n not in want]
+    if want != have:
+        # a reorder statement: the composed order is the stage's
+        if parent == Sdf.Path.absoluteRootPath:
+            layer.rootPrimOrder[:] = want
+        else:
+            spec.nameChildrenOrder[:] = want
+    for name in want:
+        _keep_child_order(layer, like, parent.AppendChild(name))
 
 
 def discard_edits(stage_path: str | os.PathLike) -> bool:
