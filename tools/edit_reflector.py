@@ -1,7 +1,7 @@
 """Edit the demo luminaire's reflector through a running ``lumitrace serve`` and print the
 beam angle as the result refines: what a DCC plug-in does, with ``lumitrace.client`` only.
 
-    lumitrace serve stages/downlight.usda --out /tmp/demo &
+    lumitrace serve stages/downlight.usda --out demo-results &
     python tools/edit_reflector.py [--url http://127.0.0.1:8650] [--reflectance 0.7]
 """
 from __future__ import annotations
