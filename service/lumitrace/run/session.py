@@ -27,6 +27,9 @@ FIRST_ITERATION = 1 << 15
 #: A session stopped only by time or error ends once this many photons left no light
 #: outside the luminaire: its error is undefined and would never reach a target.
 NO_ESCAPE_PHOTONS = 1 << 20
+#: Photons a session traces before its estimated error may stop it: the split-half
+#: estimate of the first small rounds can be far too low (few photons per texel).
+MIN_PHOTONS_FOR_TARGET = 1 << 17
 #: Share of the emitted flux cut by the depth limit above which the result says so.
 CUT_WARNING_FRACTION = 0.01
 
@@ -179,6 +182,14 @@ class Refinement:
         self.estimate = estimate(self.accumulator, self.settings.threshold)
         return self.estimate
 
+    def reached_target(self) -> bool:
+        """Whether the estimated error is at or below the target error (the settings'),
+        once :data:`MIN_PHOTONS_FOR_TARGET` photons are traced."""
+        t = self.settings.target_error
+        return (t is not None and self.estimate is not None
+                and self.accumulator.photons >= MIN_PHOTONS_FOR_TARGET
+                and self.estimate.error <= t)
+
     def no_escape(self) -> bool:
         """True once a session without a photon budget has traced
         :data:`NO_ESCAPE_PHOTONS` photons and none of them left the luminaire."""
@@ -230,7 +241,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                                   est, r.accumulator.snapshot()))
             if settings.seconds is not None and elapsed >= settings.seconds:
                 break
-            if settings.target_error is not None and err <= settings.target_error:
+            if r.reached_target():
                 break
             if r.no_escape():
                 warn(f"no light escaped the luminaire in {r.accumulator.photons:,} photons: "

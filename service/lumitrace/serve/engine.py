@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import LumitraceError
-from ..film.convergence import MapEstimate
 from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord
 from ..run.incremental import Selection, retrace, select
@@ -260,15 +259,14 @@ class Engine:
                             iteration=r.iteration, photons=acc.photons,
                             relative_error=_finite(est.error), seconds=elapsed,
                             photons_per_second=acc.photons / max(elapsed, 1e-9))
-        if self._reached(est):
+        if self._reached():
             self._finish()
         elif r.iteration <= EAGER_WRITES or \
                 time.perf_counter() - self._last_write >= WRITE_INTERVAL:
             self._write(pictures=False)
 
-    def _reached(self, est: MapEstimate) -> bool:
-        s = self.settings
-        if s.target_error is not None and est.error <= s.target_error:
+    def _reached(self) -> bool:
+        if self.refinement.reached_target():
             return True
         return self.refinement.no_escape() or not self.refinement.next_jobs()
 
