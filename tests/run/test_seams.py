@@ -134,3 +134,15 @@ def test_a_run_that_would_not_fit_in_memory_is_refused_at_once(downlight, monkey
     monkeypatch.setattr(memory, "available_bytes", lambda: 256 * 2**20)
     with pytest.raises(LumitraceError, match=r"needs about \d\.\d GiB .* 0\.2 GiB is available"):
         run(downlight, TraceSettings(photons=1000, resolution=1024, threads=2))
+
+
+def test_a_target_error_is_not_taken_from_the_first_small_rounds(downlight):
+    """The split-half error of a few thousand photons can be far too low: a session stops
+    at its target only once MIN_PHOTONS_FOR_TARGET photons are in."""
+    from lumitrace.run.session import MIN_PHOTONS_FOR_TARGET, run
+    from lumitrace.run.settings import TraceSettings
+
+    result = run(downlight, TraceSettings(target_error=0.5, resolution=8, threads=1,
+                                          workers="threads"))
+    assert result.estimate.error <= 0.5
+    assert MIN_PHOTONS_FOR_TARGET <= result.photons < 4 * MIN_PHOTONS_FOR_TARGET
