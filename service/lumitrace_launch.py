@@ -5,6 +5,7 @@ KeyboardInterrupt raised meanwhile (the run would then go on and publish). So th
 module, which imports only the standard library, records SIGINT, SIGTERM and SIGHUP before
 lumitrace is imported, and hands them to :func:`lumitrace.cli.main`.
 """
+import os
 import signal
 import sys
 
@@ -18,6 +19,10 @@ def _record(signum, _frame) -> None:
 def main() -> int:
     for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(s, _record)
+    # numpy's small matrix products gain nothing from OpenBLAS threads, whose idle spinning
+    # costs CPU next to the tracer's own threads (set before numpy loads; worker processes
+    # inherit it). A value the user set wins.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from lumitrace.cli import main as cli_main
 
     return cli_main(early_signals=_early)
