@@ -8,7 +8,6 @@ shaping or placement), ``material``, ``geometry`` (a part's transform or points)
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,22 +38,6 @@ def _dearest(kinds) -> str:
     return max(kinds, key=EFFECT_KINDS.index, default="none")
 
 
-def _same_emitter(a, b, but: tuple[str, ...] = ()) -> bool:
-    """Field-by-field equality of two emitters (their transforms are arrays)."""
-    return all(np.array_equal(getattr(a, f.name), getattr(b, f.name))
-               for f in dataclasses.fields(a) if f.name not in but)
-
-
-def _parts_geometry(scene: Scene) -> dict[str, tuple[bytes, bytes]]:
-    """Per part: its triangles' bytes and material indices' bytes."""
-    out = {}
-    for i, name in enumerate(scene.parts):
-        sel = scene.part_index == i
-        out[name] = (np.ascontiguousarray(scene.triangles[sel]).tobytes(),
-                     np.ascontiguousarray(scene.material_index[sel]).tobytes())
-    return out
-
-
 def classify(old: Scene, new: Scene, prims=()) -> Effect:
     """The effect of going from ``old`` to ``new`` (``prims``: what USD said changed)."""
     kinds, emitters, materials, parts = [], [], [], []
@@ -68,24 +51,26 @@ def classify(old: Scene, new: Scene, prims=()) -> Effect:
         emitters += sorted(set(old_e) ^ set(new_e))
     for path in set(old_e) & set(new_e):
         a, b = old_e[path], new_e[path]
-        if _same_emitter(a, b):
+        if a.same_as(b):
             continue
         emitters.append(path)
-        kinds.append("flux" if _same_emitter(a, b, but=("flux",)) else "emitter")
+        kinds.append("flux" if a.same_as(b, ignore=("flux",)) else "emitter")
     old_m = {m.path: m for m in old.materials}
     new_m = {m.path: m for m in new.materials}
     materials += sorted(p for p in set(old_m) | set(new_m) if old_m.get(p) != new_m.get(p))
     if materials:
         kinds.append("material")
-    old_g, new_g = _parts_geometry(old), _parts_geometry(new)
+    old_g, new_g = old.part_geometry(), new.part_geometry()
     if set(old_g) != set(new_g):
         kinds.append("topology")
         parts += sorted(set(old_g) ^ set(new_g))
-    changed = sorted(p for p in set(old_g) & set(new_g) if old_g[p] != new_g[p])
-    if changed:
-        parts += changed
-        # the same triangles with other material slots are a material change
-        moved = any(old_g[p][0] != new_g[p][0] for p in changed)
+    moved = sorted(p for p in set(old_g) & set(new_g)
+                   if not np.array_equal(old_g[p][0], new_g[p][0]))
+    # the same triangles with other materials in their slots are a material change
+    slots = sorted(p for p in set(old_g) & set(new_g) if p not in moved
+                   and not np.array_equal(old_g[p][1], new_g[p][1]))
+    if moved or slots:
+        parts += sorted(moved + slots)
         kinds.append("geometry" if moved else "material")
     return Effect(_dearest(kinds), tuple(sorted(emitters)), tuple(materials),
                   tuple(sorted(parts)), tuple(sorted(map(str, prims))))

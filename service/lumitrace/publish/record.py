@@ -38,7 +38,7 @@ class ResultRecord(Mapping[str, Any]):
         unknown = sorted(set(values) - set(_FIELDS))
         if unknown:
             raise KeyError(f"unknown result field(s): {', '.join(unknown)}")
-        self._values = MappingProxyType({k: _defined(values.get(k)) for k in _FIELDS})
+        self._values = MappingProxyType({k: defined(values.get(k)) for k in _FIELDS})
 
     def __getitem__(self, key: str) -> Any:
         return self._values[key]
@@ -87,7 +87,7 @@ class ResultRecord(Mapping[str, Any]):
         return out
 
 
-def _defined(value: Any) -> Any:
+def defined(value: Any) -> Any:
     """``value``, or None where it is a float that is not a number (an undefined figure)."""
     if isinstance(value, (float, np.floating)) and not math.isfinite(value):
         return None

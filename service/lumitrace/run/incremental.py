@@ -48,17 +48,6 @@ def _normalised(triangles: np.ndarray, frame: TracingFrame) -> np.ndarray:
     return (np.asarray(triangles, np.float64) - np.array(frame.center)) / frame.scale
 
 
-def _part_triangles(scene: Scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Per part path: its triangles (world m) and their material paths."""
-    out = {}
-    mats = np.array([m.path for m in scene.materials] or [""], dtype=object)
-    for i, name in enumerate(scene.parts):
-        sel = scene.part_index == i
-        out[name] = (scene.triangles[sel], mats[scene.material_index[sel]]
-                     if len(scene.materials) else np.zeros(0, object))
-    return out
-
-
 def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
            frame: TracingFrame) -> Selection:
     """The photons of ``old``'s session that the edit to ``new`` can change."""
@@ -72,12 +61,12 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
     for i, (a, b) in enumerate(zip(old.emitters, new.emitters)):
         if a.flux != b.flux:
             return Selection(restart="an emitter's flux changed along with other edits")
-        if not all(np.array_equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__):
+        if not a.same_as(b):
             changed_emitters.append(i)
     new_tri = _normalised(new.triangles, frame)
     if not frame.grid.inside(new_tri):
         return Selection(restart="geometry moved outside the session's tracing frame")
-    old_parts, new_parts = _part_triangles(old), _part_triangles(new)
+    old_parts, new_parts = old.part_geometry(), new.part_geometry()
     old_mats = {m.path: m for m in old.materials}
     new_mats = {m.path: m for m in new.materials}
     changed_mats = {p for p in set(old_mats) | set(new_mats) if old_mats.get(p) != new_mats.get(p)}

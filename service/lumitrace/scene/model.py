@@ -7,7 +7,7 @@ be hashed, pickled to workers and compared.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -74,6 +74,11 @@ class Emitter:
         adding or removing another emitter does not change this one's photons."""
         return int.from_bytes(hashlib.sha256(self.path.encode()).digest()[:8], "little")
 
+    def same_as(self, other: "Emitter", ignore: tuple[str, ...] = ()) -> bool:
+        """Field-by-field equality (the transform is an array), ``ignore`` left out."""
+        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
+                   for f in fields(self) if f.name not in ignore)
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -102,6 +107,16 @@ class Scene:
     def total_flux(self) -> float:
         """Luminous flux of all emitters together (lm)."""
         return float(sum(e.flux for e in self.emitters))
+
+    def part_geometry(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per part path: its triangles (T, 3, 3) and the path of each one's material."""
+        mats = np.array([m.path for m in self.materials] or [""], dtype=object)
+        out = {}
+        for i, name in enumerate(self.parts):
+            sel = self.part_index == i
+            out[name] = (self.triangles[sel], mats[self.material_index[sel]]
+                         if len(self.materials) else np.zeros(0, object))
+        return out
 
     def content_hash(self) -> str:
         """SHA-256 of everything the traced result depends on (geometry, materials,

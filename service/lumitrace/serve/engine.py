@@ -18,7 +18,7 @@ from typing import Any
 
 from ..errors import LumitraceError
 from ..publish.outputs import write_outputs
-from ..publish.record import ResultRecord
+from ..publish.record import ResultRecord, defined
 from ..run.incremental import Selection, retrace, select
 from ..run.session import Refinement
 from ..run.settings import TraceSettings
@@ -115,7 +115,7 @@ class Engine:
                           "done" if self.done else "tracing"),
                 "photons": acc.photons if acc else 0,
                 "iterations": r.iteration if r else 0,
-                "relative_error": _finite(est.error) if est else None,
+                "relative_error": defined(est.error) if est else None,
                 "converged": bool(est and est.error <= self.settings.convergence_target),
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
@@ -257,7 +257,7 @@ class Engine:
         elapsed = time.perf_counter() - self.started
         self.events.publish("iteration", revision=self.revision.number,
                             iteration=r.iteration, photons=acc.photons,
-                            relative_error=_finite(est.error), seconds=elapsed,
+                            relative_error=defined(est.error), seconds=elapsed,
                             photons_per_second=acc.photons / max(elapsed, 1e-9))
         if self._reached():
             self._finish()
@@ -276,7 +276,7 @@ class Engine:
         est = self.refinement.estimate
         self.events.publish("done", revision=self.revision.number,
                             photons=self.refinement.accumulator.photons,
-                            relative_error=_finite(est.error) if est else None,
+                            relative_error=defined(est.error) if est else None,
                             converged=bool(est and est.error <= self.settings.convergence_target))
         unreached = self.refinement.accumulator.unreached_parts()
         if unreached:
@@ -321,8 +321,3 @@ class Engine:
                             relative_error=record["relative_error"], pictures=pictures,
                             input_hash=record["input_hash"], seconds=now - t0,
                             outputs=record.summary().get("outputs", {}))
-
-
-def _finite(value: float) -> float | None:
-    """JSON has no Inf or NaN: an undefined error is null."""
-    return value if value == value and abs(value) != float("inf") else None
