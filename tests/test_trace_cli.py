@@ -43,7 +43,7 @@ def test_json_summary(traced_disc):
     assert summary["escaped_lm"] == pytest.approx(1000.0)
     assert summary["absorbed_lm"] == 0.0
     assert summary["light_output_ratio"] == pytest.approx(1.0)
-    assert summary["peak_direction"][2] < -0.9  # straight down
+    assert summary["photometry"]["peak_direction"][2] < -0.9  # straight down
     assert Path(summary["outputs"]["intensity_map"]) == stage.with_name("disc.intensity.exr")
 
 

@@ -556,6 +556,40 @@ def louvre() -> Usd.Stage:
     return stage
 
 
+def mirror_cup() -> Usd.Stage:
+    radius, length, rho, src, n_seg = 0.025, 0.05, 0.95, 0.00005, 256  # m, m, -, m, -
+    stage, _ = new_stage(1.0, "Reference: a one-sided Lambertian DiskLight (radius 0.05 mm, "
+                              "1000 lm) on the axis of an open mirror cylinder (radius 25 mm, "
+                              "50 mm long, specular reflectance 0.95) at its top rim, "
+                              "emitting down into it.")
+    phi = 2.0 * np.pi * np.arange(n_seg) / n_seg
+    ring = np.stack([radius * np.cos(phi), radius * np.sin(phi)], axis=1)
+    pts = np.concatenate([np.c_[ring, np.zeros(n_seg)], np.c_[ring, np.full(n_seg, -length)]])
+    tris = orient(pts, np.array(grid_triangles(1, n_seg)),
+                  lambda c: -np.c_[c[:, :2], np.zeros(len(c))])  # normals toward the axis
+    mirror = make_material(stage, "Mirror", "mirror", specular_reflectance=rho)
+    define_mesh(stage, "/Luminaire/Wall", pts.astype(np.float32), tris, mirror)
+    light = UsdLux.DiskLight.Define(stage, "/Luminaire/Source")
+    light.CreateRadiusAttr(src)
+    add_emitter(light, FLUX)
+    set_expectation(stage, {
+        "kind": "mirror_cup",
+        "description": "A Lambertian point source of flux Phi on the axis of an open mirror "
+                       "cylinder of reflectance rho, at its rim, emitting into it: a ray at "
+                       "gamma keeps gamma at every reflection off the vertical wall, so "
+                       "I(gamma) = (Phi / pi) cos(gamma) rho^k(gamma), k the reflections "
+                       "before it leaves (steps where tan(gamma) = (2k - 1) radius / length).",
+        "flux": FLUX,
+        "axis": (0.0, 0.0, -1.0),
+        "peak_cd": FLUX / math.pi,
+        "radius": radius,
+        "length": length,
+        "specular_reflectance": rho,
+        "source_radius": src,
+    })
+    return stage
+
+
 STAGES: dict[str, Callable[[], Usd.Stage]] = {
     "louvre.usda": louvre,
     "reference/isotropic.usda": isotropic,
@@ -563,6 +597,7 @@ STAGES: dict[str, Callable[[], Usd.Stage]] = {
     "reference/integrating_sphere.usda": integrating_sphere,
     "reference/fresnel_slab.usda": fresnel_slab,
     "reference/paraboloid.usda": paraboloid,
+    "reference/mirror_cup.usda": mirror_cup,
     "downlight.usda": downlight,
 }
 

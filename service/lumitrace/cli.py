@@ -195,31 +195,42 @@ def _pct(value: float | None) -> str:
 
 def _summary_text(r, stage) -> str:
     """The human summary of a result record."""
-    d = r.peak_direction
-    ang = lambda v: "-" if v is None else f"{v:.1f} deg"  # noqa: E731
+    def ang(v, e):
+        if v is None:
+            return "-"
+        return f"{v:.1f} deg" + ("" if e is None else f" +- {e:.1f}")
+
+    def pm(v, e, unit, digits=2):
+        return "-" if v is None else f"{v:.{digits}f}{' ' + unit if unit else ''}" + (
+            "" if e is None else f" +- {e:.{digits}f}")
+
     lines = [
         f"{r.luminaire} in {stage}",
         f"  photons         {r.photons:,} in {r.iterations} iterations, {r.seconds:.2f} s "
         f"({r.photons_per_second:,.0f} photons/s)",
         f"  emitted         {r.emitted_lm:10.2f} lm",
         f"  escaped         {r.escaped_lm:10.2f} lm   (light output ratio "
-        f"{r.light_output_ratio:.3f})",
+        f"{pm(r.light_output_ratio, r.light_output_ratio_error, '', 4)})",
         f"  absorbed        {r.absorbed_lm:10.2f} lm"]
     if r.cut_lm:
         lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
     lines += [
-        f"  peak intensity  {r.peak_cd:10.2f} cd toward ({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f})",
-        f"  relative error  {_pct(r.relative_error)} estimated RMS over the sphere "
+        f"  peak intensity  {pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
+        f"C {r.peak_c:g}, gamma {r.peak_gamma:g} deg (standard errors after +-)",
+        f"  map error       {_pct(r.relative_error)} estimated RMS over the sphere "
         f"(raw map {_pct(r.raw_relative_error)}){', converged' if r.converged else ''}"
         + ("" if r.escaped_lm else "   (no light escapes the luminaire)"),
+        f"  files' error    {_pct(r.photometry_error)} relative RMS standard error of the "
+        "IES/LDT values",
         f"  downward flux   {r.downward_flux_fraction:.1%}   CIE flux code {r.cie_flux_code}",
-        f"  beam angle      {ang(r.beam_angle_c0_c180)} (C0-C180), "
-        f"{ang(r.beam_angle_c90_c270)} (C90-C270)",
-        f"  field angle     {ang(r.field_angle_c0_c180)} (C0-C180), "
-        f"{ang(r.field_angle_c90_c270)} (C90-C270)",
+        f"  beam angle      {ang(r.beam_angle_c0_c180, r.beam_angle_c0_c180_error)} (C0-C180), "
+        f"{ang(r.beam_angle_c90_c270, r.beam_angle_c90_c270_error)} (C90-C270)",
+        f"  field angle     {ang(r.field_angle_c0_c180, r.field_angle_c0_c180_error)} "
+        f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
         f"  symmetry        {r.symmetry}",
         f"  intensity map   {r.intensity_map}",
         f"  IES / LDT       {r.ies}  {r.ldt}",
+        f"  with errors     {r.photometry_data}",
         f"  pictures        {r.polar_diagram}  {r.photometric_solid}",
         f"  result layer    {r.result_layer}"]
     return "\n".join(lines)

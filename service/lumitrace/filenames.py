@@ -16,6 +16,7 @@ IES_SUFFIX = ".ies"
 LDT_SUFFIX = ".ldt"
 POLAR_SUFFIX = ".polar.png"
 SOLID_SUFFIX = ".solid.png"
+PHOTOMETRY_SUFFIX = ".photometry.json"
 
 
 def stage_name(stage_path: str | os.PathLike) -> str:

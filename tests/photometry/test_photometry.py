@@ -12,7 +12,6 @@ from lumitrace.photometry import frame
 from lumitrace.photometry.eulumdat import format_ldt, parse_ldt, plane_angles, read_ldt
 from lumitrace.photometry.grid import CGammaGrid, apply_symmetry, resample
 from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
-from lumitrace.photometry.quantities import figures
 from lumitrace.report.references import expected_intensity, read_expectation
 from lumitrace.film.texel_quadrature import texel_integrals
 from helpers.paths import ROOT
@@ -51,18 +50,6 @@ def test_lambertian_grid_candela_and_flux(lambertian):
         assert grid.candela[:, j] == pytest.approx(want, rel=0.01)
     assert grid.candela[:, grid.gamma > 92.0].max() < 1e-9
     assert apply_symmetry(grid, 0.01).symmetry == "rotational"
-
-
-def test_figures_of_the_lambertian_disc(lambertian):
-    f = figures(lambertian, "Z", 1000.0, 1000.0)
-    assert f.luminous_flux == pytest.approx(1000.0, rel=1e-9)
-    assert f.light_output_ratio == pytest.approx(1.0)
-    assert f.downward_flux_fraction == pytest.approx(1.0, abs=5e-4)  # texels on the horizon
-    assert f.peak_intensity == pytest.approx(1000 / np.pi, rel=0.01)
-    assert f.beam_angle_c0_c180 == pytest.approx(120.0, abs=0.5)  # cos = 0.5 at 60 deg
-    assert f.field_angle_c90_c270 == pytest.approx(2 * np.degrees(np.arccos(0.1)), abs=0.5)
-    # sin^2 of 41.4, 60, 75.5 deg: 43.7, 75.0, 93.7 percent
-    assert f.cie_flux_code == "44 75 94 100 100"
 
 
 def _asymmetric(d):

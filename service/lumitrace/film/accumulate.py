@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cubemap import texel_solid_angles
+from .goniometer import N_BINS, Goniometer
 from ..scene import Scene
 from .tally import BatchTally
 
@@ -88,6 +89,18 @@ def compact(counts: np.ndarray):
 
 
 
+def _add_counts(target, counts, sign: int) -> None:
+    """Add (sign 1) or subtract (sign -1) dense or sparse ``counts`` into ``target``."""
+    if isinstance(target, SparseCounts):
+        target.add(counts, sign)
+    elif isinstance(counts, SparseCounts):
+        target[:, counts.idx] += sign * counts.val
+    elif sign > 0:
+        target += counts
+    else:
+        target -= counts
+
+
 def _half(counts, half: int | None) -> tuple[np.ndarray, np.ndarray | None]:
     """(values, texel indices or None for dense) of the counts of a half, or both."""
     if isinstance(counts, SparseCounts):
@@ -104,6 +117,7 @@ class EmitterTally:
     flux: float
     photons: int = 0
     counts: np.ndarray = field(default=None, repr=False)
+    cells: np.ndarray = field(default=None, repr=False)  # the goniophotometer's counts
     absorbed: int = 0
     cut: int = 0
     segments: int = 0
@@ -121,12 +135,16 @@ class EmitterTally:
 class Accumulator:
     """Sums batch tallies per emitter and turns them into intensities (cd) and fluxes (lm)."""
 
-    def __init__(self, scene: Scene, resolution: int):
+    def __init__(self, scene: Scene, resolution: int, goniometer: Goniometer | None = None):
+        """Zero counts for ``scene``'s emitters in a cube map of ``resolution`` texels a
+        side; ``goniometer`` is the one the tracer counts with (default: the scene's)."""
         self.resolution = int(resolution)
+        self.goniometer = goniometer or Goniometer.of(scene)
         ntex = 6 * self.resolution * self.resolution
-        sparse = len(scene.emitters) * 2 * ntex * 8 > DENSE_COUNTS_BYTES
-        self.emitters = [EmitterTally(e.path, e.flux, counts=SparseCounts(ntex) if sparse
-                                      else np.zeros((2, ntex), np.int64))
+        sparse = len(scene.emitters) * 2 * (ntex + N_BINS) * 8 > DENSE_COUNTS_BYTES
+        new = (lambda n: SparseCounts(n)) if sparse else \
+            (lambda n: np.zeros((2, n), np.int64))  # noqa: E731
+        self.emitters = [EmitterTally(e.path, e.flux, counts=new(ntex), cells=new(N_BINS))
                          for e in scene.emitters]
         self._solid_angles = texel_solid_angles(self.resolution)
         #: surface hits per part since the start (None once a batch without them, or a
@@ -167,14 +185,9 @@ class Accumulator:
         else:
             self.part_hits = None
         t.photons += sign * batch.photons
-        if isinstance(t.counts, SparseCounts):
-            t.counts.add(batch.counts, sign)
-        elif isinstance(batch.counts, SparseCounts):
-            t.counts[:, batch.counts.idx] += sign * batch.counts.val
-        elif sign > 0:
-            t.counts += batch.counts
-        else:
-            t.counts -= batch.counts
+        _add_counts(t.counts, batch.counts, sign)
+        if batch.cells is not None:
+            _add_counts(t.cells, batch.cells, sign)
         t.absorbed += sign * batch.absorbed
         t.cut += sign * batch.cut
         t.segments += sign * batch.segments
@@ -184,8 +197,10 @@ class Accumulator:
         get, so the running session never changes a map under their feet."""
         copy = Accumulator.__new__(Accumulator)
         copy.resolution = self.resolution
+        copy.goniometer = self.goniometer
         copy._solid_angles = self._solid_angles
-        copy.emitters = [dataclasses.replace(t, counts=t.counts.copy()) for t in self.emitters]
+        copy.emitters = [dataclasses.replace(t, counts=t.counts.copy(), cells=t.cells.copy())
+                         for t in self.emitters]
         copy.part_hits = None if self.part_hits is None else self.part_hits.copy()
         copy.parts = self.parts
         return copy
@@ -252,6 +267,34 @@ class Accumulator:
                 else:
                     var[idx] += term
         return var.reshape(self.shape)
+
+    def binned(self, group: np.ndarray, groups: int, half: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Flux (lm), its variance (lm^2) and the sum of the squared photon fluxes (lm^2,
+        what the variance of a ratio of two groups needs) in groups of the goniophotometer's
+        bins:
+        ``group`` (N_BINS,) gives each bin's group (0 .. ``groups`` - 1, or -1 for none).
+        The variance is exact for analog photons: a group's count is binomial per emitter,
+        var = sum over emitters of w^2 n (1 - n / N) (bins of one group are not
+        independent, so it is taken of the group's count, not summed over its bins).
+        ``half`` 0 or 1: the estimate from that half of the photons alone."""
+        group = np.asarray(group, np.int64)
+        use = group >= 0
+        flux, var, squares = np.zeros(groups), np.zeros(groups), np.zeros(groups)
+        for t in self.emitters:
+            if not t.photons:
+                continue
+            v, idx = _half(t.cells, half)
+            g = group if idx is None else group[idx]
+            keep = use if idx is None else use[idx]
+            n = np.bincount(g[keep], weights=v[keep].astype(np.float64), minlength=groups)
+            w, total = t.photon_flux, t.photons
+            if half is not None:  # half the photons, each carrying twice the flux
+                w, total = 2.0 * w, 0.5 * total
+            flux += w * n
+            squares += w * w * n
+            var += w * w * n * np.maximum(1.0 - n / total, 0.0)
+        return flux, var, squares
 
     def intensity(self) -> np.ndarray:
         """Raw luminous intensity estimate (cd) per texel: texel flux / texel solid angle."""

@@ -1,76 +1,113 @@
-"""The photometric description of a traced result: C-gamma grid, symmetry, figures and
-the luminous opening, ready for the IES and EULUMDAT writers and the pictures."""
+"""The photometric description of a traced result, measured by the virtual goniophotometer:
+the C-gamma grid with its standard errors and symmetry, the figures and the luminous
+opening, ready for the IES and EULUMDAT writers, the pictures and the sidecar JSON."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..film.accumulate import Accumulator
+from ..film.goniometer import EXIT_SIDE, FACES, N_BINS, N_CELLS, N_EXIT
 from ..scene import Scene
-from . import frame
-from .grid import CGammaGrid, apply_symmetry, resample
+from .grid import CGammaGrid, default_gammas
+from .measured import measure, symmetric_grid
 from .quantities import PhotometricFigures, figures
 
-#: Symmetry is used where the data departs from it by less than this (relative RMS), or
-#: by less than three times the map's own estimated error when that is larger.
+#: Symmetry is used unless the counts show a departure from it larger than this (relative
+#: RMS, at a 3 sigma lower bound; see :func:`~lumitrace.photometry.measured.asymmetry`).
 SYMMETRY_TOLERANCE = 0.01
+#: C step (deg) of the published grid.
+C_STEP = 5.0
+#: Share of the exiting flux left out at each end of the opening's extent (its edges are
+#: where all but this much of the light has left).
+OPENING_TAIL = 0.005
+#: Below this share of the escaping flux, the sides of the box have no luminous height.
+SIDE_SHARE = 0.01
 
 
 @dataclass(frozen=True)
 class LuminousOpening:
-    """Luminous dimensions (m) in the photometric frame: along C0, along C90, vertical."""
+    """Luminous dimensions (m) in the photometric frame, along C0, along C90 and vertical,
+    and the opening's centre (m, photometric-frame coordinates): measured from where
+    escaping photons cross the luminaire's bounding box."""
 
     length: float
     width: float
     height: float
+    centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-def luminous_opening(scene: Scene, downward_fraction: float) -> LuminousOpening:
-    """The luminaire's extent in the photometric frame: its geometry's bounding box (or its
-    emitters' where it has none); height 0 for a luminaire that sends all light down
-    through a horizontal opening (LM-63's flat luminous area)."""
-    c0, c90, up = frame.axes(scene.up_axis)
-    tri = np.asarray(scene.triangles).reshape(-1, 3)
-    if tri.size == 0:
-        tri = np.array([np.asarray(e.to_world)[:3, 3] for e in scene.emitters])
-        spans = [_emitter_span(e) for e in scene.emitters]
-        pad = max(spans) if spans else 0.0
+def _extent(marginal: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
+    """(start, end) between which all but :data:`OPENING_TAIL` of a binned distribution
+    (``marginal`` over ``lo`` .. ``hi``) lies at each end, linear within bins."""
+    total = float(marginal.sum())
+    if total <= 0 or hi <= lo:
+        return lo, hi
+    cum = np.concatenate([[0.0], np.cumsum(marginal)]) / total
+    edges = np.linspace(lo, hi, len(marginal) + 1)
+    return (float(np.interp(OPENING_TAIL, cum, edges)),
+            float(np.interp(1.0 - OPENING_TAIL, cum, edges)))
+
+
+def luminous_opening(acc: Accumulator) -> LuminousOpening:
+    """The luminous opening from the goniophotometer's exit bins: length and width are the
+    extents (along C0, C90) of the crossings of the box's bottom face (its top face for a
+    luminaire that sends more light up), the height the vertical extent of the crossings
+    of its sides, 0 where they carry less than :data:`SIDE_SHARE` of the flux (LM-63's flat
+    opening)."""
+    g = acc.goniometer
+    group = np.full(N_BINS, -1, np.int64)
+    group[N_CELLS:] = np.arange(N_EXIT)
+    flux = acc.binned(group, N_EXIT)[0].reshape(len(FACES), EXIT_SIDE, EXIT_SIDE)
+    lo, hi = np.array(g.lo), np.array(g.hi)
+    total = float(flux.sum())
+    if total <= 0:
+        return LuminousOpening(*(hi - lo), tuple(0.5 * (lo + hi)))
+    face = 0 if flux[0].sum() >= flux[1].sum() else 1
+    level = lo[2] if face == 0 else hi[2]
+    f = flux[face]  # rows along C90, columns along C0
+    if f.sum() < SIDE_SHARE * total:  # next to nothing leaves through top or bottom
+        a0, b0, a1, b1 = lo[0], hi[0], lo[1], hi[1]
     else:
-        pad = 0.0
-    ext = lambda axis: float(np.ptp(tri @ axis)) + pad  # noqa: E731
-    height = 0.0 if downward_fraction > 0.99 else ext(up)
-    return LuminousOpening(length=ext(c0), width=ext(c90), height=height)
-
-
-def _emitter_span(e) -> float:
-    """Largest size (m) of an emitter's emitting shape."""
-    local = {"sphere": 2 * e.radius, "disk": 2 * e.radius, "rect": max(e.width, e.height),
-             "cylinder": max(e.length, 2 * e.radius)}[e.kind]
-    if e.kind == "sphere" and e.treat_as_point:
-        local = 0.0
-    return local * float(np.linalg.norm(np.asarray(e.to_world)[:3, :3], axis=0).max())
+        a0, b0 = _extent(f.sum(axis=0), lo[0], hi[0])
+        a1, b1 = _extent(f.sum(axis=1), lo[1], hi[1])
+    sides = flux[2:]
+    height = 0.0
+    if sides.sum() >= SIDE_SHARE * total:
+        a2, b2 = _extent(sides.sum(axis=(0, 2)), lo[2], hi[2])
+        height = b2 - a2
+    return LuminousOpening(b0 - a0, b1 - a1, height, (0.5 * (a0 + b0), 0.5 * (a1 + b1), level))
 
 
 @dataclass(frozen=True)
 class Photometry:
-    """The photometric description of an intensity map: the C-gamma grid (full, and
-    reduced to the symmetry the data holds), the derived figures and the luminous opening."""
+    """The photometric description of a result: the published C-gamma grid (reduced to the
+    symmetry the counts hold, with standard errors), the figures, the luminous opening, the
+    emitters' flux and each symmetry's estimated departure."""
 
     grid: CGammaGrid
-    grid_full: CGammaGrid
     figures: PhotometricFigures
     opening: LuminousOpening
     lamp_flux: float
+    departures: dict
 
 
-def photometry_of(scene: Scene, intensity_map: np.ndarray, escaped_flux: float,
-               map_error: float = 0.0) -> Photometry:
-    """Resample an intensity map (cd, cube map) onto the C-gamma grid in the photometric
-    frame, detect its symmetry and derive the figures (lm, cd, deg)."""
-    lamp = scene.total_flux
-    grid_full = resample(intensity_map, scene.up_axis, escaped_flux)
-    tol = max(SYMMETRY_TOLERANCE, 3.0 * map_error)
-    grid = apply_symmetry(grid_full, tol)
-    fig = figures(intensity_map, scene.up_axis, escaped_flux, lamp)
-    opening = luminous_opening(scene, fig.downward_flux_fraction)
-    return Photometry(grid, grid_full, fig, opening, lamp)
+def beam_half_width(acc: Accumulator) -> float | None:
+    """Half-angle (deg) from nadir-most peak of the mean profile over all C to where it
+    halves, on a 0.5 deg raster; None where it never halves."""
+    gam = np.arange(0.0, 180.0 + 1e-9, 0.5)
+    prof = measure(acc, gam, C_STEP, "rotational").candela[0]
+    k = int(np.argmax(prof))
+    below = np.nonzero(prof[k:] < 0.5 * prof[k])[0]
+    return float(gam[k + below[0]] - gam[k]) if below.size and prof[k] > 0 else None
+
+
+def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
+    """Measure the photometry of a session's counts: a grid of C every :data:`C_STEP` deg
+    and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
+    deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
+    grid, departures = symmetric_grid(acc, default_gammas(beam_half_width(acc)), C_STEP,
+                                      SYMMETRY_TOLERANCE)
+    fig = figures(acc, grid, C_STEP)
+    return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)

@@ -34,21 +34,26 @@ class CGammaGrid:
     gamma: np.ndarray
     candela: np.ndarray
     symmetry: str = "none"
+    sigma: np.ndarray | None = None  # standard error of each value (cd), where known
 
     def full(self) -> "CGammaGrid":
         """The same distribution on planes all round (0 <= C < 360), unfolding symmetry."""
         if self.symmetry == "none":
             keep = self.c < 360.0 - 1e-9
-            return replace(self, c=self.c[keep], candela=self.candela[keep])
+            return replace(self, c=self.c[keep], candela=self.candela[keep],
+                           sigma=None if self.sigma is None else self.sigma[keep])
         step = _c_step(self.c)
         cs = np.arange(0.0, 360.0 - 1e-9, step)
-        return CGammaGrid(cs, self.gamma, self.at(cs), "none")
+        return CGammaGrid(cs, self.gamma, self.at(cs), "none",
+                          None if self.sigma is None else self.at(cs, self.sigma))
 
-    def at(self, c_deg: np.ndarray) -> np.ndarray:
-        """Intensity rows (len(c), len(gamma)) at any C angles, using the symmetry."""
+    def at(self, c_deg: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
+        """Intensity rows (len(c), len(gamma)) at any C angles, using the symmetry (or rows
+        of ``values``, shaped like ``candela``, such as ``sigma``)."""
+        table = self.candela if values is None else values
         c = np.mod(np.asarray(c_deg, dtype=np.float64), 360.0)
         if self.symmetry == "rotational":
-            return np.repeat(self.candela[:1], len(c), axis=0)
+            return np.repeat(table[:1], len(c), axis=0)
         if self.symmetry == "C0-C180":
             c = np.where(c > 180.0, 360.0 - c, c)
         elif self.symmetry == "C90-C270":
@@ -56,7 +61,7 @@ class CGammaGrid:
         elif self.symmetry == "quadrant":
             c = np.where(c > 180.0, 360.0 - c, c)
             c = np.where(c > 90.0, 180.0 - c, c)
-        src_c, src = self.c, self.candela
+        src_c, src = self.c, table
         if self.symmetry == "none" and src_c[-1] < 360.0 - 1e-9:
             src_c = np.append(src_c, 360.0)
             src = np.vstack([src, src[:1]])

@@ -1,11 +1,17 @@
-"""Figures derived from a luminous intensity distribution: fluxes, ratios, angles, CIE code.
+"""Figures a datasheet lists, measured from the goniophotometer's counts with their standard
+errors: fluxes, ratios, the CIE flux code, the peak, beam and field angles.
 
-CIE flux code (CIE 52): N1, N2, N3 are the shares of the downward flux within 41.4, 60
-and 75.5 degrees of nadir, N4 the downward share of the luminaire flux, N5 the light
-output ratio, all in percent.
+CIE flux code (CIE 52): N1, N2, N3 are the shares of the downward flux within 41.4, 60 and
+75.5 degrees of nadir (cones of pi/2, pi and 3 pi/2 sr), N4 the downward share of the
+luminaire flux, N5 the light output ratio, all in percent. The zones are whole goniometer
+cells (their edges are cell edges), so these are exact photon counts, not integrals of a
+resampled grid.
 
-All are computed on a fine C-gamma grid (2 deg by 0.25 deg) resampled from the map, so zone
-boundaries such as the CIE flux code's 41.4, 60 and 75.5 degrees are resolved.
+The peak is the largest value of the published grid, estimated without the upward bias of
+a maximum of noisy values: each half of the photons picks the cell, the other half measures
+it (the two estimates averaged). Beam (50%) and field (10%) angles are crossings of the
+published grid's plane profiles with that level; their errors come from redrawing the
+profiles within their standard errors (a parametric bootstrap, fixed seed).
 """
 from __future__ import annotations
 
@@ -14,99 +20,189 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .grid import CGammaGrid, resample
+from ..film.accumulate import Accumulator
+from ..film.goniometer import CIE_COSINES, GAMMA_EDGES, N_BINS, N_C, N_CELLS
+from .grid import CGammaGrid
+from .measured import cell_solid_angle_grid, measure
 
-#: Cone half-angles (deg) of the CIE flux code: solid angles pi/2, pi, 3pi/2 and 2pi sr.
-CIE_ZONES = (41.4, 60.0, 75.5, 90.0)
+#: Cone half-angles (deg) of the CIE flux code, and the horizon.
+CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
+#: Redraws of the plane profiles for the errors of beam and field angles.
+BOOTSTRAP_DRAWS = 200
 
 
 @dataclass(frozen=True)
 class PhotometricFigures:
-    """What a datasheet lists (lm, %, cd, degrees)."""
+    """What a datasheet lists (lm, fractions, cd, degrees), each ``*_error`` the standard
+    error of the figure before it (None where the figure is undefined)."""
 
     luminous_flux: float
+    luminous_flux_error: float
     lamp_flux: float
     light_output_ratio: float
+    light_output_ratio_error: float
     downward_flux_fraction: float
+    downward_flux_fraction_error: float
     upward_flux_fraction: float
     peak_intensity: float
+    peak_intensity_error: float
     peak_c: float
     peak_gamma: float
     beam_angle_c0_c180: float | None
+    beam_angle_c0_c180_error: float | None
     beam_angle_c90_c270: float | None
+    beam_angle_c90_c270_error: float | None
     field_angle_c0_c180: float | None
+    field_angle_c0_c180_error: float | None
     field_angle_c90_c270: float | None
+    field_angle_c90_c270_error: float | None
     cie_flux_code: str
+    cie_flux_code_values: tuple[float, ...]
+    cie_flux_code_errors: tuple[float, ...]
+    photometry_error: float | None
 
     def as_dict(self) -> dict:
         return asdict(self)
 
 
-def zonal_flux(grid: CGammaGrid, gamma_deg: float) -> float:
-    """Flux (lm) inside the cone gamma < ``gamma_deg`` about nadir (exact zone edges)."""
-    g = grid.full()
-    gam = np.union1d(g.gamma, [gamma_deg])
-    gam = gam[gam <= gamma_deg + 1e-12]
-    rows = np.array([np.interp(gam, g.gamma, row) for row in g.candela])
-    # trapezoid in gamma of I(gamma) sin(gamma), sectors in C
-    s = np.sin(np.radians(gam))
-    per_c = np.trapezoid(rows * s[None, :], np.radians(gam), axis=1)
-    dc = 2.0 * np.pi / len(g.c)
-    return float(per_c.sum() * dc)
+def _gamma_group(edge_deg: float) -> np.ndarray:
+    """Goniometer bins below gamma ``edge_deg`` (a cell edge): group 0; the rest -1."""
+    centres = 0.5 * (GAMMA_EDGES[1:] + GAMMA_EDGES[:-1])
+    group = np.full(N_BINS, -1, np.int64)
+    group[:N_CELLS] = np.where(np.broadcast_to(centres < edge_deg, (N_C, len(centres))),
+                               0, -1).ravel()
+    return group
 
 
-def _plane_profile(grid: CGammaGrid, c_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """Intensity across a vertical plane: angle from nadir, negative on the C+180 side."""
-    a = grid.at(np.array([c_deg]))[0]
-    b = grid.at(np.array([c_deg + 180.0]))[0]
-    ang = np.concatenate([-grid.gamma[::-1], grid.gamma[1:]])
-    return ang, np.concatenate([b[::-1], a[1:]])
+def _ratio(a: tuple, b: tuple) -> tuple[float, float]:
+    """A / B and its standard error for photon fluxes in nested groups (A within B), each
+    given as (flux, variance, sum of squared photon fluxes): given B's photons, A's share
+    is binomial."""
+    fa, _, qa = a
+    fb, _, qb = b
+    if fb <= 0:
+        return 0.0, math.nan
+    r = fa / fb
+    return r, math.sqrt(max(qa * (1.0 - 2.0 * r) + r * r * qb, 0.0)) / fb
 
 
-def spread_angle(grid: CGammaGrid, c_deg: float, fraction: float) -> float | None:
-    """Full angle (deg) between the directions of the plane through ``c_deg`` where the
-    intensity falls to ``fraction`` of the plane's maximum, either side of the maximum."""
-    ang, prof = _plane_profile(grid, c_deg)
+def zone_figures(acc: Accumulator) -> dict:
+    """Escaped and downward flux with errors, N1..N5 of the CIE flux code with errors."""
+    zones = {}
+    for edge in (*CIE_ZONES, 180.0):
+        f, v, q = acc.binned(_gamma_group(edge), 1)
+        zones[edge] = (float(f[0]), float(v[0]), float(q[0]))
+    total, down = zones[180.0], zones[90.0]
+    lamp = sum(t.flux for t in acc.emitters if t.photons)
+    n = [_ratio(zones[e], down) for e in CIE_ZONES[:3]]
+    dff = _ratio(down, total)
+    lor = (total[0] / lamp, math.sqrt(total[1]) / lamp) if lamp > 0 else (math.nan, math.nan)
+    values = tuple(100.0 * x for x, _ in (*n, dff, lor))
+    errors = tuple(100.0 * e for _, e in (*n, dff, lor))
+    return {"flux": total[0], "flux_error": math.sqrt(total[1]), "lamp": lamp,
+            "lor": lor, "dff": dff, "cie": (values, errors)}
+
+
+def split_peak(h0: np.ndarray, s0: np.ndarray, h1: np.ndarray, s1: np.ndarray
+               ) -> tuple[float, float, int, int]:
+    """The largest value of two half-photon grids' mean, without the bias of a maximum: each
+    half picks a cell, the other half measures it (a choice independent of the measurement
+    leaves it unbiased). The pick is the largest lower bound, value - 2 sigma, so a large
+    cell measured well wins over a tiny noisy one on a flat top. Returns (value, standard
+    error, cell picked by half 0, cell picked by half 1), cells as flat indices."""
+    a0, a1 = int(np.argmax(h0 - 2.0 * s0)), int(np.argmax(h1 - 2.0 * s1))
+    value = 0.5 * (h1.flat[a0] + h0.flat[a1])
+    error = 0.5 * math.hypot(s1.flat[a0], s0.flat[a1])
+    return float(value), float(error), a0, a1
+
+
+def _plane_profile(grid: CGammaGrid, c_deg: float, values=None):
+    """Values across the vertical plane through C (angle from nadir, negative toward
+    C + 180)."""
+    a = grid.at(np.array([c_deg]), values)[0]
+    b = grid.at(np.array([c_deg + 180.0]), values)[0]
+    return np.concatenate([-grid.gamma[::-1], grid.gamma[1:]]), np.concatenate([b[::-1], a[1:]])
+
+
+def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float) -> float | None:
+    """Full angle (deg) between the crossings of ``level`` either side of the profile's
+    largest value (linear between samples), or None where it does not cross on both."""
     k = int(np.argmax(prof))
-    level = fraction * prof[k]
-    if prof[k] <= 0:
+    if not prof[k] > 0 or not level > 0:
         return None
 
-    def crossing(idx):
-        for i0, i1 in zip(idx[:-1], idx[1:]):
-            if prof[i1] < level <= prof[i0]:
-                t = (prof[i0] - level) / (prof[i0] - prof[i1])
-                return ang[i0] + t * (ang[i1] - ang[i0])
+    def crossing(step):
+        i = k
+        while 0 <= i + step < len(prof):
+            if prof[i + step] < level <= prof[i]:
+                t = (prof[i] - level) / (prof[i] - prof[i + step])
+                return ang[i] + t * (ang[i + step] - ang[i])
+            i += step
         return None
 
-    right = crossing(list(range(k, len(ang))))
-    left = crossing(list(range(k, -1, -1)))
-    if right is None or left is None:
-        return None
-    return float(right - left)
+    right, left = crossing(1), crossing(-1)
+    return None if right is None or left is None else float(right - left)
 
 
-def figures(intensity_map: np.ndarray, up_axis: str, escaped_flux: float,
-            lamp_flux: float) -> PhotometricFigures:
-    """Derived figures of a cube-map distribution (cd) whose integral is ``escaped_flux``."""
-    fine = resample(intensity_map, up_axis, escaped_flux, c_step=2.0,
-                    gammas=np.arange(0.0, 180.0 + 1e-9, 0.25))
-    total = fine.flux()
-    down = zonal_flux(fine, 90.0)
-    zones = [zonal_flux(fine, z) for z in CIE_ZONES[:3]]
-    n = [100.0 * z / down if down > 0 else 0.0 for z in zones]
-    n4 = 100.0 * down / total if total > 0 else 0.0  # downward flux fraction
-    n5 = 100.0 * total / lamp_flux if lamp_flux > 0 else 0.0  # light output ratio
-    code = " ".join(str(int(round(v))) for v in (*n, n4, n5))
-    peak, pc, pg = fine.peak
+def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float,
+                  fraction: float, rng: np.random.Generator) -> tuple[float | None, float | None]:
+    """The beam (``fraction`` 0.5) or field (0.1) angle in the plane through ``c_deg`` and
+    its standard error."""
+    ang, prof = _plane_profile(grid, c_deg)
+    _, sig = _plane_profile(grid, c_deg, grid.sigma)
+    p0 = _plane_profile(halves[0], c_deg)[1], _plane_profile(halves[0], c_deg, halves[0].sigma)[1]
+    p1 = _plane_profile(halves[1], c_deg)[1], _plane_profile(halves[1], c_deg, halves[1].sigma)[1]
+    top, top_err, _, _ = split_peak(p0[0], p0[1], p1[0], p1[1])
+    angle = spread_angle(ang, prof, fraction * top)
+    if angle is None:
+        return None, None
+    draws = []
+    for _ in range(BOOTSTRAP_DRAWS):
+        a = spread_angle(ang, prof + sig * rng.standard_normal(len(prof)),
+                         fraction * (top + top_err * rng.standard_normal()))
+        if a is not None:
+            draws.append(a)
+    err = float(np.std(draws, ddof=1)) if len(draws) > 1 else None
+    return angle, err
+
+
+def relative_error(grid: CGammaGrid, c_step: float) -> float | None:
+    """Relative RMS standard error of the grid as a whole: sqrt(sum dOmega sigma^2 /
+    sum dOmega I^2), over the full sphere."""
+    full = grid.full()
+    omega = cell_solid_angle_grid(full.gamma, c_step)
+    den = float((omega * full.candela ** 2).sum())
+    return math.sqrt(float((omega * full.sigma ** 2).sum()) / den) if den > 0 else None
+
+
+def figures(acc: Accumulator, grid: CGammaGrid, c_step: float) -> PhotometricFigures:
+    """The datasheet figures of the goniophotometer's counts and the published ``grid``
+    (with standard errors, measured by :func:`~lumitrace.photometry.measured.measure`)."""
+    z = zone_figures(acc)
+    halves = tuple(measure(acc, grid.gamma, c_step, grid.symmetry, half=h) for h in (0, 1))
+    peak, peak_err, a0, a1 = split_peak(halves[0].candela, halves[0].sigma,
+                                        halves[1].candela, halves[1].sigma)
+    at = a0 if grid.candela.flat[a0] >= grid.candela.flat[a1] else a1
+    i, j = np.unravel_index(at, grid.candela.shape)
+    rng = np.random.default_rng(0)
+    spreads = {(c, f): plane_spreads(grid, halves, c, f, rng)
+               for f in (0.5, 0.1) for c in (0.0, 90.0)}
+    values, errors = z["cie"]
+    code = " ".join(str(int(round(v))) for v in values)
+    dff, dff_err = z["dff"]
     return PhotometricFigures(
-        luminous_flux=total, lamp_flux=lamp_flux,
-        light_output_ratio=total / lamp_flux if lamp_flux > 0 else math.nan,
-        downward_flux_fraction=down / total if total > 0 else 0.0,
-        upward_flux_fraction=1.0 - down / total if total > 0 else 0.0,
-        peak_intensity=peak, peak_c=pc, peak_gamma=pg,
-        beam_angle_c0_c180=spread_angle(fine, 0.0, 0.5),
-        beam_angle_c90_c270=spread_angle(fine, 90.0, 0.5),
-        field_angle_c0_c180=spread_angle(fine, 0.0, 0.1),
-        field_angle_c90_c270=spread_angle(fine, 90.0, 0.1),
-        cie_flux_code=code)
+        luminous_flux=z["flux"], luminous_flux_error=z["flux_error"], lamp_flux=z["lamp"],
+        light_output_ratio=z["lor"][0], light_output_ratio_error=z["lor"][1],
+        downward_flux_fraction=dff, downward_flux_fraction_error=dff_err,
+        upward_flux_fraction=1.0 - dff if z["flux"] > 0 else 0.0,
+        peak_intensity=peak, peak_intensity_error=peak_err,
+        peak_c=float(grid.c[i]), peak_gamma=float(grid.gamma[j]),
+        beam_angle_c0_c180=spreads[0.0, 0.5][0], beam_angle_c0_c180_error=spreads[0.0, 0.5][1],
+        beam_angle_c90_c270=spreads[90.0, 0.5][0],
+        beam_angle_c90_c270_error=spreads[90.0, 0.5][1],
+        field_angle_c0_c180=spreads[0.0, 0.1][0],
+        field_angle_c0_c180_error=spreads[0.0, 0.1][1],
+        field_angle_c90_c270=spreads[90.0, 0.1][0],
+        field_angle_c90_c270_error=spreads[90.0, 0.1][1],
+        cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
+        photometry_error=relative_error(grid, c_step))

@@ -32,23 +32,19 @@ from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signal
 
 
 def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: Path) -> dict:
-    """The UsdLux light standing in for the luminaire: an IES-shaped disk the size of its
-    luminous opening (equal area), at the opening's centre, with the luminaire's flux."""
+    """The UsdLux light standing in for the luminaire, a child of the luminaire prim: an
+    IES-shaped disk the size of its measured luminous opening (equal area), at the
+    opening's centre (luminaire space, stage units), with the luminaire's flux."""
     opening = ph.opening
-    _, _, up = frame.axes(scene.up_axis)
-    mpu = scene.meters_per_unit
-    tri = np.asarray(scene.triangles).reshape(-1, 3)
-    if tri.size:
-        lo, hi = tri.min(axis=0), tri.max(axis=0)
-        centre = 0.5 * (lo + hi)
-        if ph.figures.downward_flux_fraction > 0.5:  # opening at the bottom
-            centre = centre - up * (0.5 * float((hi - lo) @ up))
-    else:
-        centre = np.mean([np.asarray(e.to_world)[:3, 3] for e in scene.emitters], axis=0)
+    centre = np.asarray(scene.photometric_axes).T @ np.asarray(opening.centre)  # world m
+    m = np.asarray(scene.luminaire_to_world) if scene.luminaire_to_world else \
+        np.diag([scene.meters_per_unit] * 3 + [1.0])
+    local = np.linalg.solve(m, np.append(centre, 1.0))[:3]
+    scale = float(np.cbrt(abs(np.linalg.det(m[:3, :3])))) or scene.meters_per_unit
     radius = float(np.sqrt(max(opening.length * opening.width, 1e-12) / np.pi))
     return {"ies": os.path.relpath(ies_path, layer_dir),
-            "flux": ph.figures.luminous_flux, "radius": radius / mpu,
-            "position": tuple(float(x) / mpu for x in centre), "up_axis": scene.up_axis,
+            "flux": ph.figures.luminous_flux, "radius": radius / scale,
+            "position": tuple(float(x) for x in local), "up_axis": scene.up_axis,
             "emitters": [e.path for e in scene.emitters if "[" not in e.path]}
 
 
@@ -59,9 +55,19 @@ def plotting_available() -> bool:
 
 def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path]) -> ResultRecord:
     """The result record of a traced session, its photometry and its output paths."""
-    pfig = ph.figures.as_dict()
-    return ResultRecord({**trace_figures(result), **pfig, "symmetry": ph.grid.symmetry,
+    fig = ph.figures
+    peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
+                                result.scene.up_axis, _rotation(result.scene))
+    o = ph.opening
+    return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
+                         "peak_direction": tuple(float(x) for x in peak_dir),
+                         "luminous_opening": (o.length, o.width, o.height),
                          **{k: str(v) for k, v in paths.items()}})
+
+
+def _rotation(scene: Scene):
+    m = scene.luminaire_to_world
+    return np.asarray(m)[:3, :3] if len(m) else ()
 
 
 def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
@@ -130,8 +136,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         paths.pop("polar_diagram")
         paths.pop("photometric_solid")
     est = result.estimate
-    escaped = result.accumulator.fluxes()["escaped"]
-    ph = photometry_of(scene, est.filtered, escaped, result.relative_error)
+    ph = photometry_of(scene, result.accumulator)
     record = build_record(result, ph, paths)
     folders = [out, layer_dir]
     with locked(folders, name, wait):
@@ -141,8 +146,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         tx = Transaction(name, layer_dir)
         try:
             staged = {k: tx.staged(v) for k, v in paths.items()}
-            write_photometric_files(scene, ph, staged, name, result.relative_error, pictures,
-                                    run_id=tx.run_id)
+            write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id)
             acc = result.accumulator
             channels = {"Y": est.filtered, "raw.Y": est.raw,
                         "count": acc.counts().astype(np.float64),

@@ -1,9 +1,13 @@
-"""The photometric files of a result: IES LM-63-2019, EULUMDAT and the two pictures."""
+"""The photometric files of a result: IES LM-63-2019, EULUMDAT, the grid and figures with
+their standard errors as JSON, and the two pictures."""
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
-from ..filenames import IES_SUFFIX, LDT_SUFFIX, POLAR_SUFFIX, SOLID_SUFFIX
+from ..atomic import write_text
+from ..filenames import IES_SUFFIX, LDT_SUFFIX, PHOTOMETRY_SUFFIX, POLAR_SUFFIX, SOLID_SUFFIX
 from ..photometry.diagrams import photometric_solid, polar_diagram
 from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
@@ -16,22 +20,61 @@ def photometric_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
     """Where the photometric files of ``NAME`` go in ``out_dir``."""
     out = Path(out_dir)
     return {"ies": out / f"{name}{IES_SUFFIX}", "ldt": out / f"{name}{LDT_SUFFIX}",
+            "photometry_data": out / f"{name}{PHOTOMETRY_SUFFIX}",
             "polar_diagram": out / f"{name}{POLAR_SUFFIX}",
             "photometric_solid": out / f"{name}{SOLID_SUFFIX}"}
 
 
+def _finite(x):
+    """JSON has no NaN: a figure that is not a number is null."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
+
+
+def photometry_json(ph: Photometry, run_id: str = "") -> str:
+    """The published grid (cd) with the standard error of every value, its symmetry, the
+    figures with theirs and the luminous opening, as JSON text."""
+    g = ph.grid
+    doc = {
+        "definition": "each intensity is the photon flux through its cell (C +- half the C "
+                      "step, gamma between the midpoints to its neighbours) over the cell's "
+                      "solid angle: an unbiased estimate of the cell's mean intensity; "
+                      "sigma is its standard error (binomial, analog photons)",
+        "frame": "type C: gamma from nadir (the luminaire's -up), C counter-clockwise from "
+                 "its +X seen from above",
+        "runId": run_id,
+        "units": {"c": "deg", "gamma": "deg", "candela": "cd", "sigma": "cd"},
+        "symmetry": g.symmetry,
+        "symmetryDepartures": ph.departures,
+        "c": g.c.tolist(), "gamma": g.gamma.tolist(),
+        "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
+        "figures": {k: _finite(v) for k, v in ph.figures.as_dict().items()},
+        "luminousOpening": {"length_m": ph.opening.length, "width_m": ph.opening.width,
+                            "height_m": ph.opening.height},
+    }
+    return json.dumps(doc, indent=1) + "\n"
+
+
 def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path], name: str,
-                            map_error: float, pictures: bool = True, run_id: str = "") -> None:
-    """Write the IES and LDT files (and, with ``pictures``, the polar curve and the
-    photometric solid) of ``ph`` to ``paths`` (see :func:`photometric_paths`)."""
+                            pictures: bool = True, run_id: str = "") -> None:
+    """Write the IES and LDT files, the JSON of the grid and figures with their errors
+    (and, with ``pictures``, the polar curve and the photometric solid) of ``ph`` to
+    ``paths`` (see :func:`photometric_paths`)."""
     fig, opening, grid, lamp = ph.figures, ph.opening, ph.grid, ph.lamp_flux
     luminaire = scene.luminaire_path.rsplit("/", 1)[-1] or name
+    err = fig.photometry_error
     keywords = {"LUMCAT": name, "LUMINAIRE": f"{luminaire} ({Path(scene.stage_path).name})",
                 "LAMP": f"{len(scene.emitters)} UsdLux emitter(s), {lamp:.6g} lm",
-                "FILEGENINFO": "computed by photon tracing from the USD stage; "
-                               f"estimated relative RMS error {map_error:.2%}; "
+                "FILEGENINFO": "computed by photon tracing from the USD stage; cell means "
+                               "from photon counts, relative RMS standard error "
+                               f"{'n/a' if err is None else f'{err:.2%}'} (per value in "
+                               f"{paths['photometry_data'].name}); "
                                f"symmetry {grid.symmetry}",
                 "_LUMITRACE_RUN": run_id}
+    write_text(paths["photometry_data"], photometry_json(ph, run_id))
     write_ies(paths["ies"], grid, lamp, opening.width, opening.length, opening.height, keywords)
     mm = {"length": 1000 * opening.length, "width": 1000 * opening.width,
           "height": 1000 * opening.height, "lum_length": 1000 * opening.length,

@@ -13,7 +13,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..film.cubemap import texel_directions
 from ..run.session import TraceResult
 from ..schema import RESULT_FIELDS
 
@@ -88,20 +87,20 @@ class ResultRecord(Mapping[str, Any]):
 
 
 def defined(value: Any) -> Any:
-    """``value``, or None where it is a float that is not a number (an undefined figure)."""
+    """``value``, or None where it is a float that is not a number (an undefined figure);
+    in a tuple, each such element."""
     if isinstance(value, (float, np.floating)) and not math.isfinite(value):
         return None
+    if isinstance(value, tuple):
+        return tuple(defined(v) for v in value)
     return value
 
 
 def trace_figures(result: TraceResult) -> dict[str, Any]:
     """The figures of a traced session alone (no files, no photometry): photons, fluxes
-    (lm), the written map's peak (cd) and direction, errors, settings, rates."""
+    (lm), errors, settings, rates."""
     acc = result.accumulator
     f = acc.fluxes()
-    shown = result.estimate.filtered
-    k = int(np.argmax(shown))
-    peak_dir = texel_directions(acc.resolution).reshape(-1, 3)[k]
     secs = max(result.seconds, 1e-9)
     s = result.settings
     return {
@@ -110,7 +109,6 @@ def trace_figures(result: TraceResult) -> dict[str, Any]:
         "emitted_lm": f["emitted"], "escaped_lm": f["escaped"], "absorbed_lm": f["absorbed"],
         "cut_lm": f["cut"],
         "light_output_ratio": f["escaped"] / f["emitted"] if f["emitted"] else 0.0,
-        "peak_cd": float(shown.ravel()[k]), "peak_direction": tuple(float(x) for x in peak_dir),
         "relative_error": result.relative_error,
         "raw_relative_error": result.estimate.raw_error,
         "filtered_relative_error": result.estimate.filtered_error,

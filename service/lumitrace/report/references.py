@@ -25,7 +25,7 @@ import numpy as np
 EXPECTATION_KEY = "lumitrace:expectation"
 
 #: Kinds with a full closed-form intensity distribution (see :func:`expected_intensity`).
-DISTRIBUTION_KINDS = ("isotropic", "lambertian", "fresnel_slab")
+DISTRIBUTION_KINDS = ("isotropic", "lambertian", "fresnel_slab", "mirror_cup")
 #: All kinds of reference expectation.
 KINDS = DISTRIBUTION_KINDS + ("integrating_sphere", "paraboloid")
 
@@ -129,6 +129,32 @@ def lambertian_slab_flux(n: float, samples: int = 20001) -> tuple[float, float]:
 # --------------------------------------------------------------------------------------
 # Expectations
 # --------------------------------------------------------------------------------------
+def mirror_cup_reflections(radius: float, length: float, cos_gamma) -> np.ndarray:
+    """Reflections k of a ray from a point on the axis of an open mirror cylinder (radius,
+    length in one unit), at the rim plane, leaving at ``cos_gamma`` from the axis: it meets
+    the wall first at depth radius / tan(gamma), then every 2 radius / tan(gamma), and the
+    vertical wall keeps gamma."""
+    c = np.clip(np.asarray(cos_gamma, np.float64), 1e-12, 1.0)
+    tan = np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c
+    reach = length * tan  # horizontal distance covered before the far end
+    return np.where(reach <= radius, 0, 1 + np.floor((reach - radius) / (2.0 * radius)))
+
+
+def mirror_cup_attenuation(expectation: Mapping[str, Any], cos_gamma) -> np.ndarray:
+    """rho^k(gamma) of a mirror cup expectation (see :func:`mirror_cup_reflections`)."""
+    k = mirror_cup_reflections(float(expectation["radius"]), float(expectation["length"]),
+                               cos_gamma)
+    return float(expectation["specular_reflectance"]) ** k
+
+
+def mirror_cup_escaping_share(expectation: Mapping[str, Any], samples: int = 200001) -> float:
+    """Share of a Lambertian source's flux that leaves the mirror cup: the integral of
+    2 cos(gamma) sin(gamma) rho^k(gamma) over gamma < 90 deg (midpoint rule)."""
+    g = (np.arange(samples) + 0.5) * (0.5 * math.pi / samples)
+    w = 2.0 * np.cos(g) * np.sin(g) * mirror_cup_attenuation(expectation, np.cos(g))
+    return float(w.sum() * (0.5 * math.pi / samples))
+
+
 def _to_python(value: Any) -> Any:
     """Gf vectors, Vt arrays and nested dictionaries -> plain Python values."""
     if isinstance(value, (str, bool, int, float)):
@@ -202,6 +228,8 @@ def expected_intensity(expectation: Mapping[str, Any], directions) -> np.ndarray
         - isotropic: ``flux / (4 pi)``;
         - lambertian: ``(flux / pi) cos(gamma)`` for ``gamma < 90 deg`` from ``axis``,
           0 beyond;
+        - mirror_cup: ``(flux / pi) cos(gamma) rho^k(gamma)``, ``k`` the reflections on the
+          way out (:func:`mirror_cup_reflections`);
         - fresnel_slab: ``(flux / pi) cos(gamma) T(gamma)`` on the ``axis`` side (transmitted)
           and ``(flux / pi) cos(gamma') (1 - T(gamma'))`` on the other (reflected; gamma'
           measured from ``-axis``), ``T`` = :func:`slab_transmittance`.
@@ -226,6 +254,10 @@ def expected_intensity(expectation: Mapping[str, Any], directions) -> np.ndarray
         a = np.abs(c)
         t = slab_transmittance(a, n)
         return _peak(expectation) * a * np.where(c > 0.0, t, 1.0 - t)
+    if kind == "mirror_cup":
+        c = d @ _axis(expectation)
+        return _peak(expectation) * np.clip(c, 0.0, None) * mirror_cup_attenuation(
+            expectation, c)
     if kind in KINDS:
         raise ValueError(f"expectation kind {kind!r} has no closed-form intensity "
                          "distribution; use expected_figures()")
@@ -260,6 +292,9 @@ def expected_figures(expectation: Mapping[str, Any]) -> dict:
         return {"escaped_flux": flux, "intensity_cd": flux / (4.0 * math.pi)}
     if kind == "lambertian":
         return {"escaped_flux": flux, "peak_cd": _peak(expectation)}
+    if kind == "mirror_cup":
+        return {"escaped_flux": flux * mirror_cup_escaping_share(expectation),
+                "peak_cd": _peak(expectation)}
     if kind == "fresnel_slab":
         n = float(expectation["ior"])
         t, r = lambertian_slab_flux(n)

@@ -24,6 +24,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Scene
 from ..trace import rng
@@ -55,6 +56,8 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
         return Selection(restart="no photon records (above their memory cap)")
     if (old.up_axis, old.meters_per_unit) != (new.up_axis, new.meters_per_unit):
         return Selection(restart="the stage's units or axes changed")
+    if not np.array_equal(old.photometric_axes, new.photometric_axes):
+        return Selection(restart="the luminaire turned: its photometric frame changed")
     if [e.path for e in old.emitters] != [e.path for e in new.emitters]:
         return Selection(restart="emitters were added or removed")
     changed_emitters = []
@@ -99,8 +102,11 @@ def tally_of(emitter: int, key: np.uint64, photons: np.ndarray, rec: PhotonRecor
     half = (rng.photon_hash(key, photons[esc]) & np.uint64(1)).astype(np.int64)
     counts = np.bincount(rec.texel[esc].astype(np.int64) + ntex * half,
                          minlength=2 * ntex).reshape(2, ntex)
+    bins = np.concatenate([rec.cell[esc].astype(np.int64),
+                           rec.exit[esc].astype(np.int64) + N_CELLS]) + N_BINS * np.tile(half, 2)
+    cells = np.bincount(bins, minlength=2 * N_BINS).reshape(2, N_BINS)
     return BatchTally(emitter, int(photons[0]) if len(photons) else 0, int(len(photons)),
-                      counts, absorbed=int(np.count_nonzero(rec.texel == ABSORBED)),
+                      counts, cells, absorbed=int(np.count_nonzero(rec.texel == ABSORBED)),
                       cut=int(np.count_nonzero(rec.texel == CUT)),
                       segments=int(rec.segments.astype(np.int64).sum()))
 

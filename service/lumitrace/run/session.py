@@ -13,6 +13,7 @@ from typing import Callable
 
 from ..errors import warn
 from ..film.accumulate import Accumulator
+from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
 from ..trace.job import BatchJob
@@ -129,16 +130,18 @@ class Refinement:
     drives it round by round (and drops it when the scene changes), :func:`run` to the end."""
 
     def __init__(self, scene: Scene, settings: TraceSettings,
-                 first_round: int = FIRST_ITERATION, records_cap: int | None = None):
+                 first_round: int = FIRST_ITERATION, records_cap: int | None = None,
+                 goniometer: Goniometer | None = None):
         """``records_cap`` (bytes): keep per-photon records for selective retracing (see
-        :mod:`lumitrace.run.incremental`) up to this size, then drop them."""
+        :mod:`lumitrace.run.incremental`) up to this size, then drop them. ``goniometer``:
+        the one the tracer counts with (the prepared scene's; default the scene's own)."""
         self.scene = scene
         self.records_cap = records_cap
         self.records: list[PhotonRecords] | None = (
             [PhotonRecords.empty() for _ in scene.emitters] if records_cap else None)
         self.records_dropped = False
         self.settings = settings
-        self.accumulator = Accumulator(scene, settings.resolution)
+        self.accumulator = Accumulator(scene, settings.resolution, goniometer)
         fluxes = [e.flux for e in scene.emitters]
         self.shares = [f / sum(fluxes) for f in fluxes]
         self.budget = settings.budget()
@@ -224,7 +227,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     t0 = time.perf_counter()
     ps = prepared or prepare(scene, frame)
     t_prep = time.perf_counter() - t0
-    r = Refinement(scene, settings)
+    r = Refinement(scene, settings, goniometer=ps.goniometer)
     threads = max(1, int(settings.threads))
     mode = workers.choose(settings.workers, threads, r.budget)
     with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:

@@ -63,6 +63,7 @@ def _traced(ps: PreparedScene, job: BatchJob) -> BatchTally:
     only the texels it hit while it waits to be added (many emitters: many small jobs)."""
     tally = trace_batch(ps, job)
     tally.counts = compact(tally.counts)
+    tally.cells = compact(tally.cells)
     return tally
 
 

@@ -43,6 +43,24 @@ class Material:
         return SCATTERING_MODELS.index(self.scattering)
 
 
+#: Unit vector of each stage up axis.
+UP_VECTORS = {"Z": (0.0, 0.0, 1.0), "Y": (0.0, 1.0, 0.0)}
+
+
+def photometric_axes(up_axis: str, rotation=()) -> np.ndarray:
+    """Rows (C0, C90, up) of type C photometry's frame in world axes: up is the luminaire's
+    own up (the stage's up axis turned by ``rotation``, the luminaire prim's 3x3 world
+    rotation, none by default), C0 its +X made perpendicular to up, C90 = up x C0 (C grows
+    counter-clockwise seen from above); nadir, gamma 0, is -up."""
+    r = np.asarray(rotation, np.float64) if len(rotation) else np.eye(3)
+    up = r @ np.asarray(UP_VECTORS[up_axis])
+    up = up / np.linalg.norm(up)
+    c0 = r @ np.array([1.0, 0.0, 0.0])
+    c0 = c0 - (c0 @ up) * up
+    c0 = c0 / np.linalg.norm(c0)
+    return np.stack([c0, np.cross(up, c0), up])
+
+
 @dataclass(frozen=True)
 class Emitter:
     """One UsdLux light as a Lambertian emitter of known flux.
@@ -74,6 +92,22 @@ class Emitter:
         adding or removing another emitter does not change this one's photons."""
         return int.from_bytes(hashlib.sha256(self.path.encode()).digest()[:8], "little")
 
+    @property
+    def reach(self) -> float:
+        """Distance (local units) from the light's origin that its emitting surface reaches.
+
+        Only the sizes of the light's own kind count: the others keep their dataclass
+        defaults (1 stage unit), which would make a 1 mm LED modelled in metres a metre wide
+        and the tracing frame, hence float rounding and ray offsets, depend on the unit.
+        """
+        if self.kind == "sphere":
+            return 0.0 if self.treat_as_point else self.radius  # a point has no surface
+        if self.kind == "disk":
+            return self.radius
+        if self.kind == "rect":
+            return 0.5 * float(np.hypot(self.width, self.height))
+        return float(np.hypot(0.5 * self.length, self.radius))
+
     def same_as(self, other: "Emitter", ignore: tuple[str, ...] = ()) -> bool:
         """Field-by-field equality (the transform is an array), ``ignore`` left out."""
         return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
@@ -102,11 +136,32 @@ class Scene:
     stage_path: str = ""
     warnings: tuple[str, ...] = field(default=(), compare=False)
     time_code: float | None = field(default=None, compare=False)  # None: default time
+    #: the luminaire prim's local-to-world transform (4x4 rows, column-vector convention
+    #: like :attr:`Emitter.to_world`: local stage units to world metres), which places the
+    #: photometric frame and the stand-in light; empty: the identity
+    luminaire_to_world: tuple = ()
+
+    @property
+    def photometric_axes(self) -> np.ndarray:
+        """Rows (C0, C90, up) of the photometric frame in world axes (unit vectors)."""
+        m = self.luminaire_to_world
+        return photometric_axes(self.up_axis, np.asarray(m)[:3, :3] if len(m) else ())
 
     @property
     def total_flux(self) -> float:
         """Luminous flux of all emitters together (lm)."""
         return float(sum(e.flux for e in self.emitters))
+
+    def bound_points(self) -> np.ndarray:
+        """Points (N, 3, world m) whose bounds hold the triangles and the emitters'
+        surfaces (each light's reach as a cube around its origin)."""
+        pts = [self.triangles.reshape(-1, 3)] if self.triangles.size else []
+        cube = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0)
+                         for z in (-1.0, 1.0)])
+        for e in self.emitters:
+            m = np.asarray(e.to_world, dtype=np.float64)
+            pts.append(m[:3, 3][None, :] + np.linalg.norm(m[:3, :3], 2) * e.reach * cube)
+        return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
 
     def part_geometry(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per part path: its triangles (T, 3, 3) and the path of each one's material."""
@@ -132,4 +187,6 @@ class Scene:
                            e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())
             h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
         h.update(self.up_axis.encode())
+        if self.luminaire_to_world:
+            h.update(np.asarray(self.photometric_axes, np.float64).tobytes())
         return h.hexdigest()

@@ -223,7 +223,17 @@ class _Reader:
             stage_path=self.stage_file,
             warnings=tuple(self.warnings),
             time_code=scene_time_code(self.time),
+            luminaire_to_world=self._luminaire_to_world(root),
         )
+
+    def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
+        """The luminaire prim's local-to-world transform (local stage units to world m),
+        or () where it is the identity."""
+        m = np.array(UsdGeom.XformCache(self.time).GetLocalToWorldTransform(root))
+        if np.allclose(m, np.eye(4), rtol=0.0, atol=1e-12):
+            return ()
+        to_world = np.diag([self.meters_per_unit] * 3 + [1.0]) @ m.T
+        return tuple(map(tuple, to_world.tolist()))
 
     def _luminaire_prim(self, luminaire: str | None) -> Usd.Prim:
         if luminaire is not None:

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene import DIELECTRIC, Emitter, Scene
+from ..scene import DIELECTRIC, Scene
+from ..film.goniometer import Goniometer
 from .sampling import cross, dot
 from .records import CellGrid, part_bits
 from .scattering import MaterialTable
@@ -27,17 +28,20 @@ class TracingFrame:
     center: tuple[float, float, float]
     scale: float
     grid: CellGrid = CellGrid()
+    goniometer: Goniometer | None = None  # None: the scene's own, at prepare
 
     @classmethod
     def of(cls, scene: Scene) -> "TracingFrame":
         """The frame centred on ``scene``'s bounds, largest half-extent 1."""
-        lo, hi = _bounds(scene)
+        pts = scene.bound_points()
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
         center = 0.5 * (lo + hi)
         scale = float(0.5 * (hi - lo).max())
         if not scale > 0.0:  # a lone point light: any scale will do
             scale = 1.0
         return cls(tuple(float(c) for c in center), scale,
-                   CellGrid.around((lo - center) / scale, (hi - center) / scale))
+                   CellGrid.around((lo - center) / scale, (hi - center) / scale),
+                   Goniometer.around(scene.photometric_axes, pts))
 
 
 @dataclass
@@ -60,10 +64,12 @@ class PreparedScene:
     part_bits: np.ndarray = field(default=None, repr=False)  # (T,) uint64, see records
     grid: CellGrid = CellGrid()
     part_index: np.ndarray = field(default=None, repr=False)  # (T,) part of each triangle
+    goniometer: Goniometer | None = None
 
     @property
     def frame(self) -> TracingFrame:
-        return TracingFrame(tuple(float(c) for c in self.center), self.scale, self.grid)
+        return TracingFrame(tuple(float(c) for c in self.center), self.scale, self.grid,
+                            self.goniometer)
 
     @property
     def triangle_count(self) -> int:
@@ -75,33 +81,6 @@ class PreparedScene:
             n = origins.shape[0]
             return {"primID": np.full(n, -1, np.int32), "tfar": np.full(n, np.inf, np.float32)}
         return self.embree.run(origins, directions, output=1)
-
-
-def _emitter_reach(e: Emitter) -> float:
-    """Distance (local units) from the light's origin that its emitting surface reaches.
-
-    Only the sizes of the light's own kind count: the others keep their dataclass defaults
-    (1 stage unit), which would make a 1 mm LED modelled in metres a metre wide and the
-    normalised frame, hence float rounding and ray offsets, depend on the stage's unit.
-    """
-    if e.kind == "sphere":
-        return 0.0 if e.treat_as_point else e.radius  # a point light has no surface
-    if e.kind == "disk":
-        return e.radius
-    if e.kind == "rect":
-        return 0.5 * float(np.hypot(e.width, e.height))
-    return float(np.hypot(0.5 * e.length, e.radius))
-
-
-def _bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned bounds (world m) of the triangles and the emitters' surfaces."""
-    pts = [scene.triangles.reshape(-1, 3)] if scene.triangles.size else []
-    for e in scene.emitters:
-        m = np.asarray(e.to_world, dtype=np.float64)
-        reach = np.linalg.norm(m[:3, :3], 2) * _emitter_reach(e)
-        pts.append(m[:3, 3][None, :] + reach * np.array([[-1.0, -1, -1], [1, 1, 1]]))
-    allp = np.concatenate(pts, axis=0)
-    return allp.min(axis=0), allp.max(axis=0)
 
 
 def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
@@ -132,6 +111,7 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
                          material_index=np.asarray(scene.material_index), triangle_kind=kind,
                          polarised=bool(np.any(kind == DIELECTRIC)),
                          table=table, embree=embree, grid=frame.grid,
+                         goniometer=frame.goniometer or Goniometer.of(scene),
                          part_index=np.asarray(scene.part_index, np.int64),
                          part_bits=np.take(part_bits(scene.parts), scene.part_index)
                          if len(scene.parts) and tri.shape[0] else np.zeros(0, np.uint64))

@@ -1,7 +1,9 @@
-"""Per-photon records: what each traced photon did, in 22 bytes, so that an edit can find
+"""Per-photon records: what each traced photon did, in 28 bytes, so that an edit can find
 the photons whose paths it can change and retrace exactly those.
 
 - ``texel``: where it escaped (the cube-map texel), or :data:`ABSORBED` / :data:`CUT`;
+- ``cell``, ``exit``: where the goniophotometer counted it (C-gamma cell, exit bin less
+  :data:`~lumitrace.film.goniometer.N_CELLS`), when it escaped;
 - ``segments``: how many path segments it had (for the segment statistics);
 - ``parts``: a hash bitmask of the parts it hit (bit ``crc32(part path) % 64``);
 - ``cells``: a bitmask of the cells of a 64-cell grid over the luminaire (pinned with the
@@ -14,7 +16,7 @@ segment, only retraces a photon whose path then comes out the same.
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -22,7 +24,7 @@ import numpy as np
 ABSORBED = -1
 CUT = -2
 #: Bytes of one photon's record.
-RECORD_BYTES = 4 + 2 + 8 + 8
+RECORD_BYTES = 4 + 4 + 2 + 2 + 8 + 8
 
 
 @dataclass
@@ -30,36 +32,38 @@ class PhotonRecords:
     """Records of consecutive photons of one emitter (photon ``first + k`` at row ``k``)."""
 
     texel: np.ndarray  # int32
+    cell: np.ndarray  # int32
+    exit: np.ndarray  # uint16
     segments: np.ndarray  # uint16 (saturating)
     parts: np.ndarray  # uint64
     cells: np.ndarray  # uint64
 
     @classmethod
     def empty(cls, n: int = 0) -> "PhotonRecords":
-        return cls(np.full(n, ABSORBED, np.int32), np.zeros(n, np.uint16),
+        return cls(np.full(n, ABSORBED, np.int32), np.zeros(n, np.int32),
+                   np.zeros(n, np.uint16), np.zeros(n, np.uint16),
                    np.zeros(n, np.uint64), np.zeros(n, np.uint64))
+
+    def _arrays(self) -> list[np.ndarray]:
+        return [getattr(self, f.name) for f in fields(self)]
 
     def __len__(self) -> int:
         return len(self.texel)
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.texel, self.segments, self.parts, self.cells))
+        return sum(a.nbytes for a in self._arrays())
 
     def extend(self, other: "PhotonRecords") -> "PhotonRecords":
-        return PhotonRecords(*(np.concatenate([a, b]) for a, b in zip(
-            (self.texel, self.segments, self.parts, self.cells),
-            (other.texel, other.segments, other.parts, other.cells))))
+        return PhotonRecords(*(np.concatenate([a, b])
+                               for a, b in zip(self._arrays(), other._arrays())))
 
     def take(self, rows: np.ndarray) -> "PhotonRecords":
-        return PhotonRecords(self.texel[rows], self.segments[rows], self.parts[rows],
-                             self.cells[rows])
+        return PhotonRecords(*(a[rows] for a in self._arrays()))
 
     def put(self, rows: np.ndarray, other: "PhotonRecords") -> None:
-        self.texel[rows] = other.texel
-        self.segments[rows] = other.segments
-        self.parts[rows] = other.parts
-        self.cells[rows] = other.cells
+        for a, b in zip(self._arrays(), other._arrays()):
+            a[rows] = b
 
 
 def part_bit(path: str) -> np.uint64:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..film.cubemap import texel_index
+from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Emitter
 from . import rng
@@ -63,6 +64,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     ntex = 6 * resolution * resolution
     tally = BatchTally.empty(job.emitter, job.first, int(idx.size), resolution, record_rays)
     tally.part_hits = np.zeros(len(ps.scene.parts), np.int64)
+    gonio, escaped = ps.goniometer, []
 
     for depth in range(max_depth + 1):
         if base.size == 0:
@@ -81,12 +83,18 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             # escapes per texel, in two halves split by the photon hash's lowest bit: two
             # independent estimates of the same map, for the error estimate
             half = (np.compress(miss, base) & np.uint64(1)).astype(np.int64)
-            texel = texel_index(np.compress(miss, d, axis=1).T, resolution)
+            om, dm = np.compress(miss, o, axis=1), np.compress(miss, d, axis=1)
+            texel = texel_index(dm.T, resolution)
             tally.counts += np.bincount(texel + ntex * half, minlength=2 * ntex).reshape(2, ntex)
+            # the goniophotometer's cell and exit bin, counted once at the end
+            cell = gonio.cells(dm)
+            exit_bin = gonio.exits(om * ps.scale + ps.center[:, None], dm)
+            escaped.append(np.concatenate([cell, exit_bin]) + N_BINS * np.tile(half, 2))
             if rec is not None:
                 gone = np.compress(miss, pid)
-                om, dm = np.compress(miss, o, axis=1), np.compress(miss, d, axis=1)
                 rec.texel[gone] = texel
+                rec.cell[gone] = cell
+                rec.exit[gone] = exit_bin - N_CELLS
                 rec.cells[gone] |= ps.grid.segment_cells(om, ps.grid.exit_points(om, dm))
         h = np.flatnonzero(~miss)
         if h.size == 0:
@@ -153,6 +161,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             if pol is not None:
                 pol = np.compress(alive, pol, axis=1)
         o = p + (RAY_EPSILON * np.sign(dot(d, ng))) * ng
+    if escaped:
+        tally.cells = np.bincount(np.concatenate(escaped),
+                                  minlength=2 * N_BINS).reshape(2, N_BINS)
     if rec is not None:
         rec.segments[:] = np.minimum(nseg, np.iinfo(np.uint16).max)
         tally.records = rec

@@ -1,0 +1,104 @@
+"""The virtual goniophotometer: escaping photons counted by direction in C-gamma cells of the
+luminaire's photometric frame, and by where they leave the luminaire's bounding box.
+
+The cube map serves the interactive preview; the photometric files come from these counts.
+A cell's photon flux over its solid angle is an unbiased estimate of the cell's mean
+intensity, and exports add whole cells, so every value an IES or LDT file holds has no bias
+beyond the averaging over its own cell (as a goniophotometer's detector aperture averages).
+
+Cells are 1.25 deg of C by 0.25 deg of gamma, with extra gamma edges at the CIE flux code's
+zone boundaries (cos gamma = 0.75, 0.25; 60 deg is on the grid), so every C step that is a
+multiple of 2.5 deg, every gamma grid in 0.5 deg steps and every CIE zone is a sum of whole
+cells. The exit tally bins each escaping photon's crossing of the luminaire's bounding box
+(in the photometric frame) on a 32 x 32 grid per face: the luminous opening is measured from
+it, not guessed from the geometry.
+
+All counts live in one array of :data:`N_BINS` bins: first the C-gamma cells (C-major:
+``c_bin * N_GAMMA + gamma_bin``), then the exit bins (``face * 1024 + row * 32 + col``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Width of a C cell (deg) and of a gamma cell (deg).
+C_STEP = 1.25
+GAMMA_STEP = 0.25
+#: cos(gamma) of the CIE flux code's cone boundaries (solid angles pi/2, pi, 3 pi/2 sr).
+CIE_COSINES = (0.75, 0.5, 0.25)
+#: Gamma cell edges (deg), 0 to 180.
+GAMMA_EDGES = np.union1d(np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP),
+                         np.round(np.degrees(np.arccos(CIE_COSINES)), 12))
+N_C = int(round(360.0 / C_STEP))
+N_GAMMA = len(GAMMA_EDGES) - 1
+N_CELLS = N_C * N_GAMMA
+#: Exit bins per face side, faces of the box, exit bins in all.
+EXIT_SIDE = 32
+FACES = ("bottom", "top", "-C0", "+C0", "-C90", "+C90")
+N_EXIT = len(FACES) * EXIT_SIDE * EXIT_SIDE
+N_BINS = N_CELLS + N_EXIT
+#: The two in-face coordinates (photometric axes 0 = C0, 1 = C90, 2 = up) of each face.
+FACE_AXES = ((0, 1), (0, 1), (1, 2), (1, 2), (0, 2), (0, 2))
+
+
+def cell_solid_angles() -> np.ndarray:
+    """Solid angle (sr) of every C-gamma cell, (N_C, N_GAMMA); they sum to 4 pi."""
+    zone = -np.diff(np.cos(np.radians(GAMMA_EDGES)))
+    return np.radians(C_STEP) * np.broadcast_to(zone, (N_C, N_GAMMA))
+
+
+@dataclass(frozen=True)
+class Goniometer:
+    """Where an escaping photon is counted: ``axes`` are the rows (C0, C90, up) of the
+    photometric frame in world axes; ``lo``, ``hi`` the luminaire's bounding box (m) in
+    those axes, pinned for a session like the tracing frame."""
+
+    axes: tuple
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+    @classmethod
+    def around(cls, axes: np.ndarray, points: np.ndarray) -> "Goniometer":
+        """The goniometer whose box holds ``points`` (N, 3, world m)."""
+        a = np.asarray(axes, np.float64)
+        q = np.asarray(points, np.float64).reshape(-1, 3) @ a.T
+        if not len(q):
+            q = np.zeros((1, 3))
+        return cls(tuple(map(tuple, a.tolist())), tuple(map(float, q.min(axis=0))),
+                   tuple(map(float, q.max(axis=0))))
+
+    @classmethod
+    def of(cls, scene) -> "Goniometer":
+        """The goniometer of a :class:`~lumitrace.scene.Scene`: its photometric axes, the
+        box of its geometry and emitters."""
+        return cls.around(scene.photometric_axes, scene.bound_points())
+
+    def cells(self, d: np.ndarray) -> np.ndarray:
+        """C-gamma cell (N,) int64 of unit directions ``d`` (3, N), world axes."""
+        a = np.asarray(self.axes)
+        x, y, z = a @ d
+        gamma = np.degrees(np.arccos(np.clip(-z, -1.0, 1.0)))
+        g = np.clip(np.searchsorted(GAMMA_EDGES, gamma, side="right") - 1, 0, N_GAMMA - 1)
+        c = np.mod(np.degrees(np.arctan2(y, x)), 360.0)
+        ci = np.clip((c / C_STEP).astype(np.int64), 0, N_C - 1)
+        return ci * N_GAMMA + g
+
+    def exits(self, p: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Exit bin (N,) int64, offset by :data:`N_CELLS`, where rays from ``p`` (3, N,
+        world m) along ``d`` leave the box."""
+        a = np.asarray(self.axes)
+        q, e = a @ p, a @ d
+        lo, hi = (np.asarray(v)[:, None] for v in (self.lo, self.hi))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(e > 0, (hi - q) / e, np.where(e < 0, (lo - q) / e, np.inf))
+        axis = np.argmin(t, axis=0)
+        n = np.arange(q.shape[1])
+        x = np.clip(q + np.maximum(t[axis, n], 0.0) * e, lo, hi)
+        face = np.array([2, 4, 0])[axis] + (e[axis, n] > 0)  # C0 -> 2/3, C90 -> 4/5, up -> 0/1
+        span = np.maximum(hi - lo, 1e-12)
+        u = (x - lo) / span  # 0..1 along each axis
+        uv = np.array(FACE_AXES)[face].T  # (2, N) the two in-face axes
+        col = np.clip((u[uv[0], n] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
+        row = np.clip((u[uv[1], n] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
+        return N_CELLS + (face * EXIT_SIDE + row) * EXIT_SIDE + col
