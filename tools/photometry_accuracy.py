@@ -116,7 +116,7 @@ def main(argv=None) -> int:
         for key, label in (("vs_point", "IES / point - 1"), ("vs_cell", "IES / cell mean - 1")):
             print(f"  {label:18}" + "".join(
                 f"{'n/a' if b[key] is None else f'{b[key]:+.2%}':>11}" for b in r["bands"]))
-        print(f"  IES cd            " + "".join(f"{b['cd']:11.3f}" for b in r["bands"]))
+        print("  IES cd            " + "".join(f"{b['cd']:11.3f}" for b in r["bands"]))
         print(f"  upward flux fraction {r['upward_fraction']:.3%}; z of {r['z_n']} file values "
               f"against their sigma: max |z| {r['z_max']:.2f}, variance {r['z_var']:.2f}")
         print(f"  peak {r['peak']:.2f} +- {r['peak_error']:.2f} cd (largest cell mean "

@@ -104,6 +104,7 @@ def test_incremental_retrace_equals_a_fresh_trace(edits):
             a, b = r.accumulator.emitters[0], fresh.accumulator.emitters[0]
             assert (a.photons, a.absorbed, a.cut, a.segments) == \
                 (b.photons, b.absorbed, b.cut, b.segments)
+            assert np.array_equal(a.cells, b.cells), kind  # the goniophotometer's counts too
             np.testing.assert_allclose(r.accumulator.intensity(),
                                        fresh.accumulator.intensity(), rtol=1e-12)
             if kind == "display":

@@ -81,11 +81,25 @@ def _nonzero(counts) -> tuple[np.ndarray, np.ndarray]:
     return nz, counts[:, nz]
 
 
-def compact(counts: np.ndarray):
+def compact(counts):
     """A batch's dense counts, or their sparse form when that is much smaller (a batch of
     a few photons in a large map): what worker processes send back."""
+    if counts is None or isinstance(counts, SparseCounts):
+        return counts
     return SparseCounts.from_dense(counts) if \
         np.count_nonzero(counts.any(axis=0)) * 4 < counts.shape[1] else counts
+
+
+def counts_of(bins: np.ndarray, n: int):
+    """(2, n) counts of the flat indices ``bins`` (bin + n * half): dense, or sparse when
+    they are few against ``n`` (a small batch must not fill and send a large array)."""
+    if len(bins) * 8 >= n:
+        return np.bincount(bins, minlength=2 * n).reshape(2, n)
+    half, b = np.divmod(bins, n)
+    idx, inv = np.unique(b, return_inverse=True)
+    val = np.zeros((2, len(idx)), np.int64)
+    np.add.at(val, (half, inv), 1)
+    return SparseCounts(n, idx, val)
 
 
 

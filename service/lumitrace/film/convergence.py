@@ -63,11 +63,21 @@ class MapEstimate:
     filtered_error: float
     filtered_variance_error: float
     texel_error: np.ndarray
+    #: the filter was estimated to make the map worse, so ``filtered`` is the raw map
+    stepped_back: bool = False
 
     @property
     def error(self) -> float:
         """The estimated error of the map written as ``Y`` (filtered, or raw at threshold 0)."""
         return self.filtered_error if self.threshold > 0 else self.raw_error
+
+
+def _raw_estimate(acc: Accumulator, raw: np.ndarray, flux: np.ndarray, threshold: float,
+                  raw_err: float, stepped_back: bool = False) -> MapEstimate:
+    """The estimate that writes the raw map as ``Y``, with its binomial texel errors."""
+    texel = np.sqrt(acc.flux_variance()) / np.maximum(flux, 1e-300)
+    return MapEstimate(raw, raw, threshold, raw_err, raw_err, raw_err,
+                       np.where(flux > 0, texel, np.inf), stepped_back)
 
 
 def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
@@ -79,9 +89,7 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     noise_raw2 = _raw_noise2(acc, omega)
     raw_err = raw_relative_error(acc)
     if threshold <= 0:
-        texel = np.sqrt(acc.flux_variance()) / np.maximum(flux, 1e-300)
-        return MapEstimate(raw, raw, threshold, raw_err, raw_err, raw_err,
-                           np.where(flux > 0, texel, np.inf))
+        return _raw_estimate(acc, raw, flux, threshold, raw_err)
     filtered = pull_push(flux, counts, threshold, omega)
     # each half holds half the photons: the same threshold in photons per estimate is half
     halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold / 2.0, omega) for h in (0, 1)]
@@ -95,10 +103,14 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     bias2 = max(0.0, cross - 2.0 * noise_raw2 - 2.0 * var_f2)
     total2 = var_f2 + bias2
     signal2 = norm2(filtered, omega) - var_f2
+    # no signal above the noise (no light escaped): the relative error is undefined
+    rel = (lambda x2: float(np.sqrt(x2 / signal2))) if signal2 > 0 else (lambda x2: math.inf)
+    if signal2 > 0 and rel(total2) >= raw_err:
+        # the filter's estimated bias costs more than the noise it takes out: step back to
+        # the raw map (a preview must never be worse than the counts it comes from)
+        return _raw_estimate(acc, raw, flux, threshold, raw_err, stepped_back=True)
     # per texel: the split-half variance, smoothed by the same filter
     local_var = pull_push(diff * diff / 4.0 * omega, counts, threshold, omega)
     texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
-    # no signal above the noise (no light escaped): the relative error is undefined
-    rel = (lambda x2: float(np.sqrt(x2 / signal2))) if signal2 > 0 else (lambda x2: math.inf)
     return MapEstimate(raw, filtered, threshold, raw_err, rel(total2), rel(var_f2),
                        np.where(filtered > 0, texel, np.inf))

@@ -72,7 +72,7 @@ class Goniometer:
     def of(cls, scene) -> "Goniometer":
         """The goniometer of a :class:`~lumitrace.scene.Scene`: its photometric axes, the
         box of its geometry and emitters."""
-        return cls.around(scene.photometric_axes, scene.bound_points())
+        return cls.around(scene.photometric_axes, scene.shape_points())
 
     def cells(self, d: np.ndarray) -> np.ndarray:
         """C-gamma cell (N,) int64 of unit directions ``d`` (3, N), world axes."""

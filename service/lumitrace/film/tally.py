@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .goniometer import N_BINS
 
 
 @dataclass
@@ -19,7 +18,8 @@ class BatchTally:
     ``counts`` is (2, texels) int64: escapes of the photons in each of two pseudo-random
     halves (split by the photon hash), two independent estimates of the same map.
     ``cells`` is (2, :data:`~lumitrace.film.goniometer.N_BINS`) int64, the same photons
-    counted by the virtual goniophotometer (C-gamma cell and exit bin each).
+    counted by the virtual goniophotometer (C-gamma cell and exit bin each), dense or
+    :class:`~lumitrace.film.accumulate.SparseCounts`; None when none escaped.
     ``emitter``, ``start`` and ``photons`` name the batch (emitter number, first photon
     index, photon count); ``segments`` counts traced path segments (rays).
     """
@@ -46,4 +46,4 @@ class BatchTally:
         """A zero tally for a batch, ready to be filled (``rays`` kept on request)."""
         ntex = 6 * resolution * resolution
         return cls(emitter, start, photons, np.zeros((2, ntex), np.int64),
-                   np.zeros((2, N_BINS), np.int64), rays=[] if record_rays else None)
+                   rays=[] if record_rays else None)

@@ -21,7 +21,7 @@ SYMMETRY_TOLERANCE = 0.01
 C_STEP = 5.0
 #: Share of the exiting flux left out at each end of the opening's extent (its edges are
 #: where all but this much of the light has left).
-OPENING_TAIL = 0.005
+OPENING_TAIL = 0.001
 #: Below this share of the escaping flux, the sides of the box have no luminous height.
 SIDE_SHARE = 0.01
 

@@ -24,6 +24,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from ..film.accumulate import counts_of
 from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Scene
@@ -104,7 +105,7 @@ def tally_of(emitter: int, key: np.uint64, photons: np.ndarray, rec: PhotonRecor
                          minlength=2 * ntex).reshape(2, ntex)
     bins = np.concatenate([rec.cell[esc].astype(np.int64),
                            rec.exit[esc].astype(np.int64) + N_CELLS]) + N_BINS * np.tile(half, 2)
-    cells = np.bincount(bins, minlength=2 * N_BINS).reshape(2, N_BINS)
+    cells = counts_of(bins, N_BINS)
     return BatchTally(emitter, int(photons[0]) if len(photons) else 0, int(len(photons)),
                       counts, cells, absorbed=int(np.count_nonzero(rec.texel == ABSORBED)),
                       cut=int(np.count_nonzero(rec.texel == CUT)),

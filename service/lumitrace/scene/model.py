@@ -108,6 +108,18 @@ class Emitter:
             return 0.5 * float(np.hypot(self.width, self.height))
         return float(np.hypot(0.5 * self.length, self.radius))
 
+    @property
+    def half_extent(self) -> np.ndarray:
+        """Half sizes (3,) of the emitting shape's box in the light's local axes (stage
+        units): a disk or rect lies in its XY plane, a cylinder runs along X."""
+        if self.kind == "sphere":
+            return np.full(3, 0.0 if self.treat_as_point else self.radius)
+        if self.kind == "disk":
+            return np.array([self.radius, self.radius, 0.0])
+        if self.kind == "rect":
+            return np.array([0.5 * self.width, 0.5 * self.height, 0.0])
+        return np.array([0.5 * self.length, self.radius, self.radius])
+
     def same_as(self, other: "Emitter", ignore: tuple[str, ...] = ()) -> bool:
         """Field-by-field equality (the transform is an array), ``ignore`` left out."""
         return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
@@ -161,6 +173,17 @@ class Scene:
         for e in self.emitters:
             m = np.asarray(e.to_world, dtype=np.float64)
             pts.append(m[:3, 3][None, :] + np.linalg.norm(m[:3, :3], 2) * e.reach * cube)
+        return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
+
+    def shape_points(self) -> np.ndarray:
+        """Points (N, 3, world m) whose hull holds the triangles and the emitters' shapes:
+        each light's local box corners carried by its transform (bounds in any frame)."""
+        pts = [self.triangles.reshape(-1, 3)] if self.triangles.size else []
+        signs = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0)
+                          for z in (-1.0, 1.0)])
+        for e in self.emitters:
+            m = np.asarray(e.to_world, dtype=np.float64)
+            pts.append((signs * e.half_extent) @ m[:3, :3].T + m[:3, 3])
         return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
 
     def part_geometry(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

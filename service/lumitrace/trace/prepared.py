@@ -41,7 +41,7 @@ class TracingFrame:
             scale = 1.0
         return cls(tuple(float(c) for c in center), scale,
                    CellGrid.around((lo - center) / scale, (hi - center) / scale),
-                   Goniometer.around(scene.photometric_axes, pts))
+                   Goniometer.of(scene))
 
 
 @dataclass

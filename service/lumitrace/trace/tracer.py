@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..film.accumulate import counts_of
 from ..film.cubemap import texel_index
 from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
@@ -162,8 +163,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                 pol = np.compress(alive, pol, axis=1)
         o = p + (RAY_EPSILON * np.sign(dot(d, ng))) * ng
     if escaped:
-        tally.cells = np.bincount(np.concatenate(escaped),
-                                  minlength=2 * N_BINS).reshape(2, N_BINS)
+        tally.cells = counts_of(np.concatenate(escaped), N_BINS)
     if rec is not None:
         rec.segments[:] = np.minimum(nseg, np.iinfo(np.uint16).max)
         tally.records = rec
