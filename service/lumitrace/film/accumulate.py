@@ -65,12 +65,21 @@ class SparseCounts:
     def add(self, other, sign: int) -> None:
         """Add (sign 1) or subtract (sign -1) counts, dense or sparse."""
         nz, v = _nonzero(other)
-        merged = np.union1d(self.idx, nz)
-        val = np.zeros((2, len(merged)), np.int64)
-        val[:, np.searchsorted(merged, self.idx)] = self.val
-        val[:, np.searchsorted(merged, nz)] += sign * v
-        keep = val.any(axis=0)
-        self.idx, self.val = merged[keep], val[:, keep]
+        if not len(nz):
+            return
+        pos = np.searchsorted(self.idx, nz)
+        old = pos < len(self.idx)
+        old[old] = self.idx[pos[old]] == nz[old]
+        if not old.all():  # bins this emitter had not hit yet: insert them (zero) first
+            new = ~old
+            self.idx = np.insert(self.idx, pos[new], nz[new])
+            self.val = np.insert(self.val, pos[new], 0, axis=1)
+            pos = np.searchsorted(self.idx, nz)
+        self.val[:, pos] += sign * v
+        if sign < 0:
+            keep = self.val.any(axis=0)
+            if not keep.all():
+                self.idx, self.val = self.idx[keep], self.val[:, keep]
 
 
 def _nonzero(counts) -> tuple[np.ndarray, np.ndarray]:
@@ -282,33 +291,18 @@ class Accumulator:
                     var[idx] += term
         return var.reshape(self.shape)
 
-    def binned(self, group: np.ndarray, groups: int, half: int | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Flux (lm), its variance (lm^2) and the sum of the squared photon fluxes (lm^2,
-        what the variance of a ratio of two groups needs) in groups of the goniophotometer's
-        bins:
-        ``group`` (N_BINS,) gives each bin's group (0 .. ``groups`` - 1, or -1 for none).
-        The variance is exact for analog photons: a group's count is binomial per emitter,
-        var = sum over emitters of w^2 n (1 - n / N) (bins of one group are not
-        independent, so it is taken of the group's count, not summed over its bins).
-        ``half`` 0 or 1: the estimate from that half of the photons alone."""
-        group = np.asarray(group, np.int64)
-        use = group >= 0
-        flux, var, squares = np.zeros(groups), np.zeros(groups), np.zeros(groups)
+    def emitter_cells(self, half: int | None = None):
+        """Per emitter with photons: (photon flux (lm), photons, goniometer counts, their bin
+        indices or None when dense): the counts of ``half`` 0 or 1 alone (each of its
+        photons then carries twice the flux, of half as many) or of all photons."""
         for t in self.emitters:
             if not t.photons:
                 continue
             v, idx = _half(t.cells, half)
-            g = group if idx is None else group[idx]
-            keep = use if idx is None else use[idx]
-            n = np.bincount(g[keep], weights=v[keep].astype(np.float64), minlength=groups)
-            w, total = t.photon_flux, t.photons
-            if half is not None:  # half the photons, each carrying twice the flux
-                w, total = 2.0 * w, 0.5 * total
-            flux += w * n
-            squares += w * w * n
-            var += w * w * n * np.maximum(1.0 - n / total, 0.0)
-        return flux, var, squares
+            if half is None:
+                yield t.photon_flux, float(t.photons), v, idx
+            else:
+                yield 2.0 * t.photon_flux, 0.5 * t.photons, v, idx
 
     def intensity(self) -> np.ndarray:
         """Raw luminous intensity estimate (cd) per texel: texel flux / texel solid angle."""

@@ -8,10 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import EXIT_SIDE, FACES, N_BINS, N_CELLS, N_EXIT
+from ..film.goniometer import (EXIT_SIDE, FACES, GAMMA_EDGES, N_CELLS, N_EXIT,
+                               cell_solid_angles)
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
-from .measured import measure, symmetric_grid
+from .measured import ring_counts, symmetric_grid
 from .quantities import PhotometricFigures, figures
 
 #: Symmetry is used unless the counts show a departure from it larger than this (relative
@@ -57,9 +58,14 @@ def luminous_opening(acc: Accumulator) -> LuminousOpening:
     of its sides, 0 where they carry less than :data:`SIDE_SHARE` of the flux (LM-63's flat
     opening)."""
     g = acc.goniometer
-    group = np.full(N_BINS, -1, np.int64)
-    group[N_CELLS:] = np.arange(N_EXIT)
-    flux = acc.binned(group, N_EXIT)[0].reshape(len(FACES), EXIT_SIDE, EXIT_SIDE)
+    flux = np.zeros(N_EXIT)
+    for w, _, values, idx in acc.emitter_cells():
+        if idx is None:
+            flux += w * values[N_CELLS:]
+        else:
+            keep = idx >= N_CELLS
+            flux[idx[keep] - N_CELLS] += w * values[keep]
+    flux = flux.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE)
     lo, hi = np.array(g.lo), np.array(g.hi)
     total = float(flux.sum())
     if total <= 0:
@@ -94,20 +100,25 @@ class Photometry:
 
 
 def beam_half_width(acc: Accumulator) -> float | None:
-    """Half-angle (deg) from nadir-most peak of the mean profile over all C to where it
-    halves, on a 0.5 deg raster; None where it never halves."""
-    gam = np.arange(0.0, 180.0 + 1e-9, 0.5)
-    prof = measure(acc, gam, C_STEP, "rotational").candela[0]
+    """Half-angle (deg) from the peak of the mean profile over all C (0.5 deg rings) to
+    where it halves; None where it never does. Chooses the grid's gammas only."""
+    rings = sum(w * ring_counts(v, idx) for w, _, v, idx in acc.emitter_cells())
+    if not np.any(rings):
+        return None
+    bins = np.searchsorted(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, 0.5) - 1e-9)
+    flux = np.add.reduceat(rings, bins[:-1])
+    omega = np.add.reduceat(cell_solid_angles().sum(axis=0), bins[:-1])
+    prof = flux / omega
     k = int(np.argmax(prof))
     below = np.nonzero(prof[k:] < 0.5 * prof[k])[0]
-    return float(gam[k + below[0]] - gam[k]) if below.size and prof[k] > 0 else None
+    return float(0.5 * below[0]) if below.size else None
 
 
 def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
     """Measure the photometry of a session's counts: a grid of C every :data:`C_STEP` deg
     and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
     deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
-    grid, departures = symmetric_grid(acc, default_gammas(beam_half_width(acc)), C_STEP,
-                                      SYMMETRY_TOLERANCE)
-    fig = figures(acc, grid, C_STEP)
+    grid, halves, departures = symmetric_grid(acc, default_gammas(beam_half_width(acc)),
+                                              C_STEP, SYMMETRY_TOLERANCE)
+    fig = figures(acc, grid, halves, C_STEP)
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)

@@ -11,11 +11,13 @@ smooth; at a kink, such as the horizon of a one-sided disc, the cell's mean).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import LumitraceError
 from ..film.accumulate import Accumulator
-from ..film.goniometer import C_STEP, GAMMA_EDGES, N_BINS, N_C, N_CELLS, cell_solid_angles
+from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA, cell_solid_angles
 from .grid import CGammaGrid
 
 #: Symmetries tried, strongest first.
@@ -68,32 +70,102 @@ def planes_kept(symmetry: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"unknown symmetry {symmetry!r}")
 
 
+@functools.lru_cache(maxsize=16)
+def _blocks(c_step: float, gammas: tuple[float, ...]) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """How goniometer cells add into grid cells: (planes, C bins per plane, the first gamma
+    bin of every grid zone, the grid cells' solid angles (planes, zones))."""
+    plane, n = _plane_of_bin(c_step)
+    zone = _zone_of_bin(np.array(gammas))
+    starts = np.flatnonzero(np.r_[True, zone[1:] != zone[:-1]])
+    per = N_C // n
+    omega = _add_blocks(cell_solid_angles(), n, per, starts)
+    return n, per, starts, omega
+
+
+def _add_blocks(a: np.ndarray, n: int, per: int, starts: np.ndarray) -> np.ndarray:
+    """Sums of fine cells ``a`` (N_C, N_GAMMA) over each plane's C bins (plane 0 holds the
+    bins either side of C = 0) and each zone's gamma bins: (planes, zones)."""
+    a = np.roll(a, per // 2, axis=0).reshape(n, per, a.shape[1]).sum(axis=1)
+    return np.add.reduceat(a, starts, axis=1)
+
+
+def grid_counts(values: np.ndarray, idx: np.ndarray | None, c_step: float,
+                gammas: np.ndarray) -> np.ndarray:
+    """An emitter's goniometer counts (dense, or at bins ``idx``) summed into the cells of
+    the grid with planes every ``c_step`` and ``gammas``: (planes, zones) float64."""
+    n, per, starts, _ = _blocks(float(c_step), tuple(map(float, gammas)))
+    if idx is None:
+        fine = values[:N_CELLS].reshape(N_C, N_GAMMA)  # integer sums: exact
+        return _add_blocks(fine, n, per, starts).astype(np.float64)
+    keep = idx < N_CELLS
+    ci, gi = np.divmod(idx[keep], N_GAMMA)
+    p = ((ci + per // 2) % N_C) // per
+    z = np.searchsorted(starts, gi, side="right") - 1
+    return np.bincount(p * len(starts) + z, weights=values[keep].astype(np.float64),
+                       minlength=n * len(starts)).reshape(n, len(starts))
+
+
+def ring_counts(values: np.ndarray, idx: np.ndarray | None) -> np.ndarray:
+    """An emitter's goniometer counts summed over C: one per gamma bin, (N_GAMMA,)."""
+    if idx is None:
+        return values[:N_CELLS].astype(np.float64).reshape(N_C, N_GAMMA).sum(axis=0)
+    keep = idx < N_CELLS
+    return np.bincount(idx[keep] % N_GAMMA, weights=values[keep].astype(np.float64),
+                       minlength=N_GAMMA)
+
+
+#: The grids :func:`measure_all` returns: every symmetry, from all photons and each half.
+SYMMETRY_NAMES = ("none", *CANDIDATES)
+HALVES = (None, 0, 1)
+
+
+def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0
+                ) -> dict[tuple[str, int | None], CGammaGrid]:
+    """The goniophotometer's C-gamma grids (cd) with standard errors (``sigma``, cd), keyed
+    by (symmetry, half): planes every ``c_step`` deg (averaged over the mirror images the
+    symmetry names, on the counts), gammas ``gammas`` (deg, 0 .. 180 on a 0.5 deg raster),
+    from all photons (half None) or from one pseudo-random half. One pass over the
+    emitters. The variance is exact for analog photons: a cell's count is binomial per
+    emitter, var = sum over emitters of w^2 n (1 - n / N)."""
+    gammas = np.asarray(gammas, np.float64)
+    n, _, _, omega_grid = _blocks(float(c_step), tuple(gammas))
+    folds = {}
+    for name in SYMMETRY_NAMES:
+        rep, kept = planes_kept(name, n)
+        slot = np.full(n, -1, np.int64)
+        slot[kept] = np.arange(len(kept))
+        fold = np.zeros((len(kept), n))
+        fold[slot[rep], np.arange(n)] = 1.0  # kept plane <- the planes folded into it
+        folds[name] = (kept, fold)
+    sums = {(name, h): [np.zeros((len(kept), len(gammas))) for _ in range(2)]
+            for name, (kept, _) in folds.items() for h in HALVES}
+    halves = [list(acc.emitter_cells(h)) for h in (0, 1)]
+    for (w2, n2, v0, i0), (_, _, v1, i1) in zip(*halves):
+        k_half = [grid_counts(v0, i0, c_step, gammas), grid_counts(v1, i1, c_step, gammas)]
+        for h, k_all, w, total in ((0, k_half[0], w2, n2), (1, k_half[1], w2, n2),
+                                   (None, k_half[0] + k_half[1], 0.5 * w2, 2.0 * n2)):
+            for name, (_, fold) in folds.items():
+                k = fold @ k_all
+                f, v = sums[name, h]
+                f += w * k
+                v += w * w * k * np.maximum(1.0 - k / total, 0.0)
+    out = {}
+    for (name, h), (flux, var) in sums.items():
+        kept, fold = folds[name]
+        omega = fold @ omega_grid
+        cd, sigma = flux / omega, np.sqrt(var) / omega
+        c = kept * c_step
+        if name == "none":  # the 360 plane repeats 0, as the files list it
+            c = np.append(c, 360.0)
+            cd, sigma = np.vstack([cd, cd[:1]]), np.vstack([sigma, sigma[:1]])
+        out[name, h] = CGammaGrid(c.astype(np.float64), gammas, cd, name, sigma)
+    return out
+
+
 def measure(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
             symmetry: str = "none", half: int | None = None) -> CGammaGrid:
-    """The goniophotometer's C-gamma grid (cd) with standard errors (``sigma``, cd): planes
-    every ``c_step`` deg (averaged over the mirror images ``symmetry`` names, on the
-    counts), gammas ``gammas`` (deg, 0 .. 180 on a 0.5 deg raster). ``half``: from that
-    pseudo-random half of the photons alone."""
-    plane, n = _plane_of_bin(c_step)
-    zone = _zone_of_bin(gammas)
-    rep, kept = planes_kept(symmetry, n)
-    slot = np.full(n, -1, np.int64)
-    slot[kept] = np.arange(len(kept))
-    ng = len(gammas)
-    group = np.full(N_BINS, -1, np.int64)
-    group[:N_CELLS] = (slot[rep[plane]][:, None] * ng + zone[None, :]).ravel()
-    groups = len(kept) * ng
-    flux, var, _ = acc.binned(group, groups, half)
-    omega = np.bincount(group[:N_CELLS], weights=cell_solid_angles().ravel(), minlength=groups)
-    shape = (len(kept), ng)
-    cd = (flux / omega).reshape(shape)
-    sigma = (np.sqrt(var) / omega).reshape(shape)
-    c = kept * c_step
-    if symmetry == "none":  # the 360 plane repeats 0, as the files list it
-        c = np.append(c, 360.0)
-        cd, sigma = np.vstack([cd, cd[:1]]), np.vstack([sigma, sigma[:1]])
-    return CGammaGrid(c.astype(np.float64), np.asarray(gammas, np.float64), cd, symmetry,
-                      sigma)
+    """One grid of :func:`measure_all`: ``symmetry``, from all photons or from ``half``."""
+    return measure_all(acc, gammas, c_step)[symmetry, half]
 
 
 def _unfolded(grid: CGammaGrid, values: np.ndarray, n: int) -> np.ndarray:
@@ -106,11 +178,7 @@ def _unfolded(grid: CGammaGrid, values: np.ndarray, n: int) -> np.ndarray:
 
 def cell_solid_angle_grid(gammas: np.ndarray, c_step: float) -> np.ndarray:
     """Solid angle (sr) of every cell of the full grid, (planes, gammas)."""
-    plane, n = _plane_of_bin(c_step)
-    zone = _zone_of_bin(gammas)
-    ng = len(gammas)
-    idx = (plane[:, None] * ng + zone[None, :]).ravel()
-    return np.bincount(idx, weights=cell_solid_angles().ravel(), minlength=n * ng).reshape(n, ng)
+    return _blocks(float(c_step), tuple(map(float, gammas)))[3]
 
 
 def asymmetry(full: CGammaGrid, reduced: CGammaGrid, c_step: float,
@@ -138,19 +206,15 @@ def asymmetry(full: CGammaGrid, reduced: CGammaGrid, c_step: float,
     return float(np.sqrt(max(num, 0.0) / den)) if den > 0 else 0.0
 
 
-def symmetric_grid(acc: Accumulator, gammas: np.ndarray, c_step: float,
-                   tolerance: float) -> tuple[CGammaGrid, dict[str, float]]:
+def symmetric_grid(acc: Accumulator, gammas: np.ndarray, c_step: float, tolerance: float
+                   ) -> tuple[CGammaGrid, tuple[CGammaGrid, CGammaGrid], dict[str, float]]:
     """The grid of the strongest symmetry the counts do not show a departure from larger
     than ``tolerance`` (relative RMS; :func:`asymmetry` at a 3 sigma lower bound), averaged
-    on the counts; the full grid when there is none. Also returns every candidate's
-    estimated departure."""
-    full = measure(acc, gammas, c_step)
-    departures = {}
-    chosen = None
-    for name in CANDIDATES:
-        reduced = measure(acc, gammas, c_step, name)
-        departures[name] = asymmetry(full, reduced, c_step)
-        if chosen is None and asymmetry(full, reduced, c_step, 3.0) <= tolerance:
-            chosen = reduced
-    return (chosen if chosen is not None else full), departures
-
+    on the counts; the full grid when there is none. Returns it, the same grid from each
+    half of the photons, and every candidate's estimated departure."""
+    grids = measure_all(acc, gammas, c_step)
+    full = grids["none", None]
+    departures = {name: asymmetry(full, grids[name, None], c_step) for name in CANDIDATES}
+    chosen = next((name for name in CANDIDATES
+                   if asymmetry(full, grids[name, None], c_step, 3.0) <= tolerance), "none")
+    return grids[chosen, None], (grids[chosen, 0], grids[chosen, 1]), departures

@@ -21,9 +21,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import CIE_COSINES, GAMMA_EDGES, N_BINS, N_C, N_CELLS
+from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
-from .measured import cell_solid_angle_grid, measure
+from .measured import cell_solid_angle_grid, ring_counts
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
 CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
@@ -65,15 +65,6 @@ class PhotometricFigures:
         return asdict(self)
 
 
-def _gamma_group(edge_deg: float) -> np.ndarray:
-    """Goniometer bins below gamma ``edge_deg`` (a cell edge): group 0; the rest -1."""
-    centres = 0.5 * (GAMMA_EDGES[1:] + GAMMA_EDGES[:-1])
-    group = np.full(N_BINS, -1, np.int64)
-    group[:N_CELLS] = np.where(np.broadcast_to(centres < edge_deg, (N_C, len(centres))),
-                               0, -1).ravel()
-    return group
-
-
 def _ratio(a: tuple, b: tuple) -> tuple[float, float]:
     """A / B and its standard error for photon fluxes in nested groups (A within B), each
     given as (flux, variance, sum of squared photon fluxes): given B's photons, A's share
@@ -88,10 +79,13 @@ def _ratio(a: tuple, b: tuple) -> tuple[float, float]:
 
 def zone_figures(acc: Accumulator) -> dict:
     """Escaped and downward flux with errors, N1..N5 of the CIE flux code with errors."""
-    zones = {}
-    for edge in (*CIE_ZONES, 180.0):
-        f, v, q = acc.binned(_gamma_group(edge), 1)
-        zones[edge] = (float(f[0]), float(v[0]), float(q[0]))
+    edges = (*CIE_ZONES, 180.0)
+    ends = [int(np.searchsorted(GAMMA_EDGES, e - 1e-9)) for e in edges]  # gamma bins below
+    sums = np.zeros((3, len(edges)))  # flux, variance, squared photon fluxes per cone
+    for w, total, values, idx in acc.emitter_cells():
+        n = np.concatenate([[0.0], np.cumsum(ring_counts(values, idx))])[ends]
+        sums += [w * n, w * w * n * np.maximum(1.0 - n / total, 0.0), w * w * n]
+    zones = {e: tuple(map(float, sums[:, i])) for i, e in enumerate(edges)}
     total, down = zones[180.0], zones[90.0]
     lamp = sum(t.flux for t in acc.emitters if t.photons)
     n = [_ratio(zones[e], down) for e in CIE_ZONES[:3]]
@@ -175,11 +169,12 @@ def relative_error(grid: CGammaGrid, c_step: float) -> float | None:
     return math.sqrt(float((omega * full.sigma ** 2).sum()) / den) if den > 0 else None
 
 
-def figures(acc: Accumulator, grid: CGammaGrid, c_step: float) -> PhotometricFigures:
+def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
+            c_step: float) -> PhotometricFigures:
     """The datasheet figures of the goniophotometer's counts and the published ``grid``
-    (with standard errors, measured by :func:`~lumitrace.photometry.measured.measure`)."""
+    and the same grid from each half of the photons (with standard errors, measured by
+    :func:`~lumitrace.photometry.measured.measure_all`)."""
     z = zone_figures(acc)
-    halves = tuple(measure(acc, grid.gamma, c_step, grid.symmetry, half=h) for h in (0, 1))
     peak, peak_err, a0, a1 = split_peak(halves[0].candela, halves[0].sigma,
                                         halves[1].candela, halves[1].sigma)
     at = a0 if grid.candela.flat[a0] >= grid.candela.flat[a1] else a1

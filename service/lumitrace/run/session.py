@@ -160,8 +160,10 @@ class Refinement:
                            self.settings)
 
     def add_round(self, tallies) -> MapEstimate:
-        """Add a round's tallies; estimate the map and its error."""
-        for tally in tallies:
+        """Add a round's tallies; estimate the map and its error. The tallies are all traced
+        before any is added: adding while the tracing threads run makes every small step of
+        the many small additions of a many-emitter scene wait for the GIL."""
+        for tally in list(tallies):
             self.accumulator.add(tally)
             self.done[tally.emitter] += tally.photons
             if self.records is not None:
