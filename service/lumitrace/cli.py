@@ -93,6 +93,19 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--edits", type=Path, default=None, metavar="LAYER",
                    help="compose this edits layer over the stage, as the service does with "
                         "NAME.lumitrace-edits.usda (default: none)")
+    t.add_argument("--no-sublayer", action="store_true",
+                   help="write the outputs and the result layer, but leave the stage file "
+                        "untouched (the result layer is not sublayered into it)")
+    t.add_argument("--no-pictures", action="store_true",
+                   help="skip the polar curve and the photometric solid (the slow outputs)")
+
+    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
+                                     "current and converged, 1 stale or missing, 3 not "
+                                     "converged)",
+                       description="Compose the stage and compare its lumitrace:result:* "
+                                   "attributes with the scene as it is now: a pipeline gate.")
+    c.add_argument("stage", type=Path)
+    c.add_argument("--json", action="store_true", help="print one JSON object")
 
     v = sub.add_parser("serve", help="the live service: watch the stage, accept scene deltas, "
                                      "refine and write results as it goes",
@@ -231,12 +244,14 @@ def _summary_text(r, stage) -> str:
         f"  intensity map   {r.intensity_map}",
         f"  IES / LDT       {r.ies}  {r.ldt}",
         f"  with errors     {r.photometry_data}",
-        f"  pictures        {r.polar_diagram}  {r.photometric_solid}",
+        f"  pictures        {r.polar_diagram}  {r.photometric_solid}" if r.polar_diagram
+        else "  pictures        (not drawn)",
         f"  result layer    {r.result_layer}"]
     return "\n".join(lines)
 
 
 def cmd_trace(args) -> int:
+    from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
     from .publish.outputs import write_outputs
     from .run.session import run
     from .run.settings import TraceSettings, default_threads
@@ -248,6 +263,8 @@ def cmd_trace(args) -> int:
                              threads=args.threads or default_threads(), workers=args.workers)
     check_interrupted(defer=True)
     preflight(args.stage, args.out)
+    if not args.no_sublayer:
+        refuse_hidden_results(args.stage)
     if args.edits is not None:
         from .delta.edits import open_with_edits
         from .stage.reader import scene_from_stage
@@ -267,8 +284,17 @@ def cmd_trace(args) -> int:
         if bar is not None:
             bar.close()
     check_interrupted()
-    record = write_outputs(result, args.out)
-    text = json.dumps(record.summary()) if args.json else _summary_text(record, args.stage)
+    record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
+                           pictures=not args.no_pictures)
+    summary = record.summary()
+    target = args.target_error
+    missed = target is not None and not (record["relative_error"] is not None
+                                         and record["relative_error"] <= target)
+    summary["target_reached"] = None if target is None else not missed
+    text = json.dumps(summary) if args.json else _summary_text(record, args.stage)
+    if missed and not args.json:
+        text += (f"\nnot converged: {_pct(record['relative_error'])} > {target:.2%} "
+                 f"(exit status {NOT_CONVERGED_EXIT})")
     try:
         print(text)
         sys.stdout.flush()
@@ -276,7 +302,16 @@ def cmd_trace(args) -> int:
         sys.stdout = open(os.devnull, "w")  # nothing more to say there, even at exit
         raise LumitraceError(f"the outputs were written, but the summary could not be "
                              f"printed: {exc.strerror or exc}", "standard output") from None
-    return 0
+    return NOT_CONVERGED_EXIT if missed else 0
+
+
+def cmd_check(args) -> int:
+    from .publish.check import check_stage
+
+    verdict = check_stage(args.stage)
+    print(json.dumps(verdict.as_dict()) if args.json else f"{args.stage}: {verdict.status}: "
+          f"{verdict.message}")
+    return verdict.exit_status
 
 
 def cmd_serve(args) -> int:
@@ -415,6 +450,30 @@ def _interrupted_message(exc: Interrupted) -> str:
     return f"lumitrace: {name}: interrupted; nothing was written, earlier outputs are unchanged"
 
 
+def refuse_hidden_results(stage: Path) -> None:
+    """Stop before tracing when stronger layers than the result layer hold result opinions
+    (a stage flattened with its results): the new results would compose hidden under them."""
+    from pxr import Usd
+
+    from .filenames import result_layer_path
+    from .publish.check import stronger_result_opinions
+
+    try:
+        composed = Usd.Stage.Open(str(stage), Usd.Stage.LoadNone)
+    except Exception:  # noqa: BLE001 - the stage reader reports what is wrong, clearly
+        return
+    prim = composed.GetDefaultPrim() if composed else None
+    if not prim:
+        return  # the reader says what is wrong with the stage
+    stronger = stronger_result_opinions(composed, str(prim.GetPath()), result_layer_path(stage))
+    if stronger:
+        raise LumitraceError(
+            f"holds lumitrace:result:* opinions on {prim.GetPath()} that are stronger than "
+            "the result layer (left by flattening a stage with results?): the new results "
+            "would be hidden under them. Remove them, or trace with --no-sublayer",
+            stronger[0])
+
+
 def preflight(stage: Path, out: Path | None) -> None:
     """What can be checked before a long trace: the stage is a regular file, the output
     folders exist or can be made, and can be written to."""
@@ -463,6 +522,8 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
             return cmd_serve(args)
         if args.command == "edits":
             return cmd_edits(args)
+        if args.command == "check":
+            return cmd_check(args)
     except LumitraceError as exc:
         print(f"lumitrace: error: {exc}", file=sys.stderr)
         return 2

@@ -153,6 +153,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
     _f("seed", "int", "", "seed", "seed", doc="random seed"),
     _f("input_hash", "string", "", "inputHash", "inputHash",
        doc="hash of the scene content and the settings that shape the map"),
+    _f("scene_hash", "string", "", "sceneHash", "sceneHash",
+       doc="hash of the scene content alone: results whose hash differs are stale"),
     _f("photons_per_second", "double", "1/s", doc="photons traced per second"),
     _f("segments_per_second", "double", "1/s", doc="path segments traced per second"),
     _f("light_output_ratio_error", "double", "", exr="lightOutputRatioError",

@@ -47,6 +47,7 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "downwardFluxFraction": 0.75,
         "peakIntensity": 321.5,
         "peakIntensityError": 2.5,
+        "sceneHash": "0" * 64,
         "luminousFluxError": 0.75,
         "photometryError": 0.0125,
         "photometryData": out / "stage.photometry.json",

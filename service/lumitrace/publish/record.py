@@ -114,6 +114,6 @@ def trace_figures(result: TraceResult) -> dict[str, Any]:
         "filtered_relative_error": result.estimate.filtered_error,
         "converged": result.converged, "target_error": s.target_error,
         "threshold": float(s.threshold), "resolution": acc.resolution, "seed": s.seed,
-        "input_hash": input_hash(result),
+        "input_hash": input_hash(result), "scene_hash": result.scene.content_hash(),
         "photons_per_second": acc.photons / secs, "segments_per_second": acc.segments / secs,
     }

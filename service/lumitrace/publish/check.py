@@ -1,0 +1,95 @@
+"""Whether a stage's composed results are current: what ``lumitrace check`` reports, and the
+opinions a trace refuses to hide its new results under.
+
+A result is current when the composed ``lumitrace:result:sceneHash`` on the luminaire prim
+equals the hash of the scene as it composes now, and every result attribute comes from a
+result layer (not from stronger opinions left, say, by flattening a stage on publish).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..filenames import RESULT_LAYER_SUFFIX, result_layer_path
+from ..schema import RESULT_PREFIX
+
+#: Exit statuses: results current (and converged), stale or missing, current but the
+#: target error not reached.
+CURRENT, STALE, NOT_CONVERGED = 0, 1, 3
+
+
+def _is_result_layer(layer) -> bool:
+    return (layer.realPath or layer.identifier).endswith(RESULT_LAYER_SUFFIX)
+
+
+def stronger_result_opinions(stage, prim_path: str, result_layer: Path | None = None
+                             ) -> list[str]:
+    """Layers of ``stage``'s root layer stack holding ``lumitrace:result:*`` opinions on
+    ``prim_path`` that are stronger than the result layer (``result_layer``, or where a
+    trace would sublayer it: first among the root layer's sublayers)."""
+    stack = stage.GetLayerStack(includeSessionLayers=False)  # strongest first
+    where = next((i for i, layer in enumerate(stack) if _is_result_layer(layer) and (
+        result_layer is None or Path(layer.realPath or "") == Path(result_layer))), 1)
+    out = []
+    for layer in stack[:where]:
+        spec = layer.GetPrimAtPath(prim_path)
+        if spec and any(name.startswith(RESULT_PREFIX) for name in spec.properties.keys()):
+            out.append(layer.realPath or layer.identifier)
+    return out
+
+
+@dataclass(frozen=True)
+class Check:
+    """The verdict on a stage's results: ``status`` (current, not converged, stale,
+    missing), one line saying why, the exit status, and the composed figures read."""
+
+    status: str
+    message: str
+    exit_status: int
+    values: dict
+
+    def as_dict(self) -> dict:
+        return {"status": self.status, "message": self.message,
+                "exitStatus": self.exit_status, **self.values}
+
+
+def check_stage(stage_path: str | Path) -> Check:
+    """Compose ``stage_path`` and judge its results against the scene it composes now."""
+    from pxr import Usd
+
+    from ..stage.reader import read_stage
+
+    scene = read_stage(stage_path)
+    stage = Usd.Stage.Open(str(stage_path))
+    prim = stage.GetPrimAtPath(scene.luminaire_path)
+    names = ("sceneHash", "converged", "relativeError", "photons", "photometryError",
+             "iesFile")
+    values = {}
+    for name in names:
+        attr = prim.GetAttribute(RESULT_PREFIX + name)
+        v = attr.Get() if attr and attr.HasAuthoredValue() else None
+        values[name] = v if isinstance(v, (str, int, float, bool, type(None))) else \
+            getattr(v, "path", str(v))
+    values["currentSceneHash"] = scene.content_hash()
+    layered = any(_is_result_layer(layer)
+                  for layer in stage.GetLayerStack(includeSessionLayers=False))
+    # opinions stronger than a result layer hide it; without one (a stage flattened with
+    # its results) they are the results, judged by their hash
+    stronger = stronger_result_opinions(stage, scene.luminaire_path,
+                                        result_layer_path(stage_path)) if layered else []
+    if values["sceneHash"] is None:
+        return Check("missing", f"no results on {scene.luminaire_path}: trace the stage",
+                     STALE, values)
+    if stronger:
+        return Check("stale", f"{', '.join(stronger)} holds lumitrace:result:* opinions "
+                     f"stronger than the result layer: the composed results are not the "
+                     f"last trace's (remove them)", STALE, values)
+    if values["sceneHash"] != values["currentSceneHash"]:
+        return Check("stale", "the stage changed since its results were traced: trace it "
+                     "again", STALE, values)
+    if not values["converged"]:
+        err = values["relativeError"]
+        return Check("not converged", "the results are current but did not reach their "
+                     f"target error (relative error {'undefined' if err is None else f'{err:.2%}'})",
+                     NOT_CONVERGED, values)
+    return Check("current", "the results are current and converged", CURRENT, values)
