@@ -82,8 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run batches in threads or worker processes; auto uses processes "
                         "for long runs (the map does not depend on it)")
     t.add_argument("--out", type=Path, default=None,
-                   help="folder for the EXR (default: beside the stage); the result layer is "
-                        "always written beside the stage")
+                   help="folder for every output, the result layer included (default: "
+                        "beside the stage)")
     t.add_argument("--json", action="store_true",
                    help="print one JSON summary object as the last line of stdout")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")

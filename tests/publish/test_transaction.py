@@ -201,7 +201,7 @@ def test_two_stages_of_one_name_never_share_outputs(tmp_path):
     assert code == 2 and "another stage" in err and len(err.strip().splitlines()) == 1, err
     assert run_ids(tmp_path, "lamp") == before
     # with a folder of their own they are fine
-    assert _trace(b, "--out", tmp_path / "usdc")[0] == 2  # the result layer still collides
+    assert _trace(b, "--out", tmp_path / "usdc")[0] == 0  # the result layer goes there too
     other = tmp_path / "other"
     other.mkdir()
     shutil.copy(DISC, other / "lamp.usda")

@@ -93,12 +93,13 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
 def output_place(scene, out_dir: str | os.PathLike | None,
                  name: str | None = None) -> tuple[Path | None, Path, str, Path]:
     """Where a scene's results go: (stage file or None, output folder, NAME, folder of the
-    result layer). A stage with no file of its own (in memory, anonymous) needs ``out_dir``;
-    its NAME is ``name`` or the luminaire prim's name, its result layer goes to ``out_dir``."""
+    result layer). Everything goes to ``out_dir`` when given, else beside the stage. A
+    stage with no file of its own (in memory, anonymous) needs ``out_dir``; its NAME is
+    ``name`` or the luminaire prim's name."""
     if scene.stage_path:
         stage_path = Path(scene.stage_path).absolute()
         out = Path(out_dir).absolute() if out_dir is not None else stage_path.parent
-        return stage_path, out, name or stage_name(stage_path), stage_path.parent
+        return stage_path, out, name or stage_name(stage_path), out
     if out_dir is None:
         raise OutputError("the stage has no file of its own: name an output folder",
                           scene.luminaire_path or None)
@@ -159,7 +160,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                                      photometric_light(scene, ph, paths["ies"], layer_dir),
                                      layer_dir,
                                      {**(extra or {}), "runId": tx.run_id,
-                                      "stage": str(stage_path or "")})
+                                      "stage": str(stage_path or "")},
+                                     (scene.up_axis, scene.meters_per_unit))
             write_layer_file(stage_path, staged["result_layer"], text)
             tx.commit(last=paths["result_layer"])
         except Interrupted as exc:

@@ -93,11 +93,14 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
 
 def result_layer_text(stage: Path | None, luminaire_path: str | None,
                       results: Mapping[str, Any], light: Mapping[str, Any] | None,
-                      layer_dir: Path, layer_data: Mapping[str, str] | None = None) -> str:
+                      layer_dir: Path, layer_data: Mapping[str, str] | None = None,
+                      units: tuple[str, float] | None = None) -> str:
     """The result layer as usda text (see :func:`write_result_layer`); ``layer_data`` goes
-    into its customLayerData (the run id and stage it belongs to). ``stage`` is None for a
-    stage with no file of its own (``luminaire_path`` is then required). Checks every value
-    and raises :class:`ResultValueError` before anything is written."""
+    into its customLayerData (the run id and stage it belongs to); ``units`` (up axis,
+    metres per unit) are the stage's, so that the layer opened on its own is a valid stage
+    (with its defaultPrim too). ``stage`` is None for a stage with no file of its own
+    (``luminaire_path`` is then required). Checks every value and raises
+    :class:`ResultValueError` before anything is written."""
     if stage is not None and not stage.is_file():
         raise OutputError("no such stage file", str(stage))
     if stage is None and not luminaire_path:
@@ -107,8 +110,10 @@ def result_layer_text(stage: Path | None, luminaire_path: str | None,
         missing = sorted({"ies", "flux", "radius", "position"} - set(light))
         if missing:
             raise ResultValueError(f"the result light needs {', '.join(missing)}")
+        # every asset path of the layer written alike: relative, ./ or ../ first
+        light = {**light, "ies": _relative_asset(light["ies"], layer_dir, "the light's IES")}
     prim_path = _luminaire_path(stage, luminaire_path)
-    return _result_layer_text(stage, prim_path, values, light, layer_data)
+    return _result_layer_text(stage, prim_path, values, light, layer_data, units)
 
 
 def write_layer_file(stage: Path | None, path: Path, text: str) -> None:
@@ -223,8 +228,9 @@ def _luminaire_path(stage: Path, luminaire_path: str | None):
 
 
 def _result_layer_text(stage: Path | None, prim_path, values: dict, light: Mapping | None = None,
-                       layer_data: Mapping[str, str] | None = None) -> str:
-    from pxr import Sdf
+                       layer_data: Mapping[str, str] | None = None,
+                       units: tuple[str, float] | None = None) -> str:
+    from pxr import Sdf, UsdGeom
 
     type_names = {"asset": Sdf.ValueTypeNames.Asset, "int64": Sdf.ValueTypeNames.Int64,
                   "int": Sdf.ValueTypeNames.Int, "double": Sdf.ValueTypeNames.Double,
@@ -238,6 +244,11 @@ def _result_layer_text(stage: Path | None, prim_path, values: dict, light: Mappi
         layer.customLayerData = {f"lumitrace:{k}": str(v) for k, v in layer_data.items()}
     spec = Sdf.CreatePrimInLayer(layer, prim_path)
     spec.specifier = Sdf.SpecifierOver
+    if prim_path.IsRootPrimPath():
+        layer.defaultPrim = prim_path.name
+    if units is not None:
+        layer.pseudoRoot.SetInfo(UsdGeom.Tokens.upAxis, units[0])
+        layer.pseudoRoot.SetInfo(UsdGeom.Tokens.metersPerUnit, float(units[1]))
     spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=[LUMINAIRE_API]))
     for key, value in values.items():
         attr = Sdf.AttributeSpec(spec, RESULT_PREFIX + key,
