@@ -263,8 +263,6 @@ def cmd_trace(args) -> int:
                              threads=args.threads or default_threads(), workers=args.workers)
     check_interrupted(defer=True)
     preflight(args.stage, args.out)
-    if not args.no_sublayer:
-        refuse_hidden_results(args.stage)
     if args.edits is not None:
         from .delta.edits import open_with_edits
         from .stage.reader import scene_from_stage
@@ -274,6 +272,8 @@ def cmd_trace(args) -> int:
         scene = scene_from_stage(open_with_edits(args.stage, args.edits))
     else:
         scene = read_stage(args.stage)
+    if not args.no_sublayer:
+        refuse_hidden_results(args.stage)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
@@ -451,27 +451,25 @@ def _interrupted_message(exc: Interrupted) -> str:
 
 
 def refuse_hidden_results(stage: Path) -> None:
-    """Stop before tracing when stronger layers than the result layer hold result opinions
-    (a stage flattened with its results): the new results would compose hidden under them."""
-    from pxr import Usd
+    """Stop before tracing when the stage's root layer, which is stronger than the result
+    layer sublayered into it, holds result opinions (a stage flattened with its results):
+    the new results would compose hidden under them. Reads the root layer alone (no
+    composition: a stage with other problems is the reader's to report)."""
+    from pxr import Sdf
 
-    from .filenames import result_layer_path
-    from .publish.check import stronger_result_opinions
+    from .publish.check import result_opinion_prims
 
     try:
-        composed = Usd.Stage.Open(str(stage), Usd.Stage.LoadNone)
+        layer = Sdf.Layer.OpenAsAnonymous(str(stage), metadataOnly=False)
     except Exception:  # noqa: BLE001 - the stage reader reports what is wrong, clearly
         return
-    prim = composed.GetDefaultPrim() if composed else None
-    if not prim:
-        return  # the reader says what is wrong with the stage
-    stronger = stronger_result_opinions(composed, str(prim.GetPath()), result_layer_path(stage))
-    if stronger:
+    prims = result_opinion_prims(layer) if layer is not None else []
+    if prims:
         raise LumitraceError(
-            f"holds lumitrace:result:* opinions on {prim.GetPath()} that are stronger than "
-            "the result layer (left by flattening a stage with results?): the new results "
+            f"holds lumitrace:result:* opinions on {prims[0]} that are stronger than the "
+            "result layer (left by flattening a stage with results?): the new results "
             "would be hidden under them. Remove them, or trace with --no-sublayer",
-            stronger[0])
+            str(stage))
 
 
 def preflight(stage: Path, out: Path | None) -> None:

@@ -12,6 +12,7 @@ RESULT_LAYER_SUFFIX = ".lumitrace.usda"
 EDITS_LAYER_SUFFIX = ".lumitrace-edits.usda"
 #: Output suffixes after ``NAME`` (the result layer lives beside the stage).
 INTENSITY_SUFFIX = ".intensity.exr"
+LATLONG_SUFFIX = ".latlong.exr"
 IES_SUFFIX = ".ies"
 LDT_SUFFIX = ".ldt"
 POLAR_SUFFIX = ".polar.png"

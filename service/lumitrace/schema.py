@@ -118,6 +118,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
     _f("luminaire", "string", exr="luminaire", doc="luminaire prim path"),
     _f("intensity_map", "asset", attribute="intensityMap", group="outputs",
        doc="cube-map EXR of the intensity"),
+    _f("latlong_map", "asset", attribute="latlongMap", group="outputs",
+       doc="lat-long environment texture of the intensity (tiled, mip-mapped EXR)"),
     _f("ies", "asset", attribute="iesFile", group="outputs", doc="IES LM-63-2019 file"),
     _f("ldt", "asset", attribute="ldtFile", group="outputs", doc="EULUMDAT file"),
     _f("polar_diagram", "asset", attribute="polarDiagram", group="outputs",

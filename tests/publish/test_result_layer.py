@@ -31,6 +31,7 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         (out / name).write_bytes(b"x")
     return {
         "intensityMap": out / "stage.intensity.exr",      # absolute paths are made relative
+        "latlongMap": out / "stage.latlong.exr",
         "iesFile": str(out / "stage.ies"),
         "ldtFile": "out/stage.ldt",                       # relative to the stage's folder
         "photons": photons,

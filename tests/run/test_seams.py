@@ -110,7 +110,7 @@ def test_results_of_a_stage_with_no_file_go_to_the_named_folder(tmp_path):
     record = write_outputs(result, out)
     name = scene.luminaire_path.rsplit("/", 1)[-1]
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == sorted(
-        f"{name}{s}" for s in (".intensity.exr", ".ies", ".ldt", ".photometry.json",
+        f"{name}{s}" for s in (".intensity.exr", ".latlong.exr", ".ies", ".ldt", ".photometry.json",
                                ".polar.png", ".solid.png", ".lumitrace.usda"))
     assert record["photons"] == 20_000
     stage.GetRootLayer().subLayerPaths.append(str(out / f"{name}.lumitrace.usda"))

@@ -22,6 +22,12 @@ def _is_result_layer(layer) -> bool:
     return (layer.realPath or layer.identifier).endswith(RESULT_LAYER_SUFFIX)
 
 
+def result_opinion_prims(layer) -> list[str]:
+    """Root prims of ``layer`` (an Sdf layer) holding ``lumitrace:result:*`` opinions."""
+    return [str(spec.path) for spec in layer.rootPrims
+            if any(name.startswith(RESULT_PREFIX) for name in spec.properties.keys())]
+
+
 def stronger_result_opinions(stage, prim_path: str, result_layer: Path | None = None
                              ) -> list[str]:
     """Layers of ``stage``'s root layer stack holding ``lumitrace:result:*`` opinions on

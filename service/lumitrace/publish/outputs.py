@@ -16,12 +16,13 @@ import numpy as np
 
 from .. import __version__
 from ..errors import Interrupted, OutputError, OutputWarning, warn
-from ..filenames import INTENSITY_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
+from ..filenames import INTENSITY_SUFFIX, LATLONG_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from ..photometry import frame
 from ..photometry.distribution import Photometry, photometry_of
 from ..run.session import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
+from .latlong import write_latlong_texture
 from .photometric import photometric_paths, write_photometric_files
 from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
@@ -29,6 +30,11 @@ from .runs import layer_data
 from .result_layer import result_layer_text, write_layer_file
 from .sublayer import reload_if_open, sublayer_into_root
 from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signals_held
+
+
+#: ``relativeError`` of a texel with no estimate (no photons, nothing borrowed), and the cap
+#: of every texel's: a finite value that half floats, viewers and filters survive.
+MAX_TEXEL_ERROR = 100.0
 
 
 def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: Path) -> dict:
@@ -80,7 +86,8 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
         "software": f"lumitrace {__version__}",
         **record.exr_metadata(),
         "units": {"Y": "cd", "raw.Y": "cd", "count": "photons",
-                  "relativeError": "relative standard error of Y per texel"},
+                  "relativeError": "relative standard error of Y per texel (capped at "
+                                   f"{MAX_TEXEL_ERROR:g}: no estimate)"},
         "axes": f"stage axes, up {scene.up_axis}",
         "errorDefinition": "estimated relative RMS error of Y over the sphere: "
                            "sqrt(sum(dOmega (Y - Y_true)^2) / sum(dOmega Y_true^2))",
@@ -126,6 +133,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     scene = result.scene
     stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
+             "latlong_map": out / f"{name}{LATLONG_SUFFIX}",
              **photometric_paths(out, name),
              "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
     drawable = plotting_available()
@@ -151,10 +159,11 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
             acc = result.accumulator
             channels = {"Y": est.filtered, "raw.Y": est.raw,
                         "count": acc.counts().astype(np.float64),
-                        "relativeError": np.minimum(est.texel_error, 1e30)}
+                        "relativeError": np.minimum(est.texel_error, MAX_TEXEL_ERROR)}
             meta = {**exr_metadata(result, record), **(extra or {}), "runId": tx.run_id,
                     "stagePath": str(stage_path or "")}
             write_intensity_exr(staged["intensity_map"], channels, meta)
+            write_latlong_texture(staged["latlong_map"], est.filtered, scene.up_axis)
             text = result_layer_text(stage_path, scene.luminaire_path,
                                      record.layer_values(layer_dir),
                                      photometric_light(scene, ph, paths["ies"], layer_dir),

@@ -127,14 +127,16 @@ def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) ->
 
 
 def sublayer_into_root(stage: Path, layer_path: Path) -> None:
-    """Put ``./NAME.lumitrace.usda`` first in the stage root layer's subLayers, once.
+    """Put the result layer (``./NAME.lumitrace.usda`` beside the stage, or its path
+    relative to the stage's folder) first in the stage root layer's subLayers, once.
 
     A compare-and-swap: the file is read, the edit made on that copy, and the file is
     replaced only if it still holds exactly what was read; a save by anyone else in between
     makes it start again. Nothing but the subLayers entry changes (a .usda file's text is
     edited in place); the file keeps its mode, owner and hard links.
     """
-    entry = "./" + layer_path.name
+    rel = Path(os.path.relpath(layer_path, Path(stage).absolute().parent)).as_posix()
+    entry = rel if rel.startswith("../") else "./" + rel
     if stage.suffix.lower() == ".usdz":
         _warn(f"{stage}: a .usdz package is not modified; add {entry} to its subLayers "
               f"(or open {layer_path.name} over it) to see the result in the stage")

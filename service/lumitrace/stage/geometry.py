@@ -102,6 +102,11 @@ def _mesh_polygons(prim: Usd.Prim, time: Usd.TimeCode, warn: Callable[[str], Non
         warn(f"{path}: mesh has no points: skipped")
         return None
     validate.check_finite_points(points, path, "points")
+    scheme = mesh.GetSubdivisionSchemeAttr()
+    if scheme.HasAuthoredValue() and scheme.Get() != UsdGeom.Tokens.none:
+        warn(f"{path}: subdivisionScheme is {scheme.Get()!r}: traced as its control cage "
+             "(renderers would subdivide it); author subdivisionScheme = \"none\" or "
+             "export the refined mesh")
     counts = check_array(mesh.GetFaceVertexCountsAttr().Get(time), path,
                          "faceVertexCounts", np.int64)
     indices = check_array(mesh.GetFaceVertexIndicesAttr().Get(time), path,

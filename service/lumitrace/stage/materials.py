@@ -121,6 +121,7 @@ class BoundMaterials:
             values.update(material_api_values(material_prim, self.time))
         values.update(gprim_values)
         validate.check_material(values)
+        self._warn_lossless(values)
         mat = Material(
             path=key,
             scattering=str(values[schema.SCATTERING].value),
@@ -133,6 +134,26 @@ class BoundMaterials:
         self.index[key] = len(self.materials)
         self.materials.append(mat)
         return self.index[key]
+
+
+    def _warn_lossless(self, values: dict) -> None:
+        """Warn when a UsdPreviewSurface maps to a surface that absorbs nothing (a white
+        diffuse, a white metal: a chrome reflector with a light output ratio of 1.000)."""
+        kind = str(values[schema.SCATTERING].value)
+        name = {"diffuse": schema.REFLECTANCE, "mirror": schema.SPECULAR_REFLECTANCE,
+                "glossy": schema.SPECULAR_REFLECTANCE}.get(kind)
+        if name is None:
+            return
+        v = values[name]
+        if float(v.value) >= LOSSLESS and not str(v.prop).startswith("lumitrace:"):
+            self.warn(f"{v.where}.{v.prop}: the UsdPreviewSurface maps to a {kind} surface "
+                      f"of reflectance {float(v.value):.3f}, which absorbs no light; real "
+                      f"ones do (polished aluminium about 0.9): author {name} "
+                      "(LumitraceMaterialAPI) or a darker colour")
+
+
+#: A PreviewSurface albedo from which the surface is taken for a lossless one (warned).
+LOSSLESS = 0.99
 
 
 def _has_api(prim: Usd.Prim, name: str) -> bool:

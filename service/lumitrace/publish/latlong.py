@@ -1,0 +1,71 @@
+"""The intensity map as a lat-long environment texture: what renderers (a UsdLux DomeLight)
+and compositors read, written through OpenImageIO as a tiled, mip-mapped EXR.
+
+OpenEXR's latitude-longitude layout: x is longitude, from +pi at the left edge to -pi at the
+right, y latitude, +pi/2 at the top; longitude 0 on the equator looks along +Z, pi/2 along
++X, the poles are +-Y. That frame is a DomeLight's with ``poleAxis`` "scene": its +Y pole is
+the stage's up axis, so in a Z-up stage the image's +Y is the stage's +Z and its +Z the
+stage's -Y. R, G and B all hold the intensity (cd), so the texture's value in a direction
+is the luminaire's intensity toward it.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OutputError
+from ..film.cubemap import sample_map
+
+#: Tile size (pixels) of the texture.
+TILE = 64
+
+
+def dome_to_stage(d: np.ndarray, up_axis: str) -> np.ndarray:
+    """Directions (..., 3) in the dome's (OpenEXR lat-long) frame, in stage axes."""
+    if up_axis == "Y":
+        return d
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    return np.stack([x, -z, y], axis=-1)  # dome +Y is the stage's +Z, dome +Z its -Y
+
+
+def stage_to_dome(d: np.ndarray, up_axis: str) -> np.ndarray:
+    """Directions (..., 3) in stage axes, in the dome's frame."""
+    if up_axis == "Y":
+        return d
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    return np.stack([x, z, -y], axis=-1)
+
+
+def latlong_image(intensity_map: np.ndarray, up_axis: str, width: int | None = None
+                  ) -> np.ndarray:
+    """The cube map (cd) resampled bilinearly at the pixel centres of a 2N x N lat-long
+    image: (N, 2N) float32, N twice the cube face size unless ``width`` says otherwise."""
+    w = width or 4 * intensity_map.shape[1]
+    h = w // 2
+    lon = np.pi - 2.0 * np.pi * (np.arange(w) + 0.5) / w
+    lat = 0.5 * np.pi - np.pi * (np.arange(h) + 0.5) / h
+    lat, lon = np.meshgrid(lat, lon, indexing="ij")
+    dome = np.stack([np.cos(lat) * np.sin(lon), np.sin(lat), np.cos(lat) * np.cos(lon)], -1)
+    world = dome_to_stage(dome, up_axis).reshape(-1, 3)
+    return sample_map(intensity_map, world).reshape(h, w).astype(np.float32)
+
+
+def write_latlong_texture(path: str | os.PathLike, intensity_map: np.ndarray,
+                          up_axis: str) -> Path:
+    """Write the lat-long texture of a cube map (cd) at ``path`` (tiled, mip-mapped EXR,
+    through OpenImageIO's texture maker)."""
+    import OpenImageIO as oiio
+
+    img = latlong_image(intensity_map, up_axis)
+    buf = oiio.ImageBuf(np.repeat(img[..., None], 3, axis=2))
+    spec = oiio.ImageSpec()
+    spec.tile_width = spec.tile_height = TILE
+    spec.attribute("compression", "zip")
+    spec.attribute("oiio:ColorSpace", "lin_rec709")
+    spec.attribute("ImageDescription", "luminous intensity (cd) by direction, lat-long, "
+                   f"dome frame with its pole on the stage's +{up_axis}")
+    if not oiio.ImageBufAlgo.make_texture(oiio.MakeTxEnvLatl, buf, str(path), spec):
+        raise OutputError(f"cannot write the lat-long texture: {oiio.geterror()}", str(path))
+    return Path(path)
