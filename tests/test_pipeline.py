@@ -82,3 +82,30 @@ def test_a_flattened_stage_with_results_is_not_traced_into_hiding(disc):
     assert run.returncode == 0, run.stderr
     assert flat.read_bytes() == before
     assert flat.with_name("flat.lumitrace.usda").exists() and flat.with_name("flat.ies").exists()
+
+
+def test_a_flattened_stage_traced_again_with_replace_results_is_current(disc):
+    assert _lumitrace("trace", disc, "--photons", "100000", "--target-error", "0.5",
+                      "--no-progress", "--no-pictures", cwd=disc.parent).returncode == 0
+    flat = disc.with_name("flat.usda")
+    Usd.Stage.Open(str(disc)).Export(str(flat))
+    # the stage changes after flattening: its copied results are stale
+    stage = Usd.Stage.Open(str(flat))
+    stage.GetPrimAtPath("/Luminaire/Source").GetAttribute("lumitrace:luminousFlux").Set(800.0)
+    stage.GetRootLayer().Save()
+    assert _lumitrace("check", flat, cwd=disc.parent).returncode == 1
+    run = _lumitrace("trace", flat, "--photons", "200000", "--target-error", "0.5",
+                     "--replace-results", "--no-progress", "--no-pictures", "--json",
+                     cwd=disc.parent)
+    assert run.returncode == 0, run.stderr
+    assert "removed the stale lumitrace:result:* opinions on /Luminaire" in run.stderr
+    summary = json.loads(run.stdout.strip().splitlines()[-1])
+    assert summary["escaped_lm"] == pytest.approx(800.0)
+    check = _lumitrace("check", flat, "--json", cwd=disc.parent)
+    assert check.returncode == 0, check.stdout
+    stage.GetRootLayer().Reload()  # this process still holds the layer as it saved it
+    composed_stage = Usd.Stage.Open(str(flat))
+    composed = composed_stage.GetPrimAtPath("/Luminaire")
+    assert composed.GetAttribute("lumitrace:result:photons").Get() == summary["photons"]
+    assert composed.GetVariantSets().GetVariantSet("lumitraceRepresentation") \
+        .GetVariantNames() == ["geometry", "photometric"]

@@ -96,6 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--no-sublayer", action="store_true",
                    help="write the outputs and the result layer, but leave the stage file "
                         "untouched (the result layer is not sublayered into it)")
+    t.add_argument("--replace-results", action="store_true",
+                   help="remove stale lumitrace:result:* opinions from the stage's root layer "
+                        "(a stage flattened with its results) before tracing")
     t.add_argument("--no-pictures", action="store_true",
                    help="skip the polar curve and the photometric solid (the slow outputs)")
 
@@ -273,6 +276,12 @@ def cmd_trace(args) -> int:
     else:
         scene = read_stage(args.stage)
     if not args.no_sublayer:
+        if args.replace_results:
+            from .publish.check import strip_result_opinions
+
+            for prim in strip_result_opinions(args.stage):
+                print(f"warning: {args.stage}: removed the stale lumitrace:result:* opinions "
+                      f"on {prim} from its root layer", file=sys.stderr)
         refuse_hidden_results(args.stage)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -468,7 +477,8 @@ def refuse_hidden_results(stage: Path) -> None:
         raise LumitraceError(
             f"holds lumitrace:result:* opinions on {prims[0]} that are stronger than the "
             "result layer (left by flattening a stage with results?): the new results "
-            "would be hidden under them. Remove them, or trace with --no-sublayer",
+            "would be hidden under them. Trace with --replace-results to remove them, or "
+            "with --no-sublayer",
             str(stage))
 
 

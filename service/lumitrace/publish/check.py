@@ -28,6 +28,33 @@ def result_opinion_prims(layer) -> list[str]:
             if any(name.startswith(RESULT_PREFIX) for name in spec.properties.keys())]
 
 
+#: The variant set the result layer authors on the luminaire (see
+#: :mod:`lumitrace.publish.result_layer`); a flattened stage carries it in its root layer.
+_VARIANT_SET = "lumitraceRepresentation"
+
+
+def strip_result_opinions(stage_path: str | Path) -> list[str]:
+    """Remove the ``lumitrace:result:*`` opinions and the representation variant set that
+    flattening a stage with its results left in its root layer, and save it; returns the
+    prims cleaned. The stage's own content is not touched."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(str(stage_path))
+    prims = result_opinion_prims(layer) if layer is not None else []
+    for path in prims:
+        spec = layer.GetPrimAtPath(path)
+        for name in [n for n in spec.properties.keys() if n.startswith(RESULT_PREFIX)]:
+            spec.RemoveProperty(spec.properties[name])
+        if _VARIANT_SET in spec.variantSets:
+            spec.variantSetNameList.RemoveItemEdits(_VARIANT_SET)
+            del spec.variantSets[_VARIANT_SET]
+            if _VARIANT_SET in spec.variantSelections:
+                del spec.variantSelections[_VARIANT_SET]
+    if prims:
+        layer.Save()
+    return prims
+
+
 def stronger_result_opinions(stage, prim_path: str, result_layer: Path | None = None
                              ) -> list[str]:
     """Layers of ``stage``'s root layer stack holding ``lumitrace:result:*`` opinions on
