@@ -26,7 +26,7 @@ RANKS = {
     "run": 4,
     "publish": 5,
     "report": 6, "serve": 6,
-    "cli": 7,
+    "cli": 7, "api": 7, "__main__": 8,
     "client": 0,  # the standard library only: it runs in a DCC's own Python
 }
 

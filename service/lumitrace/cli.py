@@ -55,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="lumitrace",
         description="Far-field luminous intensity of OpenUSD luminaires by photon tracing.")
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"lumitrace {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     t = sub.add_parser("trace", help="trace a stage and write the intensity map and result layer",
@@ -300,6 +303,7 @@ def cmd_trace(args) -> int:
     missed = target is not None and not (record["relative_error"] is not None
                                          and record["relative_error"] <= target)
     summary["target_reached"] = None if target is None else not missed
+    summary["warnings"] = list(scene.warnings)
     text = json.dumps(summary) if args.json else _summary_text(record, args.stage)
     if missed and not args.json:
         text += (f"\nnot converged: {_pct(record['relative_error'])} > {target:.2%} "
