@@ -109,3 +109,20 @@ def test_a_flattened_stage_traced_again_with_replace_results_is_current(disc):
     assert composed.GetAttribute("lumitrace:result:photons").Get() == summary["photons"]
     assert composed.GetVariantSets().GetVariantSet("lumitraceRepresentation") \
         .GetVariantNames() == ["geometry", "photometric"]
+
+
+def test_cli_conventions_for_logs_and_scripts(disc):
+    """Piped stderr gets a line per iteration (no carriage returns); --quiet prints
+    nothing; --luminaire and --time-code reach the reader; --version answers."""
+    run = _lumitrace("trace", disc, "--photons", "100000", "--no-pictures", cwd=disc.parent)
+    assert run.returncode == 0 and "\r" not in run.stderr
+    lines = [ln for ln in run.stderr.splitlines() if ln.startswith("iteration ")]
+    assert len(lines) >= 2 and "photons" in lines[-1] and "error" in lines[-1]
+    run = _lumitrace("trace", disc, "--photons", "50000", "--no-pictures", "--quiet",
+                     "--luminaire", "/Luminaire", "--time-code", "1", cwd=disc.parent)
+    assert run.returncode == 0 and run.stdout == "" and run.stderr == ""
+    run = _lumitrace("trace", disc, "--photons", "50000", "--luminaire", "/Nope",
+                     cwd=disc.parent)
+    assert run.returncode == 2 and "/Nope" in run.stderr
+    run = _lumitrace("--version", cwd=disc.parent)
+    assert run.returncode == 0 and run.stdout.startswith("lumitrace ")

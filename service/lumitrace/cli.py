@@ -99,6 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--no-sublayer", action="store_true",
                    help="write the outputs and the result layer, but leave the stage file "
                         "untouched (the result layer is not sublayered into it)")
+    t.add_argument("--luminaire", default=None, metavar="PRIM",
+                   help="the luminaire prim (default: the stage's defaultPrim)")
+    t.add_argument("--time-code", type=float, default=None, metavar="CODE",
+                   help="the USD time code to read the stage at (default: its default time)")
+    t.add_argument("--quiet", action="store_true",
+                   help="print nothing but errors (the exit status says how it went)")
     t.add_argument("--replace-results", action="store_true",
                    help="remove stale lumitrace:result:* opinions from the stage's root layer "
                         "(a stage flattened with its results) before tracing")
@@ -182,9 +188,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
-    """A tqdm bar on stderr counting photons (or seconds), with iterations and error."""
+    """A tqdm bar on stderr counting photons (or seconds), with iterations and error; a
+    plain line per iteration when stderr is not a terminal (a log file, a farm's capture),
+    where a bar's carriage returns would pile up."""
     if not enabled:
         return None, None
+    if not sys.stderr.isatty():
+        def log(p):
+            print(f"iteration {p.iteration}: {p.photons:,} photons, {p.seconds:.1f} s, "
+                  f"error {_pct(p.relative_error)}", file=sys.stderr, flush=True)
+        return None, log
     from tqdm import tqdm
 
     if total is not None:
@@ -277,7 +290,7 @@ def cmd_trace(args) -> int:
             raise LumitraceError("edits layer not found", str(args.edits))
         scene = scene_from_stage(open_with_edits(args.stage, args.edits))
     else:
-        scene = read_stage(args.stage)
+        scene = read_stage(args.stage, args.luminaire, time=args.time_code)
     if not args.no_sublayer:
         if args.replace_results:
             from .publish.check import strip_result_opinions
@@ -286,10 +299,11 @@ def cmd_trace(args) -> int:
                 print(f"warning: {args.stage}: removed the stale lumitrace:result:* opinions "
                       f"on {prim} from its root layer", file=sys.stderr)
         refuse_hidden_results(args.stage)
-    for w in scene.warnings:
+    for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
-    bar, update = _progress_bar(settings.budget(), args.time, not (args.no_progress or args.json))
+    bar, update = _progress_bar(settings.budget(), args.time,
+                                not (args.no_progress or args.json or args.quiet))
     try:
         result = run(scene, settings, progress=update, frame=args.frame)
     finally:
@@ -304,12 +318,14 @@ def cmd_trace(args) -> int:
                                          and record["relative_error"] <= target)
     summary["target_reached"] = None if target is None else not missed
     summary["warnings"] = list(scene.warnings)
-    text = json.dumps(summary) if args.json else _summary_text(record, args.stage)
-    if missed and not args.json:
+    text = json.dumps(summary) if args.json else "" if args.quiet else \
+        _summary_text(record, args.stage)
+    if missed and not (args.json or args.quiet):
         text += (f"\nnot converged: {_pct(record['relative_error'])} > {target:.2%} "
                  f"(exit status {NOT_CONVERGED_EXIT})")
     try:
-        print(text)
+        if text:
+            print(text)
         sys.stdout.flush()
     except OSError as exc:
         sys.stdout = open(os.devnull, "w")  # nothing more to say there, even at exit

@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.paths import NO_EULUMDAT
+
 from lumitrace.film.cubemap import texel_solid_angles
 from lumitrace.photometry import frame
 from lumitrace.photometry.eulumdat import format_ldt, parse_ldt, plane_angles, read_ldt
@@ -144,7 +146,7 @@ def test_ldt_round_trip_with_our_reader_and_eulumdat_py(lambertian, tmp_path):
 
 
 def test_third_party_eulumdat_reads_our_ies_and_ldt(tmp_path):
-    eulumdat = pytest.importorskip("eulumdat")
+    eulumdat = pytest.importorskip("eulumdat", reason=NO_EULUMDAT)
     stage = tmp_path / "disc.usda"
     shutil.copy(ROOT / "stages" / "reference" / "lambertian_disc.usda", stage)
     from lumitrace.publish.outputs import write_outputs

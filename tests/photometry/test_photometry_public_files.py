@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.paths import NO_EULUMDAT
+
 from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
 from helpers.paths import DATA
 
@@ -37,7 +39,7 @@ def test_public_lm63_1995_file_reads_correctly():
 
 
 def test_public_file_agrees_with_third_party_readers():
-    eulumdat = pytest.importorskip("eulumdat")  # AGPL: tests only
+    eulumdat = pytest.importorskip("eulumdat", reason=NO_EULUMDAT)  # AGPL: tests only
     eulumdat_ies = pytest.importorskip("eulumdat_ies")
     ours = read_ies(BEGA).grid()
     theirs = eulumdat.Eulumdat.from_ies_file(str(BEGA))
@@ -56,7 +58,7 @@ def test_public_file_agrees_with_third_party_readers():
 
 
 def test_public_file_survives_our_writer(tmp_path):
-    eulumdat = pytest.importorskip("eulumdat")
+    eulumdat = pytest.importorskip("eulumdat", reason=NO_EULUMDAT)
     grid = read_ies(BEGA).grid()
     text = format_ies(grid, STATED_FLUX, -0.12, -0.12, 0.0, {"MANUFAC": "BEGA"})
     back = parse_ies(text).grid()
