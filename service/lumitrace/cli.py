@@ -395,6 +395,10 @@ def cmd_report(args) -> int:
                               thresholds=thresholds, seed=args.seed,
                               threads=args.threads or os.cpu_count() or 1)
     out = args.out or args.stage.parent / f"{stage_name(args.stage)}.report"
+    from .stage.reader import read_stage
+
+    for w in read_stage(args.stage).warnings:
+        print(f"warning: {w}", file=sys.stderr)
     bar, update = _progress_bar(args.photons, seconds, not args.no_progress)
     try:
         written = run_report(args.stage, out, settings, args.reference, progress=update)
@@ -405,6 +409,14 @@ def cmd_report(args) -> int:
     print(f"report     {written['html']}")
     print(f"photons    {data['photons']:,} in {data['iterations']} iterations, {data['seconds']:.1f} s")
     print(f"reference  {data['reference'] or 'none (estimated errors only)'}")
+    f = data["figures"]
+    pm = lambda v, e, d=1: "-" if v is None else f"{v:.{d}f}" + (  # noqa: E731
+        "" if e is None else f" +- {e:.{d}f}")
+    print(f"flux       {pm(f['luminous_flux'], f['luminous_flux_error'])} lm, light output "
+          f"ratio {pm(f['light_output_ratio'], f['light_output_ratio_error'], 4)}")
+    print(f"peak       {pm(f['peak_intensity'], f['peak_intensity_error'])} cd; beam "
+          f"{pm(f['beam_angle_c0_c180'], f['beam_angle_c0_c180_error'])} deg (C0-C180), "
+          f"CIE flux code {f['cie_flux_code']}")
     for key, c in data["time_to_error"].items():
         label = "raw" if key == "0" else f"threshold {key}"
         cells = ", ".join(f"{float(lv):.0%} at {t:.3g} s" if t else f"{float(lv):.0%} not reached"

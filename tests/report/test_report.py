@@ -57,3 +57,8 @@ def test_report_on_the_lambertian_disc(tmp_path):
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
     page = Path(out["html"]).read_text()
     assert "error_vs_time.png" in page and "maps.png" in page
+    # the measured figures of the final result, with their errors
+    f = data["figures"]
+    assert f["luminous_flux"] == pytest.approx(1000.0) and f["upward_flux_fraction"] == 0.0
+    assert abs(f["peak_intensity"] - 1000.0 / np.pi) < 4.0 * f["peak_intensity_error"]
+    assert data["warnings"] == []

@@ -163,6 +163,8 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
         "error_definition": "relative RMS error over the sphere: "
                             "sqrt(sum(dOmega (I - I_ref)^2) / sum(dOmega I_ref^2))",
         "photons": result.photons, "seconds": result.seconds, "iterations": result.iterations,
+        "figures": _figures(scene, result),
+        "warnings": list(scene.warnings),
         "time_to_error": crossings,
         "speedup_filtered_over_raw": speedups,
         "iterations_data": rows,
@@ -174,6 +176,21 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
     write_text(html_path, _html(data))
     return {"json": str(json_path), "html": str(html_path), **{k: str(v) for k, v in paths.items()},
             "data": data}
+
+
+def _figures(scene, result) -> dict:
+    """The measured photometric figures of the final result, with their standard errors
+    (JSON-safe: undefined figures are null)."""
+    from ..photometry.distribution import photometry_of
+
+    out = {}
+    for k, v in photometry_of(scene, result.accumulator).figures.as_dict().items():
+        if isinstance(v, tuple):
+            v = [None if not np.isfinite(x) else float(x) for x in v]
+        elif isinstance(v, float) and not np.isfinite(v):
+            v = None
+        out[k] = v
+    return out
 
 
 def _pick_snapshots(iterations: list[int]) -> list[int]:
@@ -223,19 +240,33 @@ def _plots(out: Path, rows, thresholds, ref, snapshots, picked, main_t) -> dict[
                              dpi=110, squeeze=False)
     vmax = float(ref.intensity.max()) if ref is not None else max(
         float(snapshots[i][cols[1]].max()) for i in picked)
+    # a log scale over four decades, so that a narrow beam and the dim rest both show
+    from matplotlib.colors import LogNorm
+
+    norm = LogNorm(vmin=max(vmax, 1e-300) * 1e-4, vmax=max(vmax, 1e-300), clip=True)
+    shown = None
     for r, it in enumerate(picked):
         row = next(x for x in rows if x["iteration"] == it)
         for c, key in enumerate(cols):
             img = ref.intensity if key == "reference" else snapshots[it][key]
             ax = axes[r][c]
-            ax.imshow(cube_to_latlong(img, height=90), cmap="inferno", vmin=0, vmax=vmax,
-                      extent=(-180, 180, -90, 90))
+            shown = ax.imshow(np.maximum(cube_to_latlong(img, height=90), norm.vmin),
+                              cmap="inferno", norm=norm, extent=(-180, 180, -90, 90))
             title = ("reference" if key == "reference" else
                      ("raw" if key == "0" else f"filtered (threshold {key})"))
             ax.set_title(f"{title}\n{row['photons']:,} photons", fontsize=7)
-            ax.set_xticks([])
-            ax.set_yticks([])
+            ax.set_xticks([-180, -90, 0, 90, 180])
+            ax.set_yticks([-90, 0, 90])
+            ax.tick_params(labelsize=6)
+            if r == len(picked) - 1:
+                ax.set_xlabel("longitude (deg)", fontsize=6)
+            if c == 0:
+                ax.set_ylabel("latitude (deg)", fontsize=6)
     fig.tight_layout()
+    if shown is not None:
+        bar = fig.colorbar(shown, ax=axes, shrink=0.8, pad=0.02)
+        bar.set_label("intensity (cd, log scale)", fontsize=7)
+        bar.ax.tick_params(labelsize=6)
     paths["maps"] = out / "maps.png"
     with atomic_path(paths["maps"]) as tmp:
         fig.savefig(tmp, format="png")
