@@ -19,6 +19,7 @@ All counts live in one array of :data:`N_BINS` bins: first the C-gamma cells (C-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -40,6 +41,14 @@ N_EXIT = len(FACES) * EXIT_SIDE * EXIT_SIDE
 N_BINS = N_CELLS + N_EXIT
 #: The two in-face coordinates (photometric axes 0 = C0, 1 = C90, 2 = up) of each face.
 FACE_AXES = ((0, 1), (0, 1), (1, 2), (1, 2), (0, 2), (0, 2))
+#: By the axis a ray leaves the box across: the face on its negative side, and the two
+#: in-face axes (faces across one axis share them).
+_FACE_OF_AXIS = np.array([2, 4, 0])
+_U_OF_AXIS = np.array([FACE_AXES[2][0], FACE_AXES[4][0], FACE_AXES[0][0]])
+_V_OF_AXIS = np.array([FACE_AXES[2][1], FACE_AXES[4][1], FACE_AXES[0][1]])
+#: The gamma edges that are not on the uniform raster (the CIE zones'), in degrees: a
+#: gamma's cell is its raster cell plus the number of these at or below it.
+_EXTRA_EDGES = np.setdiff1d(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP))
 
 
 def cell_solid_angles() -> np.ndarray:
@@ -74,31 +83,35 @@ class Goniometer:
         box of its geometry and emitters."""
         return cls.around(scene.photometric_axes, scene.shape_points())
 
+    @cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(axes (3, 3), lo (3, 1), hi (3, 1), span (3, 1)) as arrays, made once."""
+        lo, hi = (np.asarray(v, np.float64)[:, None] for v in (self.lo, self.hi))
+        return np.asarray(self.axes, np.float64), lo, hi, np.maximum(hi - lo, 1e-12)
+
     def cells(self, d: np.ndarray) -> np.ndarray:
         """C-gamma cell (N,) int64 of unit directions ``d`` (3, N), world axes."""
-        a = np.asarray(self.axes)
-        x, y, z = a @ d
+        x, y, z = self._arrays[0] @ d
         gamma = np.degrees(np.arccos(np.clip(-z, -1.0, 1.0)))
-        g = np.clip(np.searchsorted(GAMMA_EDGES, gamma, side="right") - 1, 0, N_GAMMA - 1)
-        c = np.mod(np.degrees(np.arctan2(y, x)), 360.0)
-        ci = np.clip((c / C_STEP).astype(np.int64), 0, N_C - 1)
-        return ci * N_GAMMA + g
+        g = (gamma * (1.0 / GAMMA_STEP)).astype(np.int64)
+        for edge in _EXTRA_EDGES:
+            g += gamma >= edge
+        c = np.degrees(np.arctan2(y, x))
+        c += 360.0 * (c < 0.0)
+        ci = np.minimum((c * (1.0 / C_STEP)).astype(np.int64), N_C - 1)
+        return ci * N_GAMMA + np.minimum(g, N_GAMMA - 1)
 
     def exits(self, p: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Exit bin (N,) int64, offset by :data:`N_CELLS`, where rays from ``p`` (3, N,
         world m) along ``d`` leave the box."""
-        a = np.asarray(self.axes)
+        a, lo, hi, span = self._arrays
         q, e = a @ p, a @ d
-        lo, hi = (np.asarray(v)[:, None] for v in (self.lo, self.hi))
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(e > 0, (hi - q) / e, np.where(e < 0, (lo - q) / e, np.inf))
         axis = np.argmin(t, axis=0)
         n = np.arange(q.shape[1])
-        x = np.clip(q + np.maximum(t[axis, n], 0.0) * e, lo, hi)
-        face = np.array([2, 4, 0])[axis] + (e[axis, n] > 0)  # C0 -> 2/3, C90 -> 4/5, up -> 0/1
-        span = np.maximum(hi - lo, 1e-12)
-        u = (x - lo) / span  # 0..1 along each axis
-        uv = np.array(FACE_AXES)[face].T  # (2, N) the two in-face axes
-        col = np.clip((u[uv[0], n] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
-        row = np.clip((u[uv[1], n] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
+        u = (np.clip(q + np.maximum(t[axis, n], 0.0) * e, lo, hi) - lo) / span  # 0..1
+        face = _FACE_OF_AXIS[axis] + (e[axis, n] > 0)  # C0 -> 2/3, C90 -> 4/5, up -> 0/1
+        col = np.minimum((u[_U_OF_AXIS[axis], n] * EXIT_SIDE).astype(np.int64), EXIT_SIDE - 1)
+        row = np.minimum((u[_V_OF_AXIS[axis], n] * EXIT_SIDE).astype(np.int64), EXIT_SIDE - 1)
         return N_CELLS + (face * EXIT_SIDE + row) * EXIT_SIDE + col
