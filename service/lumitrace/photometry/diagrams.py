@@ -65,7 +65,7 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
     cs = np.append(full.c, 360.0)
     cd = np.vstack([full.candela, full.candela[:1]])
     cc, gg = np.meshgrid(cs, full.gamma, indexing="ij")
-    d = frame.directions(cc, gg, scene.up_axis)
+    d = frame.directions(cc, gg, scene.up_axis, frame.luminaire_rotation(scene))
     tri = np.asarray(scene.triangles)
     if tri.size:
         lo, hi = tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)

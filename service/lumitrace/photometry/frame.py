@@ -34,3 +34,10 @@ def angles(d: np.ndarray, up_axis: str, rotation=()) -> tuple[np.ndarray, np.nda
     gamma = np.degrees(np.arccos(np.clip(-(d @ up), -1.0, 1.0)))
     c = np.degrees(np.arctan2(d @ c90, d @ c0)) % 360.0
     return c, gamma
+
+
+def luminaire_rotation(scene) -> np.ndarray | tuple:
+    """The 3x3 world rotation (with scale) of a scene's luminaire prim, or () for none: the
+    ``rotation`` argument of the functions above."""
+    m = scene.luminaire_to_world
+    return np.asarray(m)[:3, :3] if len(m) else ()

@@ -63,17 +63,13 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path]) ->
     """The result record of a traced session, its photometry and its output paths."""
     fig = ph.figures
     peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
-                                result.scene.up_axis, _rotation(result.scene))
+                                result.scene.up_axis, frame.luminaire_rotation(result.scene))
     o = ph.opening
     return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          "luminous_opening": (o.length, o.width, o.height),
                          **{k: str(v) for k, v in paths.items()}})
 
-
-def _rotation(scene: Scene):
-    m = scene.luminaire_to_world
-    return np.asarray(m)[:3, :3] if len(m) else ()
 
 
 def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
