@@ -119,18 +119,19 @@ SYMMETRY_NAMES = ("none", *CANDIDATES)
 HALVES = (None, 0, 1)
 
 
-def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0
+def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
+                symmetries: tuple[str, ...] = SYMMETRY_NAMES
                 ) -> dict[tuple[str, int | None], CGammaGrid]:
     """The goniophotometer's C-gamma grids (cd) with standard errors (``sigma``, cd), keyed
     by (symmetry, half): planes every ``c_step`` deg (averaged over the mirror images the
     symmetry names, on the counts), gammas ``gammas`` (deg, 0 .. 180 on a 0.5 deg raster),
     from all photons (half None) or from one pseudo-random half. One pass over the
     emitters. The variance is exact for analog photons: a cell's count is binomial per
-    emitter, var = sum over emitters of w^2 n (1 - n / N)."""
+    emitter, var = sum over emitters of w^2 n (1 - n / N). ``symmetries``: only these."""
     gammas = np.asarray(gammas, np.float64)
     n, _, _, omega_grid = _blocks(float(c_step), tuple(gammas))
     folds = {}
-    for name in SYMMETRY_NAMES:
+    for name in symmetries:
         rep, kept = planes_kept(name, n)
         slot = np.full(n, -1, np.int64)
         slot[kept] = np.arange(len(kept))

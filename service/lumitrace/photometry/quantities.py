@@ -9,9 +9,12 @@ resampled grid.
 
 The peak is the largest value of the published grid, estimated without the upward bias of
 a maximum of noisy values: each half of the photons picks the cell, the other half measures
-it (the two estimates averaged). Beam (50%) and field (10%) angles are crossings of the
-published grid's plane profiles with that level; their errors come from redrawing the
-profiles within their standard errors (a parametric bootstrap, fixed seed).
+it (the two estimates averaged). Beam (50%) and field (10%) angles are crossings of plane
+profiles with half (a tenth) of their largest value, on a grid of the published symmetry
+with gamma every 0.5 deg (the published grid's 2.5 deg would put a step of the
+distribution, such as a mirror's extra reflection, up to a degree off); their errors come
+from redrawing the profiles within their standard errors (a parametric bootstrap, fixed
+seed).
 """
 from __future__ import annotations
 
@@ -23,7 +26,7 @@ import numpy as np
 from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
-from .measured import cell_solid_angle_grid, ring_counts
+from .measured import cell_solid_angle_grid, measure_all, ring_counts
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
 CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
@@ -169,18 +172,24 @@ def relative_error(grid: CGammaGrid, c_step: float) -> float | None:
     return math.sqrt(float((omega * full.sigma ** 2).sum()) / den) if den > 0 else None
 
 
+#: Gamma raster (deg) of the profiles beam and field angles are read from.
+PROFILE_GAMMAS = np.arange(0.0, 180.0 + 1e-9, 0.5)
+
+
 def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             c_step: float) -> PhotometricFigures:
     """The datasheet figures of the goniophotometer's counts and the published ``grid``
     and the same grid from each half of the photons (with standard errors, measured by
     :func:`~lumitrace.photometry.measured.measure_all`)."""
     z = zone_figures(acc)
+    fine = measure_all(acc, PROFILE_GAMMAS, c_step, (grid.symmetry,))
+    profiles = fine[grid.symmetry, None], (fine[grid.symmetry, 0], fine[grid.symmetry, 1])
     peak, peak_err, a0, a1 = split_peak(halves[0].candela, halves[0].sigma,
                                         halves[1].candela, halves[1].sigma)
     at = a0 if grid.candela.flat[a0] >= grid.candela.flat[a1] else a1
     i, j = np.unravel_index(at, grid.candela.shape)
     rng = np.random.default_rng(0)
-    spreads = {(c, f): plane_spreads(grid, halves, c, f, rng)
+    spreads = {(c, f): plane_spreads(*profiles, c, f, rng)
                for f in (0.5, 0.1) for c in (0.0, 90.0)}
     values, errors = z["cie"]
     code = " ".join(str(int(round(v))) for v in values)
