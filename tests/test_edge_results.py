@@ -66,6 +66,7 @@ def test_no_light_escapes_stops_an_error_target(tmp_path):
     rc, summary, err = _trace(stage, tmp_path / "out", "--target-error", 0.05)
     assert rc == 3, err
     assert summary["target_reached"] is False
+    assert any("no light escaped" in w for w in summary["warnings"])  # --json lists them
     assert NO_ESCAPE_PHOTONS <= summary["photons"] < 4 * NO_ESCAPE_PHOTONS
     assert "no light escaped the luminaire" in err
 

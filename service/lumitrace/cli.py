@@ -269,7 +269,12 @@ def _summary_text(r, stage) -> str:
     return "\n".join(lines)
 
 
+_QUIET = False
+
+
 def cmd_trace(args) -> int:
+    global _QUIET
+    _QUIET = bool(args.quiet)
     from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
     from .publish.outputs import write_outputs
     from .run.session import run
@@ -317,7 +322,7 @@ def cmd_trace(args) -> int:
     missed = target is not None and not (record["relative_error"] is not None
                                          and record["relative_error"] <= target)
     summary["target_reached"] = None if target is None else not missed
-    summary["warnings"] = list(scene.warnings)
+    summary["warnings"] = list(scene.warnings) + _SHOWN
     text = json.dumps(summary) if args.json else "" if args.quiet else \
         _summary_text(record, args.stage)
     if missed and not (args.json or args.quiet):
@@ -448,12 +453,16 @@ def cmd_bench(args) -> int:
 
 
 _python_showwarning = warnings.showwarning
+#: lumitrace warnings shown in this run (the --json summary lists them too)
+_SHOWN: list[str] = []
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """lumitrace's warnings as one line each on stderr; others as Python shows them."""
     if issubclass(category, LumitraceWarning):
-        print(f"warning: {message}", file=sys.stderr)
+        _SHOWN.append(str(message))
+        if not _QUIET:
+            print(f"warning: {message}", file=sys.stderr)
     else:
         _python_showwarning(message, category, filename, lineno, file, line)
 
