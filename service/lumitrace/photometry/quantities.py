@@ -30,6 +30,10 @@ from .measured import cell_solid_angle_grid, measure_all, ring_counts
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
 CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
+#: A half picks the cell with the largest value less this many of its standard errors: a
+#: tiny noisy cell does not win a flat top by its noise, a large cell a little below the
+#: top does not win by its precision.
+PICK_SIGMAS = 2.0
 #: Redraws of the plane profiles for the errors of beam and field angles.
 BOOTSTRAP_DRAWS = 200
 
@@ -104,10 +108,10 @@ def split_peak(h0: np.ndarray, s0: np.ndarray, h1: np.ndarray, s1: np.ndarray
                ) -> tuple[float, float, int, int]:
     """The largest value of two half-photon grids' mean, without the bias of a maximum: each
     half picks a cell, the other half measures it (a choice independent of the measurement
-    leaves it unbiased). The pick is the largest lower bound, value - 2 sigma, so a large
-    cell measured well wins over a tiny noisy one on a flat top. Returns (value, standard
+    leaves it unbiased). The pick is the largest lower bound, value - :data:`PICK_SIGMAS`
+    sigma, so a large cell measured well wins over a tiny noisy one on a flat top. Returns (value, standard
     error, cell picked by half 0, cell picked by half 1), cells as flat indices."""
-    a0, a1 = int(np.argmax(h0 - 2.0 * s0)), int(np.argmax(h1 - 2.0 * s1))
+    a0, a1 = int(np.argmax(h0 - PICK_SIGMAS * s0)), int(np.argmax(h1 - PICK_SIGMAS * s1))
     value = 0.5 * (h1.flat[a0] + h0.flat[a1])
     error = 0.5 * math.hypot(s1.flat[a0], s0.flat[a1])
     return float(value), float(error), a0, a1
@@ -122,23 +126,21 @@ def _plane_profile(grid: CGammaGrid, c_deg: float, values=None):
 
 
 def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float) -> float | None:
-    """Full angle (deg) between the crossings of ``level`` either side of the profile's
-    largest value (linear between samples), or None where it does not cross on both."""
-    k = int(np.argmax(prof))
-    if not prof[k] > 0 or not level > 0:
+    """Full angle (deg) between the outermost crossings of ``level`` (linear between
+    samples): a noisy sample dipping below the level inside the beam (a tiny cell next to
+    nadir) does not cut it short. None where the profile does not fall below it on both
+    sides."""
+    if not level > 0:
+        return None
+    inside = np.flatnonzero(prof >= level)
+    if not inside.size or inside[0] == 0 or inside[-1] == len(prof) - 1:
         return None
 
-    def crossing(step):
-        i = k
-        while 0 <= i + step < len(prof):
-            if prof[i + step] < level <= prof[i]:
-                t = (prof[i] - level) / (prof[i] - prof[i + step])
-                return ang[i] + t * (ang[i + step] - ang[i])
-            i += step
-        return None
+    def cross(i, j):  # between inside sample i and outside sample j
+        t = (prof[i] - level) / (prof[i] - prof[j])
+        return ang[i] + t * (ang[j] - ang[i])
 
-    right, left = crossing(1), crossing(-1)
-    return None if right is None or left is None else float(right - left)
+    return float(cross(inside[-1], inside[-1] + 1) - cross(inside[0], inside[0] - 1))
 
 
 def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float,
