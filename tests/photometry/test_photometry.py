@@ -162,12 +162,16 @@ def test_third_party_eulumdat_reads_our_ies_and_ldt(tmp_path):
     assert ldt.downward_flux_fraction == pytest.approx(100.0 * ours.downward_flux_fraction,
                                                        abs=0.01)
     for other in (ldt, ies):
-        # our peak is the maximum of the fine, unsymmetrised map: noise lifts it a little
+        # theirs is the largest file value (noise lifts it a little), ours a split-sample
+        # estimate of the published grid's peak
         assert other.max_intensity() == pytest.approx(ours.peak_intensity, rel=0.04)
         codes = [int(x) for x in str(other.cie_flux_codes()).split()]
         mine = [int(x) for x in ours.cie_flux_code.split()]
         assert all(abs(a - b) <= 1 for a, b in zip(codes[:4], mine[:4])), (codes, mine)
-    assert ldt.beam_angle() == pytest.approx(ours.beam_angle_c0_c180, abs=3.0)
+    # theirs reads the file's 2.5 deg grid against its largest value, ours a 0.5 deg profile
+    # against the split-sample peak, with a stated error
+    assert ldt.beam_angle() == pytest.approx(
+        ours.beam_angle_c0_c180, abs=3.0 + 4.0 * ours.beam_angle_c0_c180_error)
 
 
 def test_reference_stage_ies_matches_closed_form_and_escaped_flux(tmp_path):
