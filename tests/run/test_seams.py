@@ -146,3 +146,20 @@ def test_a_target_error_is_not_taken_from_the_first_small_rounds(downlight):
                                           workers="threads"))
     assert result.estimate.error <= 0.5
     assert MIN_PHOTONS_FOR_TARGET <= result.photons < 4 * MIN_PHOTONS_FOR_TARGET
+
+
+def test_many_small_emitters_are_not_split_into_tiny_jobs():
+    """With a photon budget alone, each emitter's job in a round holds at least
+    MIN_JOB_PHOTONS photons (or all it has left); a time limit keeps the small rounds."""
+    from lumitrace.run.session import MIN_JOB_PHOTONS, TraceSettings, _round_jobs
+
+    n = 200
+    shares = [1.0 / n] * n
+    budget = TraceSettings(photons=n * 100, seed=1)
+    jobs = _round_jobs([0] * n, [100] * n, shares, 8192, budget)
+    assert len(jobs) == n and all(j.count == 100 for j in jobs)  # one round: all of it
+    big = _round_jobs([0] * n, [10_000] * n, shares, 8192, budget)
+    assert all(j.count == MIN_JOB_PHOTONS for j in big)
+    timed = _round_jobs([0] * n, [10_000] * n, shares, 8192,
+                        TraceSettings(photons=n * 10_000, seconds=5.0, seed=1))
+    assert all(j.count == 41 for j in timed)  # ceil(8192 / 200)

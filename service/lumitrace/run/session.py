@@ -88,13 +88,22 @@ def allocate(fluxes: list[float], photons: int) -> list[int]:
     return base
 
 
+#: With a photon budget alone, an emitter's job in a round holds at least this many photons
+#: (or all it has left): a scene of thousands of small lights is not split into tens of
+#: thousands of jobs of a few photons, each with its fixed cost. (A time limit or a target
+#: error keeps the small first rounds: they must stop on time.)
+MIN_JOB_PHOTONS = 256
+
+
 def _round_jobs(done: list[int], targets: list[float], shares: list[float],
                 round_photons: int, settings: TraceSettings) -> list[BatchJob]:
     """Batch jobs of the next round, batch-sized."""
     batch = settings.batch_size
+    floor = MIN_JOB_PHOTONS if settings.seconds is None and settings.target_error is None \
+        else 0
     jobs = []
     for e, (n_done, n_target, share) in enumerate(zip(done, targets, shares)):
-        want = min(int(math.ceil(round_photons * share)), n_target - n_done)
+        want = min(max(int(math.ceil(round_photons * share)), floor), n_target - n_done)
         start = n_done
         while want > 0:
             c = int(min(batch, want))
