@@ -7,29 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers.paths import NO_EULUMDAT
-
-from lumitrace.film.cubemap import texel_solid_angles
 from lumitrace.photometry import frame
 from lumitrace.photometry.eulumdat import format_ldt, parse_ldt, plane_angles, read_ldt
-from lumitrace.photometry.grid import CGammaGrid, apply_symmetry, resample
+from lumitrace.photometry.grid import CGammaGrid, default_gammas
 from lumitrace.photometry.lm63 import format_ies, parse_ies, read_ies
 from lumitrace.report.references import expected_intensity, read_expectation
-from lumitrace.film.texel_quadrature import texel_integrals
-from helpers.paths import ROOT
-
-RES = 64
-
-
-def exact_map(fn, res=RES):
-    """The noise-free cube map of a closed-form intensity (texel averages, cd)."""
-    return texel_integrals(fn, res) / texel_solid_angles(res)
-
-
-@pytest.fixture(scope="module")
-def lambertian():
-    exp = read_expectation(ROOT / "stages" / "reference" / "lambertian_disc.usda")
-    return exact_map(lambda d: expected_intensity(exp, d))
+from helpers.paths import NO_EULUMDAT, ROOT
 
 
 def test_frame_is_right_handed_with_nadir_down():
@@ -43,15 +26,18 @@ def test_frame_is_right_handed_with_nadir_down():
     assert np.allclose(frame.axes("Y")[1], [0, 0, -1])  # C90 of a Y-up stage
 
 
-def test_lambertian_grid_candela_and_flux(lambertian):
-    grid = resample(lambertian, "Z", 1000.0)
-    assert grid.flux() == pytest.approx(1000.0, rel=1e-12)
-    for gamma in (0.0, 30.0, 60.0, 80.0):
-        j = int(np.argmin(np.abs(grid.gamma - gamma)))
-        want = 1000.0 / np.pi * np.cos(np.radians(gamma))
-        assert grid.candela[:, j] == pytest.approx(want, rel=0.01)
-    assert grid.candela[:, grid.gamma > 92.0].max() < 1e-9
-    assert apply_symmetry(grid, 0.01).symmetry == "rotational"
+def closed_form_grid(fn, symmetry: str = "none", c_step: float = 5.0) -> CGammaGrid:
+    """A grid (cd) of a closed-form intensity ``fn(directions (N, 3))`` at its points: the
+    kept planes of ``symmetry`` (all round, 360 repeating 0, for none), default gammas."""
+    gam = default_gammas()
+    c = {"none": np.arange(0.0, 360.0 + 1e-9, c_step), "rotational": np.array([0.0])}[symmetry]
+    cc, gg = np.meshgrid(c, gam, indexing="ij")
+    cd = fn(frame.directions(cc, gg, "Z").reshape(-1, 3)).reshape(cc.shape)
+    return CGammaGrid(c, gam, cd, symmetry)
+
+
+def _lambertian(d):
+    return 1000.0 / np.pi * np.maximum(-d[:, 2], 0.0)
 
 
 def _asymmetric(d):
@@ -61,9 +47,7 @@ def _asymmetric(d):
 
 
 def test_asymmetric_profile_fixes_the_orientation_in_ies():
-    m = exact_map(_asymmetric, 32)
-    grid = apply_symmetry(resample(m, "Z", c_step=5.0), 0.01)
-    assert grid.symmetry == "none"
+    grid = closed_form_grid(_asymmetric)
     ies = parse_ies(format_ies(grid, 1000.0, 0.1, 0.1, 0.0))
     back = ies.grid()
     j = int(np.argmin(np.abs(back.gamma - 60.0)))
@@ -72,8 +56,8 @@ def test_asymmetric_profile_fixes_the_orientation_in_ies():
     assert at(180.0) == pytest.approx(at(270.0), rel=0.02)
 
 
-def test_ies_round_trip_and_keywords(lambertian):
-    grid = apply_symmetry(resample(lambertian, "Z", 1000.0), 0.01)
+def test_ies_round_trip_and_keywords():
+    grid = closed_form_grid(_lambertian, "rotational")
     text = format_ies(grid, 1000.0, 0.1, 0.1, 0.0, {"MANUFAC": "ACME", "LUMCAT": "X1"})
     lines = text.split("\r\n")
     assert lines[0] == "IES:LM-63-2019"
@@ -129,9 +113,9 @@ def test_ldt_symmetry_3_follows_the_standard_plane_order():
     np.testing.assert_allclose(ldt.grid.at(c), cd, rtol=1e-3)
 
 
-def test_ldt_round_trip_with_our_reader_and_eulumdat_py(lambertian, tmp_path):
+def test_ldt_round_trip_with_our_reader_and_eulumdat_py(tmp_path):
     pyldt = pytest.importorskip("pyldt")
-    grid = apply_symmetry(resample(lambertian, "Z", 1000.0, c_step=15.0), 0.01)
+    grid = closed_form_grid(_lambertian, "rotational")
     dims = dict(length=100, width=100, height=0, lum_length=100, lum_width=100, lum_height=0)
     path = tmp_path / "disc.ldt"
     path.write_text(format_ldt(grid, 1000.0, "disc", dims, 1.0, 1.0, dc=15.0), encoding="latin-1")
