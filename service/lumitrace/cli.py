@@ -225,29 +225,29 @@ def _pct(value: float | None) -> str:
     return "undefined" if value is None or not math.isfinite(value) else f"{value:.2%}"
 
 
+def _pm(value: float | None, error: float | None, unit: str = "", digits: int = 2) -> str:
+    """A figure with its standard error: "237.24 cd +- 1.59"; "-" where it is undefined."""
+    if value is None:
+        return "-"
+    return f"{value:.{digits}f}{' ' + unit if unit else ''}" + (
+        "" if error is None else f" +- {error:.{digits}f}")
+
+
 def _summary_text(r, stage) -> str:
     """The human summary of a result record."""
-    def ang(v, e):
-        if v is None:
-            return "-"
-        return f"{v:.1f} deg" + ("" if e is None else f" +- {e:.1f}")
-
-    def pm(v, e, unit, digits=2):
-        return "-" if v is None else f"{v:.{digits}f}{' ' + unit if unit else ''}" + (
-            "" if e is None else f" +- {e:.{digits}f}")
-
+    ang = lambda v, e: _pm(v, e, "deg", 1)  # noqa: E731
     lines = [
         f"{r.luminaire} in {stage}",
         f"  photons         {r.photons:,} in {r.iterations} iterations, {r.seconds:.2f} s "
         f"({r.photons_per_second:,.0f} photons/s)",
         f"  emitted         {r.emitted_lm:10.2f} lm",
         f"  escaped         {r.escaped_lm:10.2f} lm   (light output ratio "
-        f"{pm(r.light_output_ratio, r.light_output_ratio_error, '', 4)})",
+        f"{_pm(r.light_output_ratio, r.light_output_ratio_error, '', 4)})",
         f"  absorbed        {r.absorbed_lm:10.2f} lm"]
     if r.cut_lm:
         lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
     lines += [
-        f"  peak intensity  {pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
+        f"  peak intensity  {_pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
         f"C {r.peak_c:g}, gamma {r.peak_gamma:g} deg (standard errors after +-)",
         f"  map error       {_pct(r.relative_error)} estimated RMS over the sphere "
         f"(raw map {_pct(r.raw_relative_error)}){', converged' if r.converged else ''}"
@@ -415,13 +415,11 @@ def cmd_report(args) -> int:
     print(f"photons    {data['photons']:,} in {data['iterations']} iterations, {data['seconds']:.1f} s")
     print(f"reference  {data['reference'] or 'none (estimated errors only)'}")
     f = data["figures"]
-    pm = lambda v, e, d=1: "-" if v is None else f"{v:.{d}f}" + (  # noqa: E731
-        "" if e is None else f" +- {e:.{d}f}")
-    print(f"flux       {pm(f['luminous_flux'], f['luminous_flux_error'])} lm, light output "
-          f"ratio {pm(f['light_output_ratio'], f['light_output_ratio_error'], 4)}")
-    print(f"peak       {pm(f['peak_intensity'], f['peak_intensity_error'])} cd; beam "
-          f"{pm(f['beam_angle_c0_c180'], f['beam_angle_c0_c180_error'])} deg (C0-C180), "
-          f"CIE flux code {f['cie_flux_code']}")
+    print(f"flux       {_pm(f['luminous_flux'], f['luminous_flux_error'], 'lm', 1)}, light "
+          f"output ratio {_pm(f['light_output_ratio'], f['light_output_ratio_error'], '', 4)}")
+    print(f"peak       {_pm(f['peak_intensity'], f['peak_intensity_error'], 'cd', 1)}; beam "
+          f"{_pm(f['beam_angle_c0_c180'], f['beam_angle_c0_c180_error'], 'deg', 1)} "
+          f"(C0-C180), CIE flux code {f['cie_flux_code']}")
     for key, c in data["time_to_error"].items():
         label = "raw" if key == "0" else f"threshold {key}"
         cells = ", ".join(f"{float(lv):.0%} at {t:.3g} s" if t else f"{float(lv):.0%} not reached"

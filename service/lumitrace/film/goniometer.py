@@ -51,6 +51,13 @@ _V_OF_AXIS = np.array([FACE_AXES[2][1], FACE_AXES[4][1], FACE_AXES[0][1]])
 _EXTRA_EDGES = np.setdiff1d(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP))
 
 
+def escape_bins(cell: np.ndarray, exit_bin: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The flat bins of escaped photons (each counted in its cell and its exit bin, the
+    latter offset by N_CELLS; + N_BINS in the second half) that
+    :func:`~lumitrace.film.accumulate.counts_of` turns into a tally's counts."""
+    return np.concatenate([cell, exit_bin]) + N_BINS * np.tile(half, 2)
+
+
 def cell_solid_angles() -> np.ndarray:
     """Solid angle (sr) of every C-gamma cell, (N_C, N_GAMMA); they sum to 4 pi."""
     zone = -np.diff(np.cos(np.radians(GAMMA_EDGES)))

@@ -8,11 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import (EXIT_SIDE, FACES, GAMMA_EDGES, N_CELLS, N_EXIT,
+from ..film.goniometer import (EXIT_SIDE, FACES, GAMMA_EDGES, N_CELLS, N_EXIT, N_GAMMA,
                                cell_solid_angles)
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
-from .measured import ring_counts, symmetric_grid
+from .measured import emitter_rings, symmetric_grid
 from .quantities import PhotometricFigures, figures
 
 #: Symmetry is used unless the counts show a departure from it larger than this (relative
@@ -99,10 +99,11 @@ class Photometry:
     departures: dict
 
 
-def beam_half_width(acc: Accumulator) -> float | None:
+def beam_half_width(rings: list[tuple[float, float, np.ndarray]]) -> float | None:
     """Half-angle (deg) from the peak of the mean profile over all C (0.5 deg rings) to
-    where it halves; None where it never does. Chooses the grid's gammas only."""
-    rings = sum(w * ring_counts(v, idx) for w, _, v, idx in acc.emitter_cells())
+    where it halves, from the emitters' rings (:func:`~lumitrace.photometry.measured.
+    emitter_rings`); None where it never does. Chooses the grid's gammas only."""
+    rings = sum((w * ring for w, _, ring in rings), np.zeros(N_GAMMA))
     if not np.any(rings):
         return None
     bins = np.searchsorted(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, 0.5) - 1e-9)
@@ -118,7 +119,8 @@ def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
     """Measure the photometry of a session's counts: a grid of C every :data:`C_STEP` deg
     and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
     deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
-    grid, halves, departures = symmetric_grid(acc, default_gammas(beam_half_width(acc)),
+    rings = emitter_rings(acc)
+    grid, halves, departures = symmetric_grid(acc, default_gammas(beam_half_width(rings)),
                                               C_STEP, SYMMETRY_TOLERANCE)
-    fig = figures(acc, grid, halves, C_STEP)
+    fig = figures(acc, grid, halves, C_STEP, rings)
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)

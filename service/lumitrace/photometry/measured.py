@@ -119,6 +119,13 @@ SYMMETRY_NAMES = ("none", *CANDIDATES)
 HALVES = (None, 0, 1)
 
 
+def emitter_rings(acc: Accumulator) -> list[tuple[float, float, np.ndarray]]:
+    """Per emitter with photons: (photon flux (lm), photons, its counts summed over C per
+    gamma bin): what the zone fluxes and the beam's width need, made once."""
+    return [(w, total, ring_counts(values, idx))
+            for w, total, values, idx in acc.emitter_cells()]
+
+
 def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
                 symmetries: tuple[str, ...] = SYMMETRY_NAMES
                 ) -> dict[tuple[str, int | None], CGammaGrid]:

@@ -26,7 +26,7 @@ import numpy as np
 from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
-from .measured import cell_solid_angle_grid, measure_all, ring_counts
+from .measured import cell_solid_angle_grid, emitter_rings, measure_all
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
 CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
@@ -84,13 +84,14 @@ def _ratio(a: tuple, b: tuple) -> tuple[float, float]:
     return r, math.sqrt(max(qa * (1.0 - 2.0 * r) + r * r * qb, 0.0)) / fb
 
 
-def zone_figures(acc: Accumulator) -> dict:
-    """Escaped and downward flux with errors, N1..N5 of the CIE flux code with errors."""
+def zone_figures(acc: Accumulator, rings: list[tuple[float, float, np.ndarray]]) -> dict:
+    """Escaped and downward flux with errors, N1..N5 of the CIE flux code with errors, from
+    the emitters' rings (:func:`~lumitrace.photometry.measured.emitter_rings`)."""
     edges = (*CIE_ZONES, 180.0)
     ends = [int(np.searchsorted(GAMMA_EDGES, e - 1e-9)) for e in edges]  # gamma bins below
     sums = np.zeros((3, len(edges)))  # flux, variance, squared photon fluxes per cone
-    for w, total, values, idx in acc.emitter_cells():
-        n = np.concatenate([[0.0], np.cumsum(ring_counts(values, idx))])[ends]
+    for w, total, ring in rings:
+        n = np.concatenate([[0.0], np.cumsum(ring)])[ends]
         sums += [w * n, w * w * n * np.maximum(1.0 - n / total, 0.0), w * w * n]
     zones = {e: tuple(map(float, sums[:, i])) for i, e in enumerate(edges)}
     total, down = zones[180.0], zones[90.0]
@@ -179,11 +180,12 @@ PROFILE_GAMMAS = np.arange(0.0, 180.0 + 1e-9, 0.5)
 
 
 def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
-            c_step: float) -> PhotometricFigures:
+            c_step: float, rings: list | None = None) -> PhotometricFigures:
     """The datasheet figures of the goniophotometer's counts and the published ``grid``
     and the same grid from each half of the photons (with standard errors, measured by
-    :func:`~lumitrace.photometry.measured.measure_all`)."""
-    z = zone_figures(acc)
+    :func:`~lumitrace.photometry.measured.measure_all`); ``rings``: the emitters' rings
+    when the caller has them."""
+    z = zone_figures(acc, rings if rings is not None else emitter_rings(acc))
     fine = measure_all(acc, PROFILE_GAMMAS, c_step, (grid.symmetry,))
     profiles = fine[grid.symmetry, None], (fine[grid.symmetry, 0], fine[grid.symmetry, 1])
     peak, peak_err, a0, a1 = split_peak(halves[0].candela, halves[0].sigma,

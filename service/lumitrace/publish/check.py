@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..filenames import RESULT_LAYER_SUFFIX, result_layer_path
 from ..schema import RESULT_PREFIX
+from .result_layer import REPRESENTATION
 
 #: Exit statuses: results current (and converged), stale or missing, current but the
 #: target error not reached.
@@ -28,11 +29,6 @@ def result_opinion_prims(layer) -> list[str]:
             if any(name.startswith(RESULT_PREFIX) for name in spec.properties.keys())]
 
 
-#: The variant set the result layer authors on the luminaire (see
-#: :mod:`lumitrace.publish.result_layer`); a flattened stage carries it in its root layer.
-_VARIANT_SET = "lumitraceRepresentation"
-
-
 def strip_result_opinions(stage_path: str | Path) -> list[str]:
     """Remove the ``lumitrace:result:*`` opinions and the representation variant set that
     flattening a stage with its results left in its root layer, and save it; returns the
@@ -45,11 +41,11 @@ def strip_result_opinions(stage_path: str | Path) -> list[str]:
         spec = layer.GetPrimAtPath(path)
         for name in [n for n in spec.properties.keys() if n.startswith(RESULT_PREFIX)]:
             spec.RemoveProperty(spec.properties[name])
-        if _VARIANT_SET in spec.variantSets:
-            spec.variantSetNameList.RemoveItemEdits(_VARIANT_SET)
-            del spec.variantSets[_VARIANT_SET]
-            if _VARIANT_SET in spec.variantSelections:
-                del spec.variantSelections[_VARIANT_SET]
+        if REPRESENTATION in spec.variantSets:
+            spec.variantSetNameList.RemoveItemEdits(REPRESENTATION)
+            del spec.variantSets[REPRESENTATION]
+            if REPRESENTATION in spec.variantSelections:
+                del spec.variantSelections[REPRESENTATION]
     if prims:
         layer.Save()
     return prims

@@ -3,7 +3,6 @@ their standard errors as JSON, and the two pictures."""
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 from ..atomic import write_text
@@ -13,6 +12,7 @@ from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
 from ..photometry.lm63 import write_ies
 from ..scene import Scene
+from .record import defined
 from .transaction import signals_held
 
 
@@ -23,15 +23,6 @@ def photometric_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
             "photometry_data": out / f"{name}{PHOTOMETRY_SUFFIX}",
             "polar_diagram": out / f"{name}{POLAR_SUFFIX}",
             "photometric_solid": out / f"{name}{SOLID_SUFFIX}"}
-
-
-def _finite(x):
-    """JSON has no NaN: a figure that is not a number is null."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    return x
 
 
 def photometry_json(ph: Photometry, run_id: str = "") -> str:
@@ -51,7 +42,7 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
         "symmetryDepartures": ph.departures,
         "c": g.c.tolist(), "gamma": g.gamma.tolist(),
         "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
-        "figures": {k: _finite(v) for k, v in ph.figures.as_dict().items()},
+        "figures": {k: defined(v) for k, v in ph.figures.as_dict().items()},
         "luminousOpening": {"length_m": ph.opening.length, "width_m": ph.opening.width,
                             "height_m": ph.opening.height},
     }

@@ -88,11 +88,11 @@ class ResultRecord(Mapping[str, Any]):
 
 def defined(value: Any) -> Any:
     """``value``, or None where it is a float that is not a number (an undefined figure);
-    in a tuple, each such element."""
+    in a tuple or list, each such element."""
     if isinstance(value, (float, np.floating)) and not math.isfinite(value):
         return None
-    if isinstance(value, tuple):
-        return tuple(defined(v) for v in value)
+    if isinstance(value, (tuple, list)):
+        return type(value)(defined(v) for v in value)
     return value
 
 

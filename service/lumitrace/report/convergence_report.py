@@ -182,15 +182,10 @@ def _figures(scene, result) -> dict:
     """The measured photometric figures of the final result, with their standard errors
     (JSON-safe: undefined figures are null)."""
     from ..photometry.distribution import photometry_of
+    from ..publish.record import defined
 
-    out = {}
-    for k, v in photometry_of(scene, result.accumulator).figures.as_dict().items():
-        if isinstance(v, tuple):
-            v = [None if not np.isfinite(x) else float(x) for x in v]
-        elif isinstance(v, float) and not np.isfinite(v):
-            v = None
-        out[k] = v
-    return out
+    return {k: defined(list(v) if isinstance(v, tuple) else v)
+            for k, v in photometry_of(scene, result.accumulator).figures.as_dict().items()}
 
 
 def _pick_snapshots(iterations: list[int]) -> list[int]:

@@ -25,7 +25,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..film.accumulate import counts_of
-from ..film.goniometer import N_BINS, N_CELLS
+from ..film.goniometer import N_BINS, N_CELLS, escape_bins
 from ..film.tally import BatchTally
 from ..scene import Scene
 from ..trace import rng
@@ -103,9 +103,8 @@ def tally_of(emitter: int, key: np.uint64, photons: np.ndarray, rec: PhotonRecor
     half = (rng.photon_hash(key, photons[esc]) & np.uint64(1)).astype(np.int64)
     counts = np.bincount(rec.texel[esc].astype(np.int64) + ntex * half,
                          minlength=2 * ntex).reshape(2, ntex)
-    bins = np.concatenate([rec.cell[esc].astype(np.int64),
-                           rec.exit[esc].astype(np.int64) + N_CELLS]) + N_BINS * np.tile(half, 2)
-    cells = counts_of(bins, N_BINS)
+    cells = counts_of(escape_bins(rec.cell[esc].astype(np.int64),
+                                  rec.exit[esc].astype(np.int64) + N_CELLS, half), N_BINS)
     return BatchTally(emitter, int(photons[0]) if len(photons) else 0, int(len(photons)),
                       counts, cells, absorbed=int(np.count_nonzero(rec.texel == ABSORBED)),
                       cut=int(np.count_nonzero(rec.texel == CUT)),

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..film.accumulate import counts_of
 from ..film.cubemap import texel_index
-from ..film.goniometer import N_BINS, N_CELLS
+from ..film.goniometer import N_BINS, N_CELLS, escape_bins
 from ..film.tally import BatchTally
 from ..scene import Emitter
 from . import rng
@@ -90,7 +90,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             # the goniophotometer's cell and exit bin, counted once at the end
             cell = gonio.cells(dm)
             exit_bin = gonio.exits(om * ps.scale + ps.center[:, None], dm)
-            escaped.append(np.concatenate([cell, exit_bin]) + N_BINS * np.tile(half, 2))
+            escaped.append(escape_bins(cell, exit_bin, half))
             if rec is not None:
                 gone = np.compress(miss, pid)
                 rec.texel[gone] = texel
