@@ -24,3 +24,5 @@ if [ "$1" = "--test" ]; then
 else
     .venv/bin/python -m pip install -q -e '.[plot]'
 fi
+# compile the photon kernels into their on-disk cache now, not in the first run
+.venv/bin/python -m lumitrace.trace.tracer

@@ -314,10 +314,14 @@ def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
 def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay):
     """SIGINT in the first moments (Python and USD loading their modules, which can swallow
     a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs."""
+    # the delay counts from the interpreter being up (a signal during Python's own start-up,
+    # before any of our code runs, is the interpreter's to handle)
     p = subprocess.Popen([sys.executable, "-c",
-                          "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
+                          "import sys; print('up', flush=True); import lumitrace_launch; "
+                          "sys.exit(lumitrace_launch.main())",
                           "trace", str(disc), "--photons", "400000", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline() == "up\n"
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=120)
@@ -326,3 +330,31 @@ def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay):
         "lumitrace: SIGINT: interrupted; nothing was written, earlier outputs are unchanged"]
     assert sorted(q.name for q in disc.parent.iterdir() if not q.name.endswith(".lock")) == \
         ["disc.usda"]
+
+
+def test_signals_held_holds_a_signal_another_thread_takes():
+    """A signal the kernel hands to another thread (one started before the hold, as a
+    library's worker threads are) still waits for the end of the held block."""
+    import threading
+
+    from lumitrace.publish.transaction import signals_held
+
+    go, sent = threading.Event(), threading.Event()
+
+    def send():
+        go.wait()
+        os.kill(os.getpid(), signal.SIGINT)
+        sent.set()
+
+    helper = threading.Thread(target=send)
+    helper.start()
+    finished = []
+    with pytest.raises(KeyboardInterrupt):
+        with signals_held():
+            go.set()
+            sent.wait()
+            for _ in range(200):  # bytecode boundaries, where Python runs its handlers
+                time.sleep(0.001)
+            finished.append(True)
+    helper.join()
+    assert finished == [True]

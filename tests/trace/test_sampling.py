@@ -6,9 +6,8 @@ from helpers.chi2 import sphere_chi2_pvalue, sphere_integral
 from lumitrace.trace import rng
 from lumitrace.scene.shaping import shaping_window
 from lumitrace.trace.emission import emit
-from lumitrace.trace.scattering import MaterialTable, random_polarisation, scatter, smith_g1
+from lumitrace.trace.scattering import MaterialTable, scatter
 from lumitrace.scene import Emitter, Material
-from lumitrace.trace.sampling import cosine_hemisphere, uniform_cone
 
 N = 200_000
 ALPHA = 1e-3
@@ -39,19 +38,18 @@ def test_uniforms_moments_and_independence():
     assert np.abs(c - np.eye(4)).max() < 0.01
 
 
-def test_cosine_hemisphere_density():
-    u1, u2 = _u(N, 2)
-    d = cosine_hemisphere(u1, u2).T
-    p = sphere_chi2_pvalue(d, lambda w: np.maximum(w[:, 2], 0) / np.pi)
-    assert p > ALPHA
+def random_polarisation(d: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Unpolarised light: a uniformly random unit direction across each ``d`` (3, N)."""
+    t = np.cross(d.T, np.where(np.abs(d[0:1].T) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(d.T, t)
+    return (np.cos(np.pi * u)[:, None] * t + np.sin(np.pi * u)[:, None] * b).T
 
 
-def test_uniform_cone_density():
-    u1, u2 = _u(N, 2)
-    cmax = np.cos(np.radians(60))
-    d = uniform_cone(u1, u2, cmax).T
-    p = sphere_chi2_pvalue(d, lambda w: (w[:, 2] >= cmax) / (2 * np.pi * (1 - cmax)))
-    assert p > ALPHA
+def smith_g1(cos_theta: np.ndarray, alpha: float) -> np.ndarray:
+    """Smith masking G1 of the GGX distribution (0 below the surface): the reference."""
+    c2 = np.clip(cos_theta * cos_theta, 1e-300, 1.0)
+    return np.where(cos_theta > 0, 2.0 / (1.0 + np.sqrt(1.0 + alpha * alpha * (1 - c2) / c2)), 0.0)
 
 
 def _emitter(kind, **kw):

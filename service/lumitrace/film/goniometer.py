@@ -19,7 +19,6 @@ All counts live in one array of :data:`N_BINS` bins: first the C-gamma cells (C-
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -41,14 +40,10 @@ N_EXIT = len(FACES) * EXIT_SIDE * EXIT_SIDE
 N_BINS = N_CELLS + N_EXIT
 #: The two in-face coordinates (photometric axes 0 = C0, 1 = C90, 2 = up) of each face.
 FACE_AXES = ((0, 1), (0, 1), (1, 2), (1, 2), (0, 2), (0, 2))
-#: By the axis a ray leaves the box across: the face on its negative side, and the two
-#: in-face axes (faces across one axis share them).
-_FACE_OF_AXIS = np.array([2, 4, 0])
-_U_OF_AXIS = np.array([FACE_AXES[2][0], FACE_AXES[4][0], FACE_AXES[0][0]])
-_V_OF_AXIS = np.array([FACE_AXES[2][1], FACE_AXES[4][1], FACE_AXES[0][1]])
 #: The gamma edges that are not on the uniform raster (the CIE zones'), in degrees: a
-#: gamma's cell is its raster cell plus the number of these at or below it.
-_EXTRA_EDGES = np.setdiff1d(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP))
+#: gamma's cell is its raster cell plus the number of these at or below it. The tracer's
+#: kernel (:func:`lumitrace.trace.kernels.gonio_bins`) bins escaping photons so.
+EXTRA_EDGES = np.setdiff1d(GAMMA_EDGES, np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP))
 
 
 def escape_bins(cell: np.ndarray, exit_bin: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -89,36 +84,3 @@ class Goniometer:
         """The goniometer of a :class:`~lumitrace.scene.Scene`: its photometric axes, the
         box of its geometry and emitters."""
         return cls.around(scene.photometric_axes, scene.shape_points())
-
-    @cached_property
-    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(axes (3, 3), lo (3, 1), hi (3, 1), span (3, 1)) as arrays, made once."""
-        lo, hi = (np.asarray(v, np.float64)[:, None] for v in (self.lo, self.hi))
-        return np.asarray(self.axes, np.float64), lo, hi, np.maximum(hi - lo, 1e-12)
-
-    def cells(self, d: np.ndarray) -> np.ndarray:
-        """C-gamma cell (N,) int64 of unit directions ``d`` (3, N), world axes."""
-        x, y, z = self._arrays[0] @ d
-        gamma = np.degrees(np.arccos(np.clip(-z, -1.0, 1.0)))
-        g = (gamma * (1.0 / GAMMA_STEP)).astype(np.int64)
-        for edge in _EXTRA_EDGES:
-            g += gamma >= edge
-        c = np.degrees(np.arctan2(y, x))
-        c += 360.0 * (c < 0.0)
-        ci = np.minimum((c * (1.0 / C_STEP)).astype(np.int64), N_C - 1)
-        return ci * N_GAMMA + np.minimum(g, N_GAMMA - 1)
-
-    def exits(self, p: np.ndarray, d: np.ndarray) -> np.ndarray:
-        """Exit bin (N,) int64, offset by :data:`N_CELLS`, where rays from ``p`` (3, N,
-        world m) along ``d`` leave the box."""
-        a, lo, hi, span = self._arrays
-        q, e = a @ p, a @ d
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(e > 0, (hi - q) / e, np.where(e < 0, (lo - q) / e, np.inf))
-        axis = np.argmin(t, axis=0)
-        n = np.arange(q.shape[1])
-        u = (np.clip(q + np.maximum(t[axis, n], 0.0) * e, lo, hi) - lo) / span  # 0..1
-        face = _FACE_OF_AXIS[axis] + (e[axis, n] > 0)  # C0 -> 2/3, C90 -> 4/5, up -> 0/1
-        col = np.minimum((u[_U_OF_AXIS[axis], n] * EXIT_SIDE).astype(np.int64), EXIT_SIDE - 1)
-        row = np.minimum((u[_V_OF_AXIS[axis], n] * EXIT_SIDE).astype(np.int64), EXIT_SIDE - 1)
-        return N_CELLS + (face * EXIT_SIDE + row) * EXIT_SIDE + col

@@ -24,6 +24,7 @@ import json
 import os
 import shutil
 import signal
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -93,16 +94,31 @@ def locked(folders: list[Path], name: str, wait: float = DEFAULT_LOCK_WAIT) -> I
 
 @contextlib.contextmanager
 def signals_held() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends); main thread only."""
-    try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
-    except (ValueError, OSError):  # not the main thread, or no signal masks here
+    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends); main thread only.
+
+    The handlers are swapped for recorders rather than the signals masked: a signal mask
+    holds only the calling thread, and the kernel hands a process's signal to any thread
+    that does not block it (a library's worker thread), whose arrival Python then handles
+    in the main thread, inside the block.
+    """
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
+    got: list[int] = []
+    old = {}
+    for s in HELD_SIGNALS:
+        prev = signal.getsignal(s)
+        if prev is None:  # a handler not set from Python: leave it
+            continue
+        old[s] = prev
+        signal.signal(s, lambda signum, _frame: got.append(signum))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, prev in old.items():
+            signal.signal(s, prev)
+        for s in dict.fromkeys(got):
+            signal.raise_signal(s)
 
 
 @dataclass

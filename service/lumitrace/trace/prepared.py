@@ -10,13 +10,15 @@ luminaire's bounds does not move every unchanged part's float32 coordinates.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from ..scene import DIELECTRIC, Scene
+from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
-from .sampling import cross, dot
-from .records import CellGrid, part_bits
+from .vectors import cross, dot
+from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
 
@@ -74,6 +76,41 @@ class PreparedScene:
     @property
     def triangle_count(self) -> int:
         return int(self.normals.shape[1])
+
+    @cached_property
+    def kernel_args(self) -> tuple:
+        """The scene's arrays as :func:`~lumitrace.trace.kernels.bounce` takes them:
+        normals and first corners (T, 3), material and part of every triangle, then the material table
+        (kind, reflectance, specular, transmittance, ior, alpha) and the polarisation flag."""
+        t = self.table or MaterialTable.from_materials(self.scene.materials)
+        f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+        part = (self.part_index if self.part_index is not None and self.part_index.size
+                else np.zeros(self.triangle_count, np.int64))
+        return (f64(self.normals.T), f64(self.corners.T),
+                np.ascontiguousarray(self.material_index, np.int64),
+                np.ascontiguousarray(part, np.int64), np.ascontiguousarray(t.kind, np.int64),
+                f64(t.reflectance), f64(t.specular), f64(t.transmittance), f64(t.ior),
+                f64(t.alpha), bool(self.polarised))
+
+    @cached_property
+    def gonio_args(self) -> tuple:
+        """The tracing frame and the goniophotometer as the kernel takes them."""
+        g = self.goniometer
+        f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+        return (f64(self.center), float(self.scale), f64(g.axes), f64(g.lo), f64(g.hi),
+                f64(gonio.EXTRA_EDGES), gonio.C_STEP,
+                gonio.GAMMA_STEP, gonio.N_C, gonio.N_GAMMA, gonio.EXIT_SIDE, gonio.N_BINS)
+
+    @cached_property
+    def grid_args(self) -> tuple:
+        """Each triangle's part bit and the record grid (bounds, cells per axis, per-axis
+        cell masks), for the photons' records."""
+        bits = (self.part_bits if self.part_bits is not None and self.part_bits.size
+                else np.zeros(self.triangle_count, np.uint64))
+        g = self.grid
+        return (np.ascontiguousarray(bits, np.uint64), np.asarray(g.lo, np.float64),
+                np.asarray(g.hi, np.float64), np.asarray(g.n, np.int64),
+                *(np.ascontiguousarray(m) for m in _axis_masks(tuple(g.n))))
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> dict:
         """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``tfar``."""

@@ -1,0 +1,112 @@
+"""The compiled photon kernels against independent numpy definitions: the same random
+numbers, the same cube-map texels as ImfEnvmap's layout, the goniophotometer's cells and
+exit bins by their definitions, and photon paths that do not depend on the wave."""
+import numpy as np
+import pytest
+
+from lumitrace.film import cubemap
+from lumitrace.film import goniometer as gm
+from lumitrace.scene import Emitter
+from lumitrace.trace import kernels, rng
+from lumitrace.trace.emission import emit
+from lumitrace.trace.tracer import _CUBE_LAYOUT
+
+
+def _directions(n, seed=0):
+    d = np.random.default_rng(seed).normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    axes = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 1, 1], [-1, 1, -1],
+                     [0, -1, 1], [0.0, 0, -1]])
+    return np.vstack([d, axes / np.linalg.norm(axes, axis=1, keepdims=True), -axes])
+
+
+def test_random_numbers_are_the_counter_based_stream():
+    key = rng.stream_key(5, 77)
+    idx = np.arange(2000, dtype=np.int64)
+    want = rng.uniforms(key, idx, 12, 4)
+    base = rng.photon_hash(key, idx)
+    for i in range(0, 2000, 97):
+        a = kernels._uniform_pair(base[i], 12)
+        b = kernels._uniform_pair(base[i], 13)
+        assert (a[0], a[1], b[0], b[1]) == tuple(w[i] for w in want)
+
+
+def test_emitted_hashes_are_the_photon_hashes():
+    e = Emitter(path="/L", kind="disk", flux=1.0, to_world=np.eye(4), radius=0.1)
+    key = rng.stream_key(3, e.key)
+    idx = np.arange(100, 300, dtype=np.int64)
+    out = (np.empty((3, 200)), np.empty((3, 200)), np.empty((3, 200)), np.empty(200, np.uint64))
+    emit(e, key, idx, normals=True, out=out)
+    assert np.array_equal(out[3], rng.photon_hash(key, idx))
+
+
+@pytest.mark.parametrize("res", [1, 2, 7, 32])
+def test_texels_are_imfenvmaps(res):
+    d = _directions(20_000, seed=res)
+    # directions exactly on pixel positions and on the faces' edges and corners
+    edge = cubemap.texel_directions(res).reshape(-1, 3)
+    d = np.vstack([d, edge, [[0.0, 0.0, 0.0]]])
+    assert np.array_equal(kernels.texels(np.ascontiguousarray(d.T), res, _CUBE_LAYOUT),
+                          cubemap.texel_index(d, res))
+
+
+def _frame_axes(seed):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_goniometer_cells_follow_their_edges(seed):
+    axes = _frame_axes(seed) if seed else np.eye(3)
+    r = np.random.default_rng(seed)
+    c = r.uniform(0, 360, 50_000)
+    g = np.degrees(np.arccos(r.uniform(-1, 1, 50_000)))
+    g = np.concatenate([g, [0.1, 179.9, 41.4, 41.5, 60.2, 75.5, 75.6]])
+    c = np.concatenate([c, [0.6, 359.4, 1.3, 181.0, 90.1, 270.2, 44.9]])
+    local = np.stack([np.sin(np.radians(g)) * np.cos(np.radians(c)),
+                      np.sin(np.radians(g)) * np.sin(np.radians(c)), -np.cos(np.radians(g))])
+    d = np.ascontiguousarray(axes.T @ local)
+    cell, _ = kernels.gonio_bins(np.zeros_like(d), d, np.ascontiguousarray(axes),
+                                 np.full(3, -1.0), np.ones(3), gm.EXTRA_EDGES, gm.C_STEP,
+                                 gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA, gm.EXIT_SIDE)
+    want = (np.floor(c / gm.C_STEP).astype(int) * gm.N_GAMMA
+            + np.searchsorted(gm.GAMMA_EDGES, g, side="right") - 1)
+    # away from the edges (float rounding decides exactly on one), every photon is in its cell
+    ce = np.abs(c / gm.C_STEP - np.round(c / gm.C_STEP)) > 1e-7
+    ge = np.min(np.abs(g[:, None] - gm.GAMMA_EDGES[None]), axis=1) > 1e-7
+    clear = ce & ge
+    assert clear.sum() > 49_000
+    assert np.array_equal(cell[clear], want[clear])
+
+
+def _exits_by_definition(p, d, lo, hi):
+    """Exit bins of rays from p along d (N, 3, photometric axes = world) from the box."""
+    with np.errstate(divide="ignore"):
+        t = np.where(d > 0, (hi - p) / d, np.where(d < 0, (lo - p) / d, np.inf))
+    axis = np.argmin(t, axis=1)
+    n = np.arange(len(p))
+    q = p + np.maximum(t[n, axis], 0)[:, None] * d
+    u = (np.clip(q, lo, hi) - lo) / (hi - lo)
+    face = np.array([2, 4, 0])[axis] + (d[n, axis] > 0)
+    ua = np.array([1, 0, 0])[axis]
+    va = np.array([2, 2, 1])[axis]
+    col = np.minimum((u[n, ua] * gm.EXIT_SIDE).astype(int), gm.EXIT_SIDE - 1)
+    row = np.minimum((u[n, va] * gm.EXIT_SIDE).astype(int), gm.EXIT_SIDE - 1)
+    return gm.N_CELLS + (face * gm.EXIT_SIDE + row) * gm.EXIT_SIDE + col
+
+
+def test_exit_bins_follow_their_faces():
+    lo, hi = np.array([-0.2, -0.1, -0.05]), np.array([0.3, 0.1, 0.02])
+    r = np.random.default_rng(4)
+    p = r.uniform(lo, hi, size=(20_000, 3))
+    d = _directions(20_000 - 16, seed=4)
+    args = (np.eye(3), lo, hi, gm.EXTRA_EDGES, gm.C_STEP, gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA,
+            gm.EXIT_SIDE)
+    _, ex = kernels.gonio_bins(np.ascontiguousarray(p.T), np.ascontiguousarray(d.T), *args)
+    assert np.array_equal(ex, _exits_by_definition(p, d, lo, hi))
+    # straight down from the centre: the middle of the bottom face (face 0)
+    _, ex = kernels.gonio_bins(np.zeros((3, 1)), np.array([[0.0], [0.0], [-1.0]]), *args)
+    b = ex[0] - gm.N_CELLS
+    assert b // gm.EXIT_SIDE**2 == gm.FACES.index("bottom")
+    col, row = b % gm.EXIT_SIDE, (b // gm.EXIT_SIDE) % gm.EXIT_SIDE
+    assert (col, row) == (int(0.4 * gm.EXIT_SIDE), int(0.5 * gm.EXIT_SIDE))
