@@ -4,8 +4,9 @@
 
 Each phase is timed by wrapping the functions that do it (thread CPU time, so the tracing
 threads are counted too): importing, stage reading, scene preparation, then per batch
-emission, intersection (Embree), scattering, binning (cube-map texels, goniophotometer
-cells and exits, the counts) and the rest of the tracer's numpy work, then the map
+emission, intersection (Embree), the compiled bounce kernel (scattering, offsets,
+binning into cube-map texels, goniophotometer cells and exits) and the Python around
+them, then the map
 estimates (pull-push and its error), the photometry, the outputs (files, pictures). The
 stage is traced from a copy, so the repository is left as it was.
 """
@@ -58,19 +59,16 @@ def _timed(phase: str, fn):
 
 
 def _patch():
-    from lumitrace.film import goniometer
     from lumitrace.photometry import distribution
     from lumitrace.publish import outputs, photometric
     from lumitrace.run import session, workers
-    from lumitrace.trace import prepared, tracer
+    from lumitrace.trace import kernels, prepared, tracer
 
-    workers.trace_batch = _timed("tracer numpy work", tracer.trace_batch)
+    workers.trace_batch = _timed("tracer (Python around the kernels)", tracer.trace_batch)
     tracer.emit = _timed("emission", tracer.emit)
-    tracer.scatter = _timed("scattering", tracer.scatter)
-    tracer.texel_index = _timed("binning", tracer.texel_index)
-    tracer.counts_of = _timed("binning", tracer.counts_of)
-    goniometer.Goniometer.cells = _timed("binning", goniometer.Goniometer.cells)
-    goniometer.Goniometer.exits = _timed("binning", goniometer.Goniometer.exits)
+    kernels.start = _timed("emission", kernels.start)
+    kernels.bounce = _timed("bounce kernel (scattering, binning)", kernels.bounce)
+    tracer.counts_of = _timed("bounce kernel (scattering, binning)", tracer.counts_of)
     prepared.PreparedScene.intersect = _timed("intersection (Embree)",
                                               prepared.PreparedScene.intersect)
     session.estimate = _timed("map estimates (filter, errors)", session.estimate)
@@ -117,7 +115,8 @@ def profile(stage: Path, photons: int) -> dict:
                 sum(v for k, v in _cpu.items() if k in TRACING), 1e-9)}
 
 
-TRACING = ("tracer numpy work", "emission", "scattering", "binning", "intersection (Embree)")
+TRACING = ("tracer (Python around the kernels)", "emission",
+           "bounce kernel (scattering, binning)", "intersection (Embree)")
 
 
 def main(argv=None) -> int:

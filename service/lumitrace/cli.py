@@ -82,8 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--threads", type=_positive_int, default=None,
                    help="tracing workers (default: all cores); the map does not depend on it")
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
-                   help="run batches in threads or worker processes; auto uses processes "
-                        "for long runs (the map does not depend on it)")
+                   help="run batches in threads or worker processes; auto uses threads "
+                        "(the map does not depend on it)")
     t.add_argument("--out", type=Path, default=None,
                    help="folder for every output, the result layer included (default: "
                         "beside the stage)")
@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="approximate tracing time (default 10)")
     b.add_argument("--threads", type=_positive_int, default=None)
     b.add_argument("--workers", choices=("processes", "threads"), default="processes",
-                   help="run batches in worker processes (as long traces do) or threads")
+                   help="run batches in worker processes (each alone in its process, as "
+                        "the bare-Embree reference runs) or threads")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
@@ -276,8 +277,6 @@ def cmd_trace(args) -> int:
     global _QUIET
     _QUIET = bool(args.quiet)
     from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
-    from .publish.outputs import write_outputs
-    from .run.session import run
     from .run.settings import TraceSettings, default_threads
     from .stage.reader import read_stage
 
@@ -307,6 +306,8 @@ def cmd_trace(args) -> int:
     for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
+    from .run.session import run
+
     bar, update = _progress_bar(settings.budget(), args.time,
                                 not (args.no_progress or args.json or args.quiet))
     try:
@@ -315,6 +316,8 @@ def cmd_trace(args) -> int:
         if bar is not None:
             bar.close()
     check_interrupted()
+    from .publish.outputs import write_outputs
+
     record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
                            pictures=not args.no_pictures)
     summary = record.summary()

@@ -1,0 +1,287 @@
+"""Speed on four small luminaires, in the figures a photon tracer is compared by.
+
+    python tools/side_by_side.py [--photons 10000000] [--repeats 3] [--max-photons 64000000]
+                                 [--scenes isotropic lambertian mirror_cup diffuse_cup] [--json]
+
+The four scenes are built as stages (in a temporary folder): an isotropic point source and
+a Lambertian disc in free space, and a Lambertian point source at the rim of an open
+cylinder (radius 25 mm, 50 mm long) that is a 95% specular mirror or 85% white paint.
+
+Per scene:
+
+- throughput: ``lumitrace trace`` run as a user runs it (a subprocess, ``--photons``, no
+  pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second;
+- convergence: a run in this process that records, after every iteration, the relative RMS
+  error ``sqrt(sum(Omega (I - I_ref)^2) / sum(Omega I_ref^2))`` over the cells of a
+  C 15 deg x gamma 5 deg grid, of the raw estimate (the goniophotometer's counts: what
+  the IES and LDT files hold) and of the filtered cube map (averaged over each cell), and
+  the photons and seconds (time spent measuring left out) at which each first reaches 2%
+  and 1%. For the map, ``I_ref`` is averaged over the same texels (the texels' size is
+  not the map's error). ``I_ref`` is the closed form's cell mean (isotropic, Lambertian, mirror cup:
+  I = (Phi / pi) cos(gamma) rho^k(gamma)); the diffuse cup has none, so its reference is a
+  run of 4x ``--max-photons`` photons with another seed, whose own variance (from its
+  stated standard errors) is taken out of the squared error.
+
+``PEER_CPU_SECONDS`` are the process CPU seconds of a Rust photon tracer for luminaires
+on these four scenes at 10M photons on a machine of this kind (2 cores), for the ratios.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: no spinning BLAS threads
+
+import argparse
+import json
+import math
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import make_stages as ms  # noqa: E402  (the reference stages' builders)
+
+from lumitrace.film.cubemap import texel_directions, texel_solid_angles  # noqa: E402
+from lumitrace.film.texel_quadrature import texel_integrals  # noqa: E402
+from lumitrace.photometry import frame  # noqa: E402
+from lumitrace.photometry.measured import cell_solid_angle_grid, grid_counts  # noqa: E402
+from lumitrace.report.references import expected_intensity, read_expectation  # noqa: E402
+from lumitrace.run.session import TraceSettings, run  # noqa: E402
+from lumitrace.stage.reader import read_stage  # noqa: E402
+
+#: Process CPU seconds of the peer tracer at 10M photons (median of 3).
+PEER_CPU_SECONDS = {"isotropic": 0.96, "lambertian": 1.2, "mirror_cup": 2.6,
+                    "diffuse_cup": 3.2}
+C_STEP, GAMMA_STEP = 15.0, 5.0
+GAMMAS = np.arange(0.0, 180.0 + 1e-9, GAMMA_STEP)
+LEVELS = (0.02, 0.01)
+
+
+def diffuse_cup():
+    """The mirror cup's geometry in 85% white paint (no closed form)."""
+    stage = ms.mirror_cup()
+    wall = stage.GetPrimAtPath("/Luminaire/Wall")
+    paint = ms.make_material(stage, "Paint", "diffuse", reflectance=0.85)
+    ms.bind(wall, paint)
+    layer = stage.GetRootLayer()
+    data = dict(layer.customLayerData)
+    data.pop(ms.EXPECTATION_KEY, None)  # no closed form
+    layer.customLayerData = data
+    return stage
+
+
+BUILDERS = {"isotropic": ms.isotropic, "lambertian": ms.lambertian_disc,
+            "mirror_cup": ms.mirror_cup, "diffuse_cup": diffuse_cup}
+
+
+def build(name: str, folder: Path) -> Path:
+    path = folder / f"{name}.usda"
+    stage = BUILDERS[name]()
+    path.write_text(stage.GetRootLayer().ExportToString(), encoding="utf-8")
+    return path
+
+
+def throughput(stage: Path, photons: int, repeats: int, out: Path) -> dict:
+    """Process CPU seconds of ``lumitrace trace`` (median of ``repeats``), as run by a user."""
+    cpu, wall = [], []
+    for k in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace", str(stage),
+                        "--photons", str(photons), "--no-pictures", "--quiet",
+                        "--no-sublayer", "--out", str(out), "--replace-results"],
+                       check=True, stdout=subprocess.DEVNULL)
+        wall.append(time.perf_counter() - t0)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    c = float(np.median(cpu))
+    return {"cpu_seconds": c, "wall_seconds": float(np.median(wall)),
+            "photons_per_cpu_second": photons / c}
+
+
+def _raw_grid(acc) -> tuple[np.ndarray, np.ndarray]:
+    """The goniophotometer's cell means (cd) and their variances on the grid."""
+    omega = cell_solid_angle_grid(GAMMAS, C_STEP)
+    flux = np.zeros_like(omega)
+    var = np.zeros_like(omega)
+    for w, _, values, idx in acc.emitter_cells():
+        n = grid_counts(values, idx, C_STEP, GAMMAS)
+        flux += w * n
+        var += w * w * n  # Poisson: analog photons of one weight
+    return flux / omega, var / omega**2
+
+
+class _MapCells:
+    """Solid-angle weighted means of a cube map over the grid's cells."""
+
+    def __init__(self, resolution: int, up_axis: str):
+        d = texel_directions(resolution).reshape(-1, 3)
+        c, g = frame.angles(d, up_axis)
+        plane = np.round(np.mod(c, 360.0) / C_STEP).astype(int) % int(360 / C_STEP)
+        mids = 0.5 * (GAMMAS[1:] + GAMMAS[:-1])
+        zone = np.searchsorted(mids, g)
+        self.cell = plane * len(GAMMAS) + zone
+        self.omega = texel_solid_angles(resolution).ravel()
+        self.n = int(360 / C_STEP) * len(GAMMAS)
+        self.weight = np.bincount(self.cell, self.omega, self.n)
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        s = np.bincount(self.cell, self.omega * image.ravel(), self.n)
+        return (s / np.maximum(self.weight, 1e-300)).reshape(-1, len(GAMMAS))
+
+    def variance(self, flux: np.ndarray, photon_flux: float) -> np.ndarray:
+        """Variance of the cell means of a raw map of texel fluxes ``flux`` (lm) from
+        analog photons of ``photon_flux`` (lm) each (Poisson counts)."""
+        s = np.bincount(self.cell, photon_flux * flux.ravel(), self.n)
+        return (s / np.maximum(self.weight, 1e-300) ** 2).reshape(-1, len(GAMMAS))
+
+
+def closed_form_cells(expectation: dict, up_axis: str, sub: int = 24) -> np.ndarray:
+    """The closed form's mean over every grid cell (sin-weighted midpoint quadrature)."""
+    planes = np.arange(0.0, 360.0, C_STEP)
+    edges = np.concatenate([[0.0], 0.5 * (GAMMAS[1:] + GAMMAS[:-1]), [180.0]])
+    out = np.zeros((len(planes), len(GAMMAS)))
+    f = (np.arange(sub) + 0.5) / sub
+    for j, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        g = lo + f * (hi - lo)
+        for i, c0 in enumerate(planes):
+            c = c0 - 0.5 * C_STEP + f * C_STEP
+            cc, gg = np.meshgrid(c, g, indexing="ij")
+            w = np.sin(np.radians(gg))
+            d = frame.directions(cc, gg, up_axis).reshape(-1, 3)
+            v = expected_intensity(expectation, d).reshape(cc.shape)
+            out[i, j] = float((v * w).sum() / w.sum())
+    return out
+
+
+def rms(value: np.ndarray, ref: np.ndarray, ref_var: np.ndarray | None = None) -> float:
+    omega = cell_solid_angle_grid(GAMMAS, C_STEP)
+    num = float((omega * (value - ref) ** 2).sum())
+    if ref_var is not None:
+        num = max(num - float((omega * ref_var).sum()), 0.0)
+    return math.sqrt(num / float((omega * ref**2).sum()))
+
+
+def _crossing(rows, key, level, axis):
+    """Where the error first falls to ``level``, interpolated in log-log between rows."""
+    prev = None
+    for r in rows:
+        if r[key] <= level:
+            if prev is None or prev[key] <= 0 or r[key] <= 0:
+                return float(r[axis])
+            f = (math.log(prev[key]) - math.log(level)) / (math.log(prev[key]) - math.log(r[key]))
+            return float(math.exp(math.log(prev[axis]) + f * (math.log(r[axis]) - math.log(prev[axis]))))
+        prev = r
+    return None
+
+
+class _Done(Exception):
+    pass
+
+
+def convergence(stage: Path, max_photons: int, resolution: int, seed: int = 1) -> dict:
+    """Errors of the raw grid and the filtered map after every iteration, and where they
+    first reach each level. The map is compared with the reference averaged over the same
+    texels, so the comparison measures the map's noise and filter bias, not its texels'
+    size."""
+    scene = read_stage(stage)
+    try:
+        expectation = read_expectation(stage)
+    except KeyError:
+        expectation = None
+    cells = _MapCells(resolution, scene.up_axis)
+    if expectation is not None:
+        ref = closed_form_cells(expectation, scene.up_axis)
+        truth = texel_integrals(lambda d: expected_intensity(expectation, d), resolution)
+        ref_map = cells(truth / texel_solid_angles(resolution))
+        ref_var = ref_map_var = None
+        source = "closed form"
+    else:
+        n_ref = 4 * max_photons
+        r = run(scene, TraceSettings(photons=n_ref, resolution=resolution, seed=seed + 1000))
+        ref, ref_var = _raw_grid(r.accumulator)
+        flux = r.accumulator.texel_flux()
+        w = r.accumulator.emitters[0].photon_flux
+        ref_map = cells(flux / texel_solid_angles(resolution))
+        ref_map_var = cells.variance(flux, w)
+        source = f"{n_ref:,} photons, seed {seed + 1000}"
+    rows, overhead = [], [0.0]
+
+    def record(p) -> None:
+        t0 = time.perf_counter()
+        raw, _ = _raw_grid(p.accumulator)
+        rows.append({"photons": p.photons, "seconds": p.seconds - overhead[0],
+                     "raw": rms(raw, ref, ref_var),
+                     "filtered": rms(cells(p.estimate.filtered), ref_map, ref_map_var)})
+        overhead[0] += time.perf_counter() - t0
+        if rows[-1]["raw"] <= min(LEVELS) and rows[-1]["filtered"] <= min(LEVELS):
+            raise _Done
+
+    try:
+        run(scene, TraceSettings(photons=max_photons, resolution=resolution, seed=seed),
+            progress=record)
+    except _Done:
+        pass
+    out = {"reference": source, "iterations": rows}
+    for key in ("raw", "filtered"):
+        for lv in LEVELS:
+            out[f"{key}_{lv:g}"] = {"photons": _crossing(rows, key, lv, "photons"),
+                                    "seconds": _crossing(rows, key, lv, "seconds")}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--photons", type=int, default=10_000_000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--max-photons", type=int, default=64_000_000)
+    ap.add_argument("--resolution", type=int, default=32)
+    ap.add_argument("--scenes", nargs="+", default=list(BUILDERS), choices=list(BUILDERS))
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for name in args.scenes:
+            stage = build(name, folder)
+            t = throughput(stage, args.photons, args.repeats, folder / f"out_{name}")
+            peer = PEER_CPU_SECONDS[name] * args.photons / 10_000_000
+            t["peer_photons_per_cpu_second"] = args.photons / peer
+            t["ratio_to_peer"] = t["photons_per_cpu_second"] / t["peer_photons_per_cpu_second"]
+            t.update(convergence(stage, args.max_photons, args.resolution))
+            rows[name] = t
+            if not args.json:
+                _print(name, t)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    return 0
+
+
+def _fmt(x, unit):
+    if x is None:
+        return "not reached"
+    return f"{x / 1e6:.2f}M" if unit == "photons" else f"{x:.2f} s"
+
+
+def _print(name: str, t: dict) -> None:
+    print(f"\n{name}: {t['photons_per_cpu_second'] / 1e6:.2f}M photons per CPU s "
+          f"({t['cpu_seconds']:.2f} CPU s, {t['wall_seconds']:.2f} s wall); peer "
+          f"{t['peer_photons_per_cpu_second'] / 1e6:.2f}M, ratio {t['ratio_to_peer']:.2f}; "
+          f"reference: {t['reference']}")
+    for key in ("raw", "filtered"):
+        cells = [f"{lv:.0%}: {_fmt(t[f'{key}_{lv:g}']['photons'], 'photons')} photons, "
+                 f"{_fmt(t[f'{key}_{lv:g}']['seconds'], 'seconds')}" for lv in LEVELS]
+        print(f"  {key:8s} " + "; ".join(cells))
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
