@@ -64,6 +64,8 @@ steradians); texel indices are int64 flat indices ``row * res + col`` into the
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 #: Number of faces and their names, in ImfEnvmap's ``CubeMapFace`` order (top to bottom).
@@ -375,6 +377,15 @@ def canonical_texels(res: int) -> np.ndarray:
     return texel_index(texel_directions(res).reshape(-1, 3), res).reshape(image_shape(res))
 
 
+@functools.lru_cache(maxsize=16)
+def _seams(res: int) -> tuple[np.ndarray, np.ndarray]:
+    """The canonical texel of every texel and which texels share their position: fixed
+    by the face size, made once."""
+    canon = canonical_texels(res).ravel()
+    shared = np.bincount(canon, minlength=canon.size)[canon] > 1
+    return canon, shared
+
+
 def weld_seams(image, solid_angles=None) -> np.ndarray:
     """Merge texels that share a pixel position on a cube edge or corner.
 
@@ -397,19 +408,45 @@ def weld_seams(image, solid_angles=None) -> np.ndarray:
     if img.shape[1] != res:
         raise ValueError(f"cube map image must be {6 * res} x {res}, got {img.shape[:2]}")
     w = texel_solid_angles(res) if solid_angles is None else np.asarray(solid_angles, np.float64)
-    canon = canonical_texels(res).ravel()
+    canon, shared = _seams(res)
     n = NUM_FACES * res * res
     flat = img.reshape(n, -1)
-    shared = np.bincount(canon, minlength=n)[canon] > 1
     wsum = np.bincount(canon, weights=w.ravel(), minlength=n)
     out = flat.copy()
+    at = canon[shared]
     for ch in range(flat.shape[1]):
         num = np.bincount(canon, weights=flat[:, ch] * w.ravel(), minlength=n)
-        out[shared, ch] = num[canon[shared]] / wsum[canon[shared]]
+        out[shared, ch] = num[at] / wsum[at]
     return out.reshape(img.shape)
 
 
-def sample_map(image, directions) -> np.ndarray:
+def bilinear_taps(directions, res: int) -> tuple[np.ndarray, np.ndarray]:
+    """The four texels (N, 4) and weights (N, 4) of :func:`sample_map`'s bilinear lookup
+    of ``directions`` (N, 3) in a map of face size ``res``: a lookup of many maps at the
+    same directions computes them once."""
+    res = _check_res(res)
+    face, pif = face_and_pixel_position(directions, res)
+    s = res - 1
+    i0 = np.clip(np.floor(pif), 0, max(s - 1, 0)).astype(np.int64)
+    t = pif - i0
+    i1 = np.minimum(i0 + 1, s)
+    if s == 0:
+        t[:] = 0.0
+
+    def texel(ix, iy):
+        col = s * _C0[face] + _CX[face] * ix + _CY[face] * iy
+        row = face * res + s * _R0[face] + _RX[face] * ix + _RY[face] * iy
+        return row * res + col
+
+    tx, ty = t[:, 0], t[:, 1]
+    index = np.stack([texel(i0[:, 0], i0[:, 1]), texel(i1[:, 0], i0[:, 1]),
+                      texel(i0[:, 0], i1[:, 1]), texel(i1[:, 0], i1[:, 1])], axis=1)
+    weight = np.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty], axis=1)
+    return index, weight
+
+
+def sample_map(image, directions, taps: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> np.ndarray:
     """Bilinear lookup of a cube map by direction.
 
     The direction's position in face (ImfEnvmap ``faceAndPixelPosition``) is interpolated
@@ -424,6 +461,8 @@ def sample_map(image, directions) -> np.ndarray:
         The cube map.
     directions : array_like, shape (N, 3)
         Directions, any length (not necessarily normalised), finite.
+    taps : optional
+        :func:`bilinear_taps` of ``directions`` for this face size, when made already.
 
     Returns
     -------
@@ -435,25 +474,9 @@ def sample_map(image, directions) -> np.ndarray:
     res = face_size(img.shape[0])
     if img.shape[1] != res:
         raise ValueError(f"cube map image must be {6 * res} x {res}, got {img.shape[:2]}")
-    face, pif = face_and_pixel_position(directions, res)
-    s = res - 1
-    i0 = np.clip(np.floor(pif), 0, max(s - 1, 0)).astype(np.int64)
-    t = pif - i0
-    i1 = np.minimum(i0 + 1, s)
-    if s == 0:
-        t[:] = 0.0
+    index, weight = taps if taps is not None else bilinear_taps(directions, res)
     flat = img.reshape(NUM_FACES * res * res, -1)
-
-    def fetch(ix, iy):
-        col = s * _C0[face] + _CX[face] * ix + _CY[face] * iy
-        row = face * res + s * _R0[face] + _RX[face] * ix + _RY[face] * iy
-        return flat[row * res + col]
-
-    tx, ty = t[:, :1], t[:, 1:]
-    out = ((1 - tx) * (1 - ty) * fetch(i0[:, 0], i0[:, 1])
-           + tx * (1 - ty) * fetch(i1[:, 0], i0[:, 1])
-           + (1 - tx) * ty * fetch(i0[:, 0], i1[:, 1])
-           + tx * ty * fetch(i1[:, 0], i1[:, 1]))
+    out = sum(weight[:, k:k + 1] * flat[index[:, k]] for k in range(4))
     return out[:, 0] if img.ndim == 2 else out
 
 
@@ -483,6 +506,6 @@ __all__ = [
     "NUM_FACES", "FACE_NAMES", "FACE_AXIS", "FACE_SIGN", "FACE_MINOR_AXES",
     "POS_X", "NEG_X", "POS_Y", "NEG_Y", "POS_Z", "NEG_Z",
     "face_size", "image_shape", "face_and_pixel_position", "pixel_position", "direction",
-    "texel_index", "texel_directions", "face_solid_angles", "texel_solid_angles",
+    "texel_index", "texel_directions", "bilinear_taps", "face_solid_angles", "texel_solid_angles",
     "rectangle_solid_angle", "canonical_texels", "weld_seams", "sample_map", "latlong_directions",
 ]

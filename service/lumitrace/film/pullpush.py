@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cubemap import texel_directions, texel_index, texel_solid_angles, sample_map, weld_seams
+from .cubemap import (bilinear_taps, sample_map, texel_directions, texel_index,
+                      texel_solid_angles, weld_seams)
 
 FOUR_PI = 4.0 * np.pi
 
@@ -38,6 +39,7 @@ class _Level:
     res: int
     parent: np.ndarray
     directions: np.ndarray
+    taps: tuple  # bilinear taps of ``directions`` in this level's map (cube-map lookups)
 
 
 @functools.lru_cache(maxsize=8)
@@ -48,10 +50,12 @@ def _pyramid(res: int) -> tuple[_Level, ...]:
     while fine > 2:
         coarse = max(2, (fine + 1) // 2)
         d = texel_directions(fine).reshape(-1, 3)
-        levels.append(_Level(res=coarse, parent=texel_index(d, coarse), directions=d))
+        levels.append(_Level(res=coarse, parent=texel_index(d, coarse), directions=d,
+                             taps=bilinear_taps(d, coarse)))
         fine = coarse
+    d = texel_directions(fine).reshape(-1, 3)
     levels.append(_Level(res=fine, parent=np.zeros(6 * fine * fine, np.int64),
-                         directions=texel_directions(fine).reshape(-1, 3)))
+                         directions=d, taps=bilinear_taps(d, fine)))
     return tuple(levels)
 
 
@@ -87,7 +91,8 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
         lv_res = res if depth == 0 else levels[depth - 1].res
         dirs = levels[depth].directions
         own = np.divide(f[depth], w[depth], out=np.zeros_like(f[depth]), where=w[depth] > 0)
-        below = sample_map(coarse.reshape(6 * coarse_res, coarse_res), dirs)
+        below = sample_map(coarse.reshape(6 * coarse_res, coarse_res), dirs,
+                           levels[depth].taps)
         # confidence in the texel's own estimate: the photons it holds, or the photons the
         # coarser level predicts for it; an empty texel where many were expected is dark
         expected = below * w[depth] * photons_per_lumen
@@ -111,7 +116,7 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
             significant = np.abs(group(n[depth]) - lam_g) > 3.0 * np.sqrt(lam_g) + 3.0
             bias2_g = np.where(significant, np.maximum(dev2 - var_g, 0.0), 0.0)
             local = weld_seams(bias2_g.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
-            bias2 = np.maximum(sample_map(local, dirs), 0.0)
+            bias2 = np.maximum(sample_map(local, dirs, lv.taps), 0.0)
             weight = np.maximum(weight, bias2 / np.maximum(bias2 + var_own, 1e-300))
         value = weight * own + (1.0 - weight) * below
         value = weld_seams(value.reshape(6 * lv_res, lv_res),

@@ -23,8 +23,13 @@ from . import workers
 from .memory import check_memory
 from .settings import TraceSettings
 
-#: Photons in the first iteration; later iterations double up to a full round of batches.
+#: Photons in the first iteration; later iterations double up to a full round of batches,
+#: and on while estimating the map costs more than :data:`ESTIMATE_SHARE` of tracing a
+#: round that takes less than :data:`ROUND_SECONDS`: the estimate stays a small part of a
+#: run whatever the tracer's speed, and a round stays short enough for an edit to wait.
 FIRST_ITERATION = 1 << 15
+ESTIMATE_SHARE = 0.1
+ROUND_SECONDS = 1.0
 #: A session stopped only by time or error ends once this many photons left no light
 #: outside the luminaire: its error is undefined and would never reach a target.
 NO_ESCAPE_PHOTONS = 1 << 20
@@ -172,14 +177,21 @@ class Refinement:
         """Add a round's tallies; estimate the map and its error. The tallies are all traced
         before any is added: adding while the tracing threads run makes every small step of
         the many small additions of a many-emitter scene wait for the GIL."""
-        for tally in list(tallies):
+        t0 = time.perf_counter()
+        tallies = list(tallies)
+        t_trace = time.perf_counter() - t0
+        for tally in tallies:
             self.accumulator.add(tally)
             self.done[tally.emitter] += tally.photons
             if self.records is not None:
                 self._keep_records(tally)
         self.iteration += 1
-        self.round_photons = min(2 * self.round_photons, self.full_round)
+        t0 = time.perf_counter()
         self.estimate = estimate(self.accumulator, self.settings.threshold)
+        t_estimate = time.perf_counter() - t0
+        if self.round_photons < self.full_round or (
+                t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
+            self.round_photons *= 2
         return self.estimate
 
     def _keep_records(self, tally) -> None:
