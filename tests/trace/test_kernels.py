@@ -110,3 +110,32 @@ def test_exit_bins_follow_their_faces():
     assert b // gm.EXIT_SIDE**2 == gm.FACES.index("bottom")
     col, row = b % gm.EXIT_SIDE, (b // gm.EXIT_SIDE) % gm.EXIT_SIDE
     assert (col, row) == (int(0.4 * gm.EXIT_SIDE), int(0.5 * gm.EXIT_SIDE))
+
+
+def test_photons_that_cannot_meet_the_geometry_skip_embree_with_the_same_result(monkeypatch):
+    """A light below a plate, facing away from it: no emitted photon can meet a triangle,
+    none goes to Embree, and the tally is the one every photon cast through Embree gives."""
+    from lumitrace.scene import Material, Scene
+    from lumitrace.trace import tracer
+    from lumitrace.trace.job import BatchJob
+    from lumitrace.trace.prepared import prepare
+
+    tri = np.array([[[-1.0, -1.0, 0.2], [1.0, -1.0, 0.2], [1.0, 1.0, 0.2]],
+                    [[-1.0, -1.0, 0.2], [1.0, 1.0, 0.2], [-1.0, 1.0, 0.2]]])
+    e = Emitter(path="/L", kind="disk", flux=1.0, to_world=np.eye(4), radius=0.1)
+    scene = Scene(tri, np.zeros(2, np.int32), np.zeros(2, np.int32),
+                  (Material("/M", "diffuse", reflectance=0.5),), ("/P",), (e,))
+    job = BatchJob(0, 0, 5000, 3, 8)
+    ps = prepare(scene)
+    calls = []
+    monkeypatch.setattr(ps, "intersect", lambda o, d: calls.append(len(o)))
+    culled = tracer.trace_batch(ps, job, records=True)
+    assert calls == [] and culled.escaped == 5000
+    monkeypatch.undo()
+    monkeypatch.setattr(kernels, "cull", lambda n, *a: n)  # every ray to Embree
+    every = tracer.trace_batch(prepare(scene), job, records=True)
+    assert np.array_equal(culled.counts, every.counts)
+    dense = lambda c: c.dense() if hasattr(c, "dense") else c  # noqa: E731
+    assert np.array_equal(dense(culled.cells), dense(every.cells))
+    for a, b in zip(culled.records._arrays(), every.records._arrays()):
+        assert np.array_equal(a, b)

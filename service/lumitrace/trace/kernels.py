@@ -638,3 +638,34 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, lin, offset, normal
         p[0, i], p[1, i], p[2, i] = wx + offset[0], wy + offset[1], wz + offset[2]
         d[0, i], d[1, i], d[2, i] = dx, dy, dz
         n[0, i], n[1, i], n[2, i] = nx, ny, nz
+
+
+@numba.njit(**_JIT)
+def cull(n, o, d, base, pid, o32, d32, lo, hi):
+    """Put the first ``n`` rays (o, d: (N, 3), normalised frame) that can meet the box
+    ``lo``..``hi`` (the geometry's bounds, with a margin) first, the rest after them, moving
+    their hashes, rows and float32 rays along; return how many can meet it. A ray that
+    misses the box escapes without Embree."""
+    k = 0
+    for i in range(n):
+        t0, t1 = 0.0, math.inf
+        for a in range(3):
+            if d[i, a] != 0.0:
+                u = (lo[a] - o[i, a]) / d[i, a]
+                v = (hi[a] - o[i, a]) / d[i, a]
+                t0 = max(t0, min(u, v))
+                t1 = min(t1, max(u, v))
+            elif o[i, a] < lo[a] or o[i, a] > hi[a]:
+                t1 = -1.0
+        if t1 < t0:
+            continue
+        if i != k:
+            for a in range(3):
+                o[i, a], o[k, a] = o[k, a], o[i, a]
+                d[i, a], d[k, a] = d[k, a], d[i, a]
+                o32[i, a], o32[k, a] = o32[k, a], o32[i, a]
+                d32[i, a], d32[k, a] = d32[k, a], d32[i, a]
+            base[i], base[k] = base[k], base[i]
+            pid[i], pid[k] = pid[k], pid[i]
+        k += 1
+    return k

@@ -22,6 +22,10 @@ from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
 
+#: Margin (normalised units) around the triangles' bounds within which rays go to Embree.
+REACH_MARGIN = 1e-3
+
+
 @dataclass(frozen=True)
 class TracingFrame:
     """The normalised tracing frame: ``p_traced = (p_world - center) / scale`` (world m),
@@ -91,6 +95,15 @@ class PreparedScene:
                 np.ascontiguousarray(part, np.int64), np.ascontiguousarray(t.kind, np.int64),
                 f64(t.reflectance), f64(t.specular), f64(t.transmittance), f64(t.ior),
                 f64(t.alpha), bool(self.polarised))
+
+    @cached_property
+    def reach_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds (normalised) of the triangles, widened well beyond float32 rounding:
+        a ray that misses this box meets no triangle."""
+        tri = (np.asarray(self.scene.triangles, np.float64).reshape(-1, 3) - self.center) \
+            / self.scale
+        margin = REACH_MARGIN * max(1.0, float(np.abs(tri).max()))
+        return tri.min(axis=0) - margin, tri.max(axis=0) + margin
 
     @cached_property
     def gonio_args(self) -> tuple:

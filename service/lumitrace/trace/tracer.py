@@ -105,16 +105,26 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     # polarisation matters only where a dielectric can see it
     if ps.polarised:
         w.pol[cur][:n] = UNPOLARISED
+    # emitted photons that cannot meet any geometry escape without Embree
+    reach = kernels.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
+                         *ps.reach_box) if ps.embree is not None else 0
     n_escaped = 0
     for depth in range(job.max_depth + 1):
-        o32, d32 = w.o32[:n], w.d32[:n]
+        o32, d32 = w.o32[:reach], w.d32[:reach]
         if record_rays:
             tally.rays.append((o32.copy(), d32.copy()))
-        hit = ps.intersect(o32, d32)
+        if reach:
+            hit = ps.intersect(o32, d32)
+            prim, tfar = hit["primID"], hit["tfar"]
+        if reach < n:
+            prim = np.concatenate([prim, np.full(n - reach, -1, np.int32)]) if reach \
+                else np.full(n, -1, np.int32)
+            tfar = np.concatenate([tfar, np.full(n - reach, np.inf, np.float32)]) if reach \
+                else np.full(n, np.inf, np.float32)
         tally.segments += n
         nxt = 1 - cur
         n_next, n_escaped, cut, absorbed = kernels.bounce(
-            depth, job.max_depth, hit["primID"], hit["tfar"], w.o[cur], w.d[cur],
+            depth, job.max_depth, prim, tfar, w.o[cur], w.d[cur],
             w.pol[cur], w.base[cur][:n], w.pid[cur], w.o[nxt], w.d[nxt], w.pol[nxt],
             w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, tally.counts, job.resolution,
             _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
@@ -123,6 +133,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         tally.cut += cut
         tally.absorbed += absorbed
         cur, n = nxt, n_next
+        reach = n  # rays that leave a surface start within the geometry's bounds
         if n == 0:
             break
     if n_escaped:
