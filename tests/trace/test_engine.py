@@ -92,3 +92,18 @@ def test_worker_processes_give_the_same_map_as_threads(downlight):
     b = _run(downlight, photons=200_000, workers="processes").accumulator
     assert np.array_equal(a.counts(), b.counts())
     assert [t.absorbed for t in a.emitters] == [t.absorbed for t in b.emitters]
+
+
+def test_rounds_grow_while_estimating_would_dominate(downlight, monkeypatch):
+    """Once the rounds are full ones, they double while the map's estimate costs more than a
+    tenth of tracing a round; how the photons are split into rounds changes nothing."""
+    from lumitrace.run import session
+
+    monkeypatch.setattr(session, "ESTIMATE_SHARE", float("inf"))  # never grow
+    fixed = _run(downlight, photons=200_000, threads=1, batch_size=1 << 10)
+    monkeypatch.undo()
+    grown = _run(downlight, photons=200_000, threads=1, batch_size=1 << 10)
+    # the estimate of a 32-texel map costs far more than tracing 2048 photons
+    assert fixed.iterations >= 200_000 // 2048
+    assert grown.iterations < 20  # doubling: about log2 of the photon count
+    assert np.array_equal(fixed.accumulator.counts(), grown.accumulator.counts())
