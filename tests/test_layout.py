@@ -22,7 +22,8 @@ RANKS = {
     "__init__": 1.5,  # registers the schema on import; anything may read __version__
     "stage": 2, "film": 2,
     "delta": 2.5,  # edits the stage, reads it back through the stage reader
-    "trace": 3, "photometry": 3,
+    "photometry": 2.8,  # grids and file formats: the tracer reads measured emitter profiles
+    "trace": 3,
     "run": 4,
     "publish": 5,
     "report": 6, "serve": 6,

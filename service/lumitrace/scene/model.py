@@ -62,6 +62,19 @@ def photometric_axes(up_axis: str, rotation=()) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class IesShaping:
+    """A measured intensity profile shaping a light (UsdLuxShapingAPI ``shaping:ies:*``):
+    the file (IES LM-63, or EULUMDAT by its ``.ldt`` extension; absolute path), its
+    ``angleScale`` and ``normalize``. The profile is the light's far-field intensity
+    distribution in its own frame: gamma 0 along local -Z, C 0 toward local +X, C 90
+    toward local +Y; the light's shape only places the photons' start points."""
+
+    file: str
+    angle_scale: float = 0.0
+    normalize: bool = False
+
+
+@dataclass(frozen=True)
 class Emitter:
     """One UsdLux light as a Lambertian emitter of known flux.
 
@@ -85,6 +98,7 @@ class Emitter:
     cone_angle: float = 180.0
     cone_softness: float = 0.0
     focus: float = 0.0
+    ies: IesShaping | None = None
 
     @property
     def key(self) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import fields
 from typing import Callable
 
@@ -11,7 +12,7 @@ from pxr import Usd, UsdGeom, UsdLux
 
 from .. import schema
 from ..errors import StageError
-from ..scene import Emitter
+from ..scene import Emitter, IesShaping
 from ..scene.shaping import shaping_emits, shaping_fraction, unshaped_cone_angle
 from . import validate
 from .materials import luminance
@@ -83,7 +84,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
                                                  path, "inputs:length")
         dims["radius"] = validate.check_positive(cylinder.GetRadiusAttr().Get(time),
                                                  path, "inputs:radius")
-    cone_angle, cone_softness, focus = _shaping(prim, kind, time, warn)
+    cone_angle, cone_softness, focus, ies = _shaping(prim, kind, time, warn)
 
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     authored_flux = None
@@ -105,6 +106,11 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
                              "inputs:color")
         normalize = bool(light.GetNormalizeAttr().Get(time))
         fraction = shaping_fraction(kind, cone_angle, cone_softness, focus)
+        if ies is not None and not ies.normalize:
+            warn(f"{path}.inputs:shaping:ies:normalize: an IES profile that is not "
+                 "normalised scales the light's power by the renderer's convention; the "
+                 "light is traced with its unshaped flux (author lumitrace:luminousFlux "
+                 "or ies:normalize to say which flux it has)")
 
     emitters = []
     for matrix, label in placements(xf, prim, frame):
@@ -133,7 +139,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
         emitters.append(Emitter(
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
-            cone_angle=cone_angle, cone_softness=cone_softness, **dims, **extra))
+            cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, **dims, **extra))
     return emitters
 
 
@@ -152,14 +158,15 @@ def _flux_source(kind: str, intensity: float, exposure: float, color, normalize:
     return "inputs:intensity"
 
 
-def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode,
-             warn: Callable[[str], None]) -> tuple[float, float, float]:
-    """Cone angle (deg), softness and focus; unshaped: 90 deg for one-sided lights,
-    180 deg (all directions) for sphere and cylinder lights."""
+def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode, warn: Callable[[str], None]
+             ) -> tuple[float, float, float, IesShaping | None]:
+    """Cone angle (deg), softness, focus and IES profile; unshaped: 90 deg for one-sided
+    lights, 180 deg (all directions) for sphere and cylinder lights. An IES profile is the
+    light's whole distribution: the cone and focus do not apply to it."""
     path = str(prim.GetPath())
     unshaped = unshaped_cone_angle(kind)
     if not prim.HasAPI(UsdLux.ShapingAPI):
-        return unshaped, 0.0, 0.0
+        return unshaped, 0.0, 0.0, None
     shaping = UsdLux.ShapingAPI(prim)
     angle_attr = shaping.GetShapingConeAngleAttr()
     angle, softness, focus = unshaped, 0.0, 0.0
@@ -175,11 +182,15 @@ def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode,
     if focus_attr.HasAuthoredValue():
         focus = validate.check_non_negative(focus_attr.Get(time), path,
                                             "inputs:shaping:focus")
-    if shaping.GetShapingIesFileAttr().Get(time):
-        warn(f"{path}.inputs:shaping:ies:file: IES profiles on emitters are ignored")
+    ies = _ies_shaping(shaping, kind, time, path, warn)
+    if ies is not None:
+        if angle < unshaped or focus > 0.0:
+            warn(f"{path}: the cone and focus do not apply to a light shaped by an IES "
+                 "profile: ignored")
+        return unshaped, 0.0, 0.0, ies
     if kind == "cylinder" and (angle < unshaped or focus > 0.0):
         warn(f"{path}: shaping of a CylinderLight is ignored")
-        return unshaped, 0.0, 0.0
+        return unshaped, 0.0, 0.0, None
     if focus > 0.0 and "focus" not in _EMITTER_FIELDS:
         warn(f"{path}.inputs:shaping:focus: focus is not supported: ignored")
         focus = 0.0
@@ -187,7 +198,30 @@ def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode,
         raise StageError("shaping leaves no direction to emit in (cone angle, softness and "
                          "focus together)", path,
                          "inputs:shaping:focus" if focus > 0.0 else "inputs:shaping:cone:angle")
-    return angle, softness, focus
+    return angle, softness, focus, None
+
+
+def _ies_shaping(shaping: UsdLux.ShapingAPI, kind: str, time: Usd.TimeCode, path: str,
+                 warn: Callable[[str], None]) -> IesShaping | None:
+    """The light's IES profile, its file resolved and checked to exist (its content is
+    read when the scene is prepared for tracing)."""
+    asset = shaping.GetShapingIesFileAttr().Get(time)
+    if not asset or not asset.path:
+        return None
+    prop = "inputs:shaping:ies:file"
+    if kind == "cylinder":
+        warn(f"{path}.{prop}: IES profiles on a CylinderLight are ignored")
+        return None
+    resolved = asset.resolvedPath  # relative to the layer that authored it
+    if not resolved or not os.path.isfile(resolved):
+        raise StageError(f"IES profile not found: {asset.path}", path, prop)
+    scale_attr = shaping.GetShapingIesAngleScaleAttr()
+    scale = float(scale_attr.Get(time)) if scale_attr.HasAuthoredValue() else 0.0
+    if not (math.isfinite(scale) and scale > -1.0):
+        raise StageError(f"must be finite and > -1, got {scale:g}", path,
+                         "inputs:shaping:ies:angleScale")
+    return IesShaping(os.path.abspath(resolved), scale,
+                      bool(shaping.GetShapingIesNormalizeAttr().Get(time)))
 
 
 def _cofactor(a: np.ndarray) -> np.ndarray:

@@ -5,7 +5,9 @@ one side, along their local -Z; sphere lights from their whole surface (isotropi
 intensity); cylinder lights from their side, not their caps. UsdLuxShapingAPI narrows the
 emission about the local -Z axis: intensity is multiplied by ``cos(theta)**focus`` and by a
 cone window that is 1 inside ``angle * (1 - softness)``, falls with a smoothstep to 0 at
-``angle`` and is 0 beyond. The authored luminous flux is the flux after shaping.
+``angle`` and is 0 beyond. The authored luminous flux is the flux after shaping. A light
+shaped by a measured profile (``shaping:ies:file``) emits that profile as its intensity
+distribution (:mod:`lumitrace.trace.profiles`), from points spread over its surface.
 """
 from __future__ import annotations
 
@@ -14,10 +16,12 @@ import numpy as np
 from ..scene import Emitter
 from ..scene.shaping import is_one_sided, is_shaped, profile_table
 from . import kernels
+from .profiles import profile_table as measured_table
 
 _SHAPES = {"disk": kernels.DISK, "rect": kernels.RECT, "sphere": kernels.SPHERE,
            "cylinder": kernels.CYLINDER}
 _NO_TABLE = np.zeros(2)
+_NO_ROWS = np.zeros((1, 2))
 
 
 def emission_args(e: Emitter) -> tuple:
@@ -30,13 +34,17 @@ def emission_args(e: Emitter) -> tuple:
     # normals transform with the inverse transpose; scaled first, so that a light in a stage
     # of tiny or huge units does not overflow (the reader refuses singular transforms)
     normal_map = np.ascontiguousarray(np.linalg.inv(lin / np.abs(lin).max()).T)
-    shaped = is_shaped(e.kind, e.cone_angle, e.focus)
+    measured = e.ies is not None
+    shaped = not measured and is_shaped(e.kind, e.cone_angle, e.focus)
     theta, cdf = (profile_table(1 if is_one_sided(e.kind) else 0, float(e.cone_angle),
                                 float(e.cone_softness), float(e.focus))
                   if shaped else (_NO_TABLE, _NO_TABLE))
+    m = measured_table(e.ies) if measured else None
     size = np.array([e.radius, e.width, e.height, e.length], dtype=np.float64)
     point = e.kind == "sphere" and (bool(e.treat_as_point) or e.radius == 0.0)
-    return (_SHAPES[e.kind], size, point, shaped, theta, cdf, lin, t, normal_map)
+    return (_SHAPES[e.kind], size, point, shaped, theta, cdf, measured,
+            m.c_cdf if m else _NO_TABLE, m.gamma_cdf if m else _NO_ROWS,
+            m.cos_edges if m else _NO_TABLE, m.c_step if m else 1.0, lin, t, normal_map)
 
 
 def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,

@@ -573,6 +573,25 @@ def _profile_local(u1, u2, theta_tab, cdf):
 
 
 @numba.njit(**_INLINE)
+def _measured_local(u1, u2, c_cdf, gamma_cdf, cos_edges, c_step):
+    """A direction in a light's frame drawn from a measured profile's table (see
+    :mod:`lumitrace.trace.profiles`): gamma from local -Z, C from local +X toward +Y."""
+    m = c_cdf.shape[0] - 1
+    j = min(max(np.searchsorted(c_cdf, u1, side="right") - 1, 0), m - 1)
+    w = c_cdf[j + 1] - c_cdf[j]
+    f = min(max((u1 - c_cdf[j]) / w, 0.0), 1.0) if w > 0.0 else 0.5
+    row = gamma_cdf[j]
+    n = row.shape[0] - 1
+    k = min(max(np.searchsorted(row, u2, side="right") - 1, 0), n - 1)
+    w2 = row[k + 1] - row[k]
+    f2 = min(max((u2 - row[k]) / w2, 0.0), 1.0) if w2 > 0.0 else 0.5
+    cg = cos_edges[k] + f2 * (cos_edges[k + 1] - cos_edges[k])  # uniform in solid angle
+    sg = math.sqrt(max(0.0, 1.0 - cg * cg))
+    c = (j + f) * c_step
+    return sg * math.cos(c), sg * math.sin(c), -cg
+
+
+@numba.njit(**_INLINE)
 def _unit(x, y, z):
     n = math.sqrt(x * x + y * y + z * z)
     return x / n, y / n, z / n
@@ -585,12 +604,14 @@ def _apply(m, x, y, z):
 
 
 @numba.njit(**_JIT)
-def emit_photons(shape, size, point, shaped, theta_tab, cdf, lin, offset, normal_map, key,
-                 index, p, d, n, base):
+def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
+                 cos_edges, c_step, lin, offset, normal_map, key, index, p, d, n, base):
     """Photons ``index`` of one light: start points ``p`` (world m), unit directions ``d``
     and the emitting surface's unit normals ``n`` (3, N; world), and the photons' hashes
     ``base``. ``size`` is (radius, width, height, length) in the light's units; ``lin``,
-    ``offset`` its world transform, ``normal_map`` the normals' (inverse transpose)."""
+    ``offset`` its world transform, ``normal_map`` the normals' (inverse transpose).
+    ``shaped``: the UsdLux cone and focus table; ``measured``: a measured profile's table,
+    which is the light's whole distribution (a disk or rect then emits on both sides)."""
     ax, ay, az = _unit(*_apply(normal_map, 0.0, 0.0, -1.0))
     for i in range(index.shape[0]):
         h = _fmix64(numba.uint64(index[i]) ^ key)
@@ -604,14 +625,22 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, lin, offset, normal
                 x, y, z = r * c, r * s, 0.0
             else:
                 x, y, z = (u1 - 0.5) * size[1], (u2 - 0.5) * size[2], 0.0
-            if shaped:
-                lx, ly, lz = _profile_local(u3, u4, theta_tab, cdf)
+            if measured:
+                dx, dy, dz = _unit(*_apply(lin, *_measured_local(u3, u4, c_cdf, gamma_cdf,
+                                                                 cos_edges, c_step)))
+                side = 1.0 if dx * ax + dy * ay + dz * az >= 0.0 else -1.0
+                nx, ny, nz = side * ax, side * ay, side * az
             else:
-                lx, ly, lz = _cosine_local(u3, u4)
-            dx, dy, dz = _to_world(lx, ly, lz, ax, ay, az)
-            nx, ny, nz = ax, ay, az
+                if shaped:
+                    lx, ly, lz = _profile_local(u3, u4, theta_tab, cdf)
+                else:
+                    lx, ly, lz = _cosine_local(u3, u4)
+                dx, dy, dz = _to_world(lx, ly, lz, ax, ay, az)
+                nx, ny, nz = ax, ay, az
         elif shape == SPHERE:
-            if shaped:
+            if measured:
+                wx, wy, wz = _measured_local(u1, u2, c_cdf, gamma_cdf, cos_edges, c_step)
+            elif shaped:
                 wx, wy, wz = _profile_local(u1, u2, theta_tab, cdf)
                 wy, wz = -wy, -wz  # about the light's -Z
             else:
