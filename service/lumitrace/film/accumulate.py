@@ -174,13 +174,18 @@ class Accumulator:
         #: removal, makes the count unknown): parts no photon reaches are reported
         self.part_hits: np.ndarray | None = np.zeros(len(scene.parts), np.int64)
         self.parts = tuple(scene.parts)
+        # a mesh light's own surface: its photons leave it, none need reach it
+        self.emitting_parts = frozenset(e.path.split("[")[0] for e in scene.emitters
+                                        if e.kind == "mesh")
 
     def unreached_parts(self) -> list[str] | None:
         """Parts no traced photon hit (fully enclosed, behind an absorber, hidden), or None
-        when that is not known."""
+        when that is not known; a mesh light's own surface, which its photons leave, is not
+        reported."""
         if self.part_hits is None:
             return None
-        return [p for p, n in zip(self.parts, self.part_hits) if n == 0]
+        return [p for p, n in zip(self.parts, self.part_hits)
+                if n == 0 and p not in self.emitting_parts]
 
     def add(self, batch: BatchTally) -> None:
         """Add a batch's photons (integer sums: exact and order-independent)."""
@@ -226,6 +231,7 @@ class Accumulator:
                          for t in self.emitters]
         copy.part_hits = None if self.part_hits is None else self.part_hits.copy()
         copy.parts = self.parts
+        copy.emitting_parts = self.emitting_parts
         return copy
 
     def rescale(self, emitter: int, flux: float) -> None:

@@ -16,7 +16,7 @@ SCATTERING_MODELS = ("diffuse", "mirror", "glossy", "translucent", "dielectric",
 DIFFUSE, MIRROR, GLOSSY, TRANSLUCENT, DIELECTRIC, ABSORBER = range(len(SCATTERING_MODELS))
 
 #: UsdLux light types we emit from, in the order of their codes in :attr:`Emitter.kind`.
-EMITTER_KINDS = ("sphere", "disk", "rect", "cylinder")
+EMITTER_KINDS = ("sphere", "disk", "rect", "cylinder", "mesh")
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,9 @@ class Emitter:
     ``to_world`` (4x4, column-vector convention: ``p_world = M[:3,:3] @ p + M[:3,3]``) maps
     the light's local space, in stage units, to world metres. Shape sizes are in local stage
     units, as authored. One-sided area lights (disk, rect) emit towards their local -Z, as
-    UsdLux defines; sphere and cylinder lights emit outward from their surface.
+    UsdLux defines; sphere and cylinder lights emit outward from their surface; a mesh
+    light (UsdLux MeshLightAPI on a gprim) from the front of its ``triangles``, or both
+    sides.
     ``cone_angle`` (degrees; 180, or 90 for one-sided lights, means unshaped), ``cone_softness`` and ``focus`` come from
     UsdLuxShapingAPI, measured from the emission axis (-Z); see :mod:`lumitrace.trace.emission`.
     """
@@ -99,6 +101,10 @@ class Emitter:
     cone_softness: float = 0.0
     focus: float = 0.0
     ies: IesShaping | None = None
+    #: a mesh light's triangles (T, 3, 3), world metres less ``to_world``'s translation
+    #: (their centre), front faces counter-clockwise; it emits from both sides if two-sided
+    triangles: np.ndarray | None = None
+    two_sided: bool = False
 
     @property
     def key(self) -> int:
@@ -116,6 +122,8 @@ class Emitter:
         """
         if self.kind == "sphere":
             return 0.0 if self.treat_as_point else self.radius  # a point has no surface
+        if self.kind == "mesh":
+            return float(np.linalg.norm(self.triangles.reshape(-1, 3), axis=1).max())
         if self.kind == "disk":
             return self.radius
         if self.kind == "rect":
@@ -128,6 +136,8 @@ class Emitter:
         units): a disk or rect lies in its XY plane, a cylinder runs along X."""
         if self.kind == "sphere":
             return np.full(3, 0.0 if self.treat_as_point else self.radius)
+        if self.kind == "mesh":
+            return np.abs(self.triangles.reshape(-1, 3)).max(axis=0)
         if self.kind == "disk":
             return np.array([self.radius, self.radius, 0.0])
         if self.kind == "rect":
@@ -223,6 +233,16 @@ class Scene:
             h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
                            e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())
             h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
+            if e.triangles is not None:
+                h.update(repr(e.two_sided).encode())
+                h.update(np.ascontiguousarray(e.triangles, dtype=np.float64).tobytes())
+            if e.ies is not None:
+                h.update(repr((e.ies.file, e.ies.angle_scale, e.ies.normalize)).encode())
+                try:
+                    with open(e.ies.file, "rb") as fh:
+                        h.update(hashlib.sha256(fh.read()).digest())
+                except OSError:
+                    h.update(b"unreadable profile")
         h.update(self.up_axis.encode())
         if self.luminaire_to_world:
             h.update(np.asarray(self.photometric_axes, np.float64).tobytes())

@@ -143,6 +143,53 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
     return emitters
 
 
+def read_mesh_light(prim: Usd.Prim, placed: list[np.ndarray], time: Usd.TimeCode,
+                    warn: Callable[[str], None]) -> list[Emitter]:
+    """The emitters of a gprim with UsdLux MeshLightAPI (or the older GeometryLight's
+    LightAPI), one per placement: its world triangles (``placed``, m) emit as a Lambertian
+    surface from their front faces, or both sides for a ``doubleSided`` gprim. The flux is
+    ``lumitrace:luminousFlux`` or, from ``inputs:intensity``, pi L A per side."""
+    path = str(prim.GetPath())
+    two_sided = bool(UsdGeom.Gprim(prim).GetDoubleSidedAttr().Get(time))
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        warn(f"{path}: shaping of a mesh light is ignored")
+    flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
+    light = UsdLux.LightAPI(prim)
+    emitters = []
+    for k, tris in enumerate(placed):
+        if len(tris) == 0:
+            continue
+        area = float(0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0],
+                                                     tris[:, 2] - tris[:, 0]), axis=1).sum())
+        if flux_attr and flux_attr.HasAuthoredValue():
+            flux = validate.check_luminous_flux(flux_attr.Get(time), path,
+                                                schema.LUMINOUS_FLUX)
+        elif light.GetIntensityAttr().HasAuthoredValue():
+            intensity = validate.check_non_negative(light.GetIntensityAttr().Get(time),
+                                                    path, "inputs:intensity")
+            exposure = validate.check_finite(light.GetExposureAttr().Get(time), path,
+                                             "inputs:exposure")
+            color = check_array(light.GetColorAttr().Get(time), path, "inputs:color",
+                                width=3).ravel()
+            flux = light_flux("mesh", intensity, exposure, color,
+                              bool(light.GetNormalizeAttr().Get(time)), area,
+                              2.0 if two_sided else 1.0)
+            if not (math.isfinite(flux) and 0.0 < flux <= validate.MAX_LUMINOUS_FLUX):
+                raise StageError(f"mesh light emits no usable flux ({flux:g} lm)", path,
+                                 "inputs:intensity")
+        else:
+            raise StageError("light has no luminous flux: author lumitrace:luminousFlux (lm) "
+                             "or inputs:intensity", path)
+        centre = tris.reshape(-1, 3).mean(axis=0)
+        to_world = np.eye(4)
+        to_world[:3, 3] = centre
+        emitters.append(Emitter(path=path + (f"[{k}]" if len(placed) > 1 else ""),
+                                kind="mesh", flux=float(flux), to_world=to_world,
+                                triangles=np.ascontiguousarray(tris - centre),
+                                two_sided=two_sided))
+    return emitters
+
+
 def _flux_source(kind: str, intensity: float, exposure: float, color, normalize: bool,
                  area: float, fraction: float) -> str:
     """The input that takes a light's flux above :data:`.validate.MAX_LUMINOUS_FLUX`: the

@@ -56,7 +56,7 @@ from ..scene import Emitter, Scene
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
-from .lights import light_kind, read_light
+from .lights import light_kind, read_light, read_mesh_light
 from .materials import BoundMaterials
 from .representation import is_stand_in_light, modelled_luminaire
 from .timing import read_time, requested_time, scene_time_code
@@ -197,7 +197,7 @@ class _Reader:
                        f"{schema.MATERIAL_FALLBACKS[schema.REFLECTANCE]:g}")
         if not self.emitters:
             raise StageError("no emitter: the luminaire has no active, visible Sphere, Disk, "
-                             f"Rect or Cylinder light (in {self.label})", root_path)
+                             f"Rect or Cylinder light or mesh light (in {self.label})", root_path)
         validate.check_total_flux([e.flux for e in self.emitters], root_path)
 
         for note in self.diagnostics.take():
@@ -293,10 +293,11 @@ class _Reader:
                            "not a surface or light lumitrace knows; its children are read")
                 continue
             if prim.IsA(UsdGeom.Gprim):
-                if prim.HasAPI(UsdLux.LightAPI):
-                    self._warn(f"{prim.GetPath()}: mesh lights are not supported: traced as "
-                               "a plain surface without emission")
+                first = len(self.triangles)
                 self._gprim(prim, frame)
+                if prim.HasAPI(UsdLux.LightAPI):  # MeshLightAPI: the surface emits too
+                    self.emitters.extend(read_mesh_light(
+                        prim, self.triangles[first:], self.time, self._warn))
 
     def _visible_and_rendered(self, prim: Usd.Prim, computed: bool) -> bool:
         imageable = UsdGeom.Imageable(prim)

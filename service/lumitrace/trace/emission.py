@@ -19,9 +19,20 @@ from . import kernels
 from .profiles import profile_table as measured_table
 
 _SHAPES = {"disk": kernels.DISK, "rect": kernels.RECT, "sphere": kernels.SPHERE,
-           "cylinder": kernels.CYLINDER}
+           "cylinder": kernels.CYLINDER, "mesh": kernels.MESH}
 _NO_TABLE = np.zeros(2)
 _NO_ROWS = np.zeros((1, 2))
+_NO_MESH = (np.array([0.0, 1.0]), np.zeros((1, 3, 3)), np.zeros((1, 3)))
+
+
+def _mesh_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh light's area CDF over its triangles, the triangles and their unit normals."""
+    tri = np.ascontiguousarray(e.triangles, dtype=np.float64)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    cdf = np.concatenate([[0.0], np.cumsum(area)]) / area.sum()
+    cdf[-1] = 1.0
+    return cdf, tri, np.ascontiguousarray(cross / (2.0 * area[:, None]))
 
 
 def emission_args(e: Emitter) -> tuple:
@@ -35,16 +46,18 @@ def emission_args(e: Emitter) -> tuple:
     # of tiny or huge units does not overflow (the reader refuses singular transforms)
     normal_map = np.ascontiguousarray(np.linalg.inv(lin / np.abs(lin).max()).T)
     measured = e.ies is not None
-    shaped = not measured and is_shaped(e.kind, e.cone_angle, e.focus)
+    shaped = not measured and e.kind != "mesh" and is_shaped(e.kind, e.cone_angle, e.focus)
     theta, cdf = (profile_table(1 if is_one_sided(e.kind) else 0, float(e.cone_angle),
                                 float(e.cone_softness), float(e.focus))
                   if shaped else (_NO_TABLE, _NO_TABLE))
     m = measured_table(e.ies) if measured else None
     size = np.array([e.radius, e.width, e.height, e.length], dtype=np.float64)
     point = e.kind == "sphere" and (bool(e.treat_as_point) or e.radius == 0.0)
+    mesh = _mesh_tables(e) if e.kind == "mesh" else _NO_MESH
     return (_SHAPES[e.kind], size, point, shaped, theta, cdf, measured,
             m.c_cdf if m else _NO_TABLE, m.gamma_cdf if m else _NO_ROWS,
-            m.cos_edges if m else _NO_TABLE, m.c_step if m else 1.0, lin, t, normal_map)
+            m.cos_edges if m else _NO_TABLE, m.c_step if m else 1.0, *mesh,
+            bool(e.two_sided), lin, t, normal_map)
 
 
 def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,

@@ -541,7 +541,7 @@ def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
 # --- emission -------------------------------------------------------------------------------
 
 #: Emitter shapes as :func:`emit_photons` takes them.
-DISK, RECT, SPHERE, CYLINDER = 0, 1, 2, 3
+DISK, RECT, SPHERE, CYLINDER, MESH = 0, 1, 2, 3, 4
 
 
 @numba.njit(**_INLINE)
@@ -605,13 +605,16 @@ def _apply(m, x, y, z):
 
 @numba.njit(**_JIT)
 def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
-                 cos_edges, c_step, lin, offset, normal_map, key, index, p, d, n, base):
+                 cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, lin, offset,
+                 normal_map, key, index, p, d, n, base):
     """Photons ``index`` of one light: start points ``p`` (world m), unit directions ``d``
     and the emitting surface's unit normals ``n`` (3, N; world), and the photons' hashes
     ``base``. ``size`` is (radius, width, height, length) in the light's units; ``lin``,
     ``offset`` its world transform, ``normal_map`` the normals' (inverse transpose).
     ``shaped``: the UsdLux cone and focus table; ``measured``: a measured profile's table,
-    which is the light's whole distribution (a disk or rect then emits on both sides)."""
+    which is the light's whole distribution (a disk or rect then emits on both sides).
+    A mesh light picks a triangle by area (``mesh_cdf``), a point uniform on it and, if
+    ``two_sided``, a side, from its first two numbers."""
     ax, ay, az = _unit(*_apply(normal_map, 0.0, 0.0, -1.0))
     for i in range(index.shape[0]):
         h = _fmix64(numba.uint64(index[i]) ^ key)
@@ -657,6 +660,24 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
                 x, y, z = _to_world(lx, ly, lz, wx, wy, wz)
                 x, y, z = size[0] * x, size[0] * y, size[0] * z
                 nx, ny, nz = _unit(*_apply(normal_map, x, y, z))
+        elif shape == MESH:
+            m = mesh_cdf.shape[0] - 1
+            t = min(max(np.searchsorted(mesh_cdf, u1, side="right") - 1, 0), m - 1)
+            w = mesh_cdf[t + 1] - mesh_cdf[t]
+            f = min(max((u1 - mesh_cdf[t]) / w, 0.0), 1.0) if w > 0.0 else 0.5
+            side = 1.0
+            if two_sided:
+                f, side = (2.0 * f, 1.0) if f < 0.5 else (2.0 * f - 1.0, -1.0)
+            a = math.sqrt(f)
+            b0, b1, b2 = 1.0 - a, a * (1.0 - u2), a * u2  # uniform on the triangle
+            x = b0 * mesh_tris[t, 0, 0] + b1 * mesh_tris[t, 1, 0] + b2 * mesh_tris[t, 2, 0]
+            y = b0 * mesh_tris[t, 0, 1] + b1 * mesh_tris[t, 1, 1] + b2 * mesh_tris[t, 2, 1]
+            z = b0 * mesh_tris[t, 0, 2] + b1 * mesh_tris[t, 1, 2] + b2 * mesh_tris[t, 2, 2]
+            nx, ny, nz = _apply(normal_map, side * mesh_normals[t, 0], side * mesh_normals[t, 1],
+                                side * mesh_normals[t, 2])
+            nx, ny, nz = _unit(nx, ny, nz)
+            lx, ly, lz = _cosine_local(u3, u4)
+            dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
         else:  # CYLINDER: its side, not its caps
             c, s = _turn(u2)
             x, y, z = (u1 - 0.5) * size[3], size[0] * c, size[0] * s
