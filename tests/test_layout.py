@@ -18,6 +18,7 @@ PACKAGE = ROOT / "service" / "lumitrace"
 #: (the tracer fills the film's tally; the writers read the film's maps), never back.
 RANKS = {
     "errors": 0, "atomic": 0, "filenames": 0,
+    "tm25": 0.5,  # the ray-file format: the stage reader reads a light's rays, outputs write them
     "scene": 1, "schema": 1.2,  # the schema names the scene's scattering models as tokens
     "__init__": 1.5,  # registers the schema on import; anything may read __version__
     "stage": 2, "film": 2,
@@ -101,9 +102,18 @@ def test_import_graph_has_no_cycle():
             visit(n, [n])
 
 
+#: Modules allowed to be longer, and why.
+LONG_MODULES = {
+    # numba's on-disk cache is keyed by the file of each compiled entry point: helpers in
+    # another file could change without their callers being recompiled
+    "trace/kernels.py": 900,
+}
+
+
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_no_module_over_700_lines(path):
-    assert len(path.read_text().splitlines()) <= 700
+    limit = LONG_MODULES.get(str(path.relative_to(PACKAGE)), 700)
+    assert len(path.read_text().splitlines()) <= limit
 
 
 def test_engine_imports_without_the_plotting_extra():
