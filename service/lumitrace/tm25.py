@@ -75,6 +75,19 @@ def _text(raw: bytes) -> str:
     return s.split("\0", 1)[0]
 
 
+def summary(path: str | os.PathLike) -> tuple[float | None, np.ndarray]:
+    """What a light emitting a ray file needs to know of it: the luminous flux (lm) it
+    states (its header's, else the sum of its rays'; None for a radiometric-only file) and
+    the half extents (3,) of its start points about the origin (mm)."""
+    f = read_tm25(path)
+    extent = np.abs(f.positions).max(axis=0).astype(np.float64) if len(f) else np.zeros(3)
+    if not f.photometric:
+        return None, extent
+    if np.isfinite(f.luminous_flux) and f.luminous_flux > 0:
+        return float(f.luminous_flux), extent
+    return float(f.flux.astype(np.float64).sum()), extent
+
+
 def read_tm25(path: str | os.PathLike) -> RayFile:
     """Read a TM-25 ray file (see the module docstring for what is supported)."""
     path = os.fspath(path)

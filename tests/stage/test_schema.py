@@ -42,9 +42,11 @@ def test_material_api_properties_and_fallbacks():
 def test_emitter_and_luminaire_api_properties():
     registry = Usd.SchemaRegistry()
     emitter = registry.FindAppliedAPIPrimDefinition(schema.EMITTER_API)
-    assert emitter.GetPropertyNames() == [schema.LUMINOUS_FLUX]
+    assert emitter.GetPropertyNames() == [schema.LUMINOUS_FLUX, schema.RAY_FILE]
     assert (emitter.GetSchemaAttributeSpec(schema.LUMINOUS_FLUX).typeName
             == Sdf.ValueTypeNames.Float)
+    assert (emitter.GetSchemaAttributeSpec(schema.RAY_FILE).typeName
+            == Sdf.ValueTypeNames.Asset)
     luminaire = registry.FindAppliedAPIPrimDefinition(schema.LUMINAIRE_API)
     assert set(luminaire.GetPropertyNames()) == set(schema.RESULT_ATTRIBUTES)
     for name, type_name in schema.RESULT_ATTRIBUTES.items():

@@ -105,6 +105,11 @@ class Emitter:
     #: (their centre), front faces counter-clockwise; it emits from both sides if two-sided
     triangles: np.ndarray | None = None
     two_sided: bool = False
+    #: a TM-25 ray file (absolute path) whose rays the light emits, in its own frame, and
+    #: the light's local units per millimetre (the file's unit)
+    rays: str | None = None
+    ray_scale: float = 1.0
+    ray_extent: tuple = ()  # half extents (3,) of the rays' start points, local units
 
     @property
     def key(self) -> int:
@@ -120,6 +125,8 @@ class Emitter:
         defaults (1 stage unit), which would make a 1 mm LED modelled in metres a metre wide
         and the tracing frame, hence float rounding and ray offsets, depend on the unit.
         """
+        if self.rays is not None:
+            return float(np.linalg.norm(self.ray_extent))
         if self.kind == "sphere":
             return 0.0 if self.treat_as_point else self.radius  # a point has no surface
         if self.kind == "mesh":
@@ -134,6 +141,8 @@ class Emitter:
     def half_extent(self) -> np.ndarray:
         """Half sizes (3,) of the emitting shape's box in the light's local axes (stage
         units): a disk or rect lies in its XY plane, a cylinder runs along X."""
+        if self.rays is not None:
+            return np.asarray(self.ray_extent, np.float64)
         if self.kind == "sphere":
             return np.full(3, 0.0 if self.treat_as_point else self.radius)
         if self.kind == "mesh":
@@ -236,13 +245,15 @@ class Scene:
             if e.triangles is not None:
                 h.update(repr(e.two_sided).encode())
                 h.update(np.ascontiguousarray(e.triangles, dtype=np.float64).tobytes())
-            if e.ies is not None:
-                h.update(repr((e.ies.file, e.ies.angle_scale, e.ies.normalize)).encode())
+            for f in ([e.ies.file] if e.ies is not None else []) + (
+                    [e.rays] if e.rays is not None else []):
+                h.update(repr((f, e.ies and (e.ies.angle_scale, e.ies.normalize),
+                               e.ray_scale)).encode())
                 try:
-                    with open(e.ies.file, "rb") as fh:
+                    with open(f, "rb") as fh:
                         h.update(hashlib.sha256(fh.read()).digest())
                 except OSError:
-                    h.update(b"unreadable profile")
+                    h.update(b"unreadable file")
         h.update(self.up_axis.encode())
         if self.luminaire_to_world:
             h.update(np.asarray(self.photometric_axes, np.float64).tobytes())

@@ -13,6 +13,7 @@ from pxr import Usd, UsdGeom, UsdLux
 from .. import schema
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
+from .. import tm25
 from ..scene.shaping import shaping_emits, shaping_fraction, unshaped_cone_angle
 from . import validate
 from .materials import luminance
@@ -85,12 +86,26 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         dims["radius"] = validate.check_positive(cylinder.GetRadiusAttr().Get(time),
                                                  path, "inputs:radius")
     cone_angle, cone_softness, focus, ies = _shaping(prim, kind, time, warn)
+    rays = _ray_file(prim, time)
+    if rays is not None and (ies is not None or cone_angle < unshaped_cone_angle(kind)
+                             or focus > 0.0):
+        warn(f"{path}: a light that emits a ray file is not shaped: its shaping is ignored")
+        cone_angle, cone_softness, focus, ies = unshaped_cone_angle(kind), 0.0, 0.0, None
 
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     authored_flux = None
     if flux_attr and flux_attr.HasAuthoredValue():
         authored_flux = validate.check_luminous_flux(flux_attr.Get(time), path,
                                                      schema.LUMINOUS_FLUX)
+    if rays is not None:
+        stated, ray_extent = tm25.summary(rays)
+        if authored_flux is None:
+            if stated is None:
+                raise StageError("the ray file carries radiant flux only: author "
+                                 "lumitrace:luminousFlux (lm)", path, schema.RAY_FILE)
+            authored_flux = validate.check_luminous_flux(stated, path, schema.RAY_FILE)
+    if authored_flux is not None:
+        pass
     elif not light.GetIntensityAttr().HasAuthoredValue():
         raise StageError("light has no luminous flux: author lumitrace:luminousFlux (lm) "
                          "or inputs:intensity", path)
@@ -139,7 +154,10 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
         emitters.append(Emitter(
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
-            cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, **dims, **extra))
+            cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, rays=rays,
+            ray_scale=0.001 / meters_per_unit,
+            ray_extent=tuple(ray_extent * 0.001 / meters_per_unit) if rays else (),
+            **dims, **extra))
     return emitters
 
 
@@ -246,6 +264,20 @@ def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode, warn: Callable[[str]
                          "focus together)", path,
                          "inputs:shaping:focus" if focus > 0.0 else "inputs:shaping:cone:angle")
     return angle, softness, focus, None
+
+
+def _ray_file(prim: Usd.Prim, time: Usd.TimeCode) -> str | None:
+    """The TM-25 ray file a light emits (``lumitrace:rayFile``), resolved beside the layer
+    that authors it, or None."""
+    attr = prim.GetAttribute(schema.RAY_FILE)
+    asset = attr.Get(time) if attr and attr.HasAuthoredValue() else None
+    if not asset or not asset.path:
+        return None
+    resolved = asset.resolvedPath
+    if not resolved or not os.path.isfile(resolved):
+        raise StageError(f"ray file not found: {asset.path}", str(prim.GetPath()),
+                         schema.RAY_FILE)
+    return os.path.abspath(resolved)
 
 
 def _ies_shaping(shaping: UsdLux.ShapingAPI, kind: str, time: Usd.TimeCode, path: str,

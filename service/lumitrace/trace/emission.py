@@ -7,13 +7,19 @@ emission about the local -Z axis: intensity is multiplied by ``cos(theta)**focus
 cone window that is 1 inside ``angle * (1 - softness)``, falls with a smoothstep to 0 at
 ``angle`` and is 0 beyond. The authored luminous flux is the flux after shaping. A light
 shaped by a measured profile (``shaping:ies:file``) emits that profile as its intensity
-distribution (:mod:`lumitrace.trace.profiles`), from points spread over its surface.
+distribution (:mod:`lumitrace.trace.profiles`), from points spread over its surface. A
+light with a TM-25 ray file (``lumitrace:rayFile``) emits the file's rays, in its own frame.
 """
 from __future__ import annotations
 
+import functools
+import os
+
 import numpy as np
 
+from ..errors import LumitraceError
 from ..scene import Emitter
+from ..tm25 import read_tm25
 from ..scene.shaping import is_one_sided, is_shaped, profile_table
 from . import kernels
 from .profiles import profile_table as measured_table
@@ -23,6 +29,27 @@ _SHAPES = {"disk": kernels.DISK, "rect": kernels.RECT, "sphere": kernels.SPHERE,
 _NO_TABLE = np.zeros(2)
 _NO_ROWS = np.zeros((1, 2))
 _NO_MESH = (np.array([0.0, 1.0]), np.zeros((1, 3, 3)), np.zeros((1, 3)))
+_NO_RAYS = (np.array([0.0, 1.0]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
+
+
+def _ray_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ray-file light's flux CDF over its rays and their start points (local units) and
+    unit directions (re-read when the file changes)."""
+    st = os.stat(e.rays)
+    return _read_rays(e.rays, st.st_mtime_ns, st.st_size, float(e.ray_scale))
+
+
+@functools.lru_cache(maxsize=4)
+def _read_rays(path: str, _mtime_ns: int, _size: int, scale: float):
+    f = read_tm25(path)
+    w = f.flux.astype(np.float64)
+    if not (len(f) and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0):
+        raise LumitraceError("the ray file's rays carry no usable flux", path)
+    cdf = np.concatenate([[0.0], np.cumsum(w)]) / w.sum()
+    cdf[-1] = 1.0
+    d = f.directions.astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return cdf, np.ascontiguousarray(f.positions.astype(np.float64) * scale), d
 
 
 def _mesh_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,10 +81,12 @@ def emission_args(e: Emitter) -> tuple:
     size = np.array([e.radius, e.width, e.height, e.length], dtype=np.float64)
     point = e.kind == "sphere" and (bool(e.treat_as_point) or e.radius == 0.0)
     mesh = _mesh_tables(e) if e.kind == "mesh" else _NO_MESH
-    return (_SHAPES[e.kind], size, point, shaped, theta, cdf, measured,
+    rays = _ray_tables(e) if e.rays is not None else _NO_RAYS
+    shape = kernels.RAYS if e.rays is not None else _SHAPES[e.kind]
+    return (shape, size, point, shaped, theta, cdf, measured,
             m.c_cdf if m else _NO_TABLE, m.gamma_cdf if m else _NO_ROWS,
             m.cos_edges if m else _NO_TABLE, m.c_step if m else 1.0, *mesh,
-            bool(e.two_sided), lin, t, normal_map)
+            bool(e.two_sided), *rays, lin, t, normal_map)
 
 
 def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,

@@ -541,7 +541,7 @@ def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
 # --- emission -------------------------------------------------------------------------------
 
 #: Emitter shapes as :func:`emit_photons` takes them.
-DISK, RECT, SPHERE, CYLINDER, MESH = 0, 1, 2, 3, 4
+DISK, RECT, SPHERE, CYLINDER, MESH, RAYS = 0, 1, 2, 3, 4, 5
 
 
 @numba.njit(**_INLINE)
@@ -605,8 +605,8 @@ def _apply(m, x, y, z):
 
 @numba.njit(**_JIT)
 def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
-                 cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, lin, offset,
-                 normal_map, key, index, p, d, n, base):
+                 cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, ray_cdf,
+                 ray_pos, ray_dir, lin, offset, normal_map, key, index, p, d, n, base):
     """Photons ``index`` of one light: start points ``p`` (world m), unit directions ``d``
     and the emitting surface's unit normals ``n`` (3, N; world), and the photons' hashes
     ``base``. ``size`` is (radius, width, height, length) in the light's units; ``lin``,
@@ -614,7 +614,8 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
     ``shaped``: the UsdLux cone and focus table; ``measured``: a measured profile's table,
     which is the light's whole distribution (a disk or rect then emits on both sides).
     A mesh light picks a triangle by area (``mesh_cdf``), a point uniform on it and, if
-    ``two_sided``, a side, from its first two numbers."""
+    ``two_sided``, a side, from its first two numbers; a ray-file light picks one of its
+    rays (start points ``ray_pos``, directions ``ray_dir``, local) by flux (``ray_cdf``)."""
     ax, ay, az = _unit(*_apply(normal_map, 0.0, 0.0, -1.0))
     for i in range(index.shape[0]):
         h = _fmix64(numba.uint64(index[i]) ^ key)
@@ -678,6 +679,12 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
             nx, ny, nz = _unit(nx, ny, nz)
             lx, ly, lz = _cosine_local(u3, u4)
             dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
+        elif shape == RAYS:
+            m = ray_cdf.shape[0] - 1
+            t = min(max(np.searchsorted(ray_cdf, u1, side="right") - 1, 0), m - 1)
+            x, y, z = ray_pos[t, 0], ray_pos[t, 1], ray_pos[t, 2]
+            dx, dy, dz = _unit(*_apply(lin, ray_dir[t, 0], ray_dir[t, 1], ray_dir[t, 2]))
+            nx, ny, nz = dx, dy, dz  # offset along the ray
         else:  # CYLINDER: its side, not its caps
             c, s = _turn(u2)
             x, y, z = (u1 - 0.5) * size[3], size[0] * c, size[0] * s

@@ -1,0 +1,98 @@
+"""Lights that emit a TM-25 ray file (lumitrace:rayFile): photons start at the file's rays,
+drawn by flux, in the light prim's frame, with the file's luminous flux; a Lambertian LED
+ray set turned to face down traces as the Lambertian closed form."""
+import math
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
+
+from lumitrace import tm25
+from lumitrace.errors import StageError
+from lumitrace.photometry.measured import measure
+from lumitrace.run.session import TraceSettings, run
+from lumitrace.stage.reader import read_stage
+
+GAMMAS = np.arange(0.0, 180.0 + 1e-9, 5.0)
+
+
+def _lambertian_led(path, n=1_000_000, photometric=True, seed=5):
+    """An LED as makers publish it: rays from a 1 mm disc around +Z (the LED's own axis),
+    cosine-distributed, 0.0002 lm each."""
+    r = np.random.default_rng(seed)
+    rad, phi = np.sqrt(r.random(n)), 2 * np.pi * r.random(n)
+    u, v = r.random(n), 2 * np.pi * r.random(n)
+    dirs = np.column_stack([np.sqrt(u) * np.cos(v), np.sqrt(u) * np.sin(v), np.sqrt(1 - u)])
+    rays = tm25.RayFile(positions=np.column_stack([rad * np.cos(phi), rad * np.sin(phi),
+                                                   np.zeros(n)]).astype(np.float32),
+                        directions=dirs.astype(np.float32),
+                        flux=np.full(n, 2e-4, np.float32))
+    data = tm25.format_tm25(rays)
+    if not photometric:  # the luminous column relabelled as radiant flux (W)
+        head = bytearray(data[:tm25.TEXT_END])
+        head[tm25.FLAGS_AT + 8:tm25.FLAGS_AT + 20] = np.array([1, 0, 0], "<i4").tobytes()
+        data = bytes(head) + data[tm25.TEXT_END:]
+    path.write_bytes(data)
+    return path
+
+
+def _stage(folder, ray_asset, flux=None, turn=180.0, name="led"):
+    path = folder / f"{name}.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.001)  # modelled in millimetres
+    root = UsdGeom.Xform.Define(stage, "/Luminaire")
+    stage.SetDefaultPrim(root.GetPrim())
+    light = UsdLux.SphereLight.Define(stage, "/Luminaire/LED")
+    light.CreateRadiusAttr(0.5)
+    UsdGeom.Xformable(light).AddRotateXOp().Set(turn)  # the LED's +Z to the light's -Z
+    p = light.GetPrim()
+    p.AddAppliedSchema("LumitraceEmitterAPI")
+    p.CreateAttribute("lumitrace:rayFile", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(ray_asset))
+    if flux is not None:
+        p.CreateAttribute("lumitrace:luminousFlux", Sdf.ValueTypeNames.Float).Set(flux)
+    stage.Save()
+    return path
+
+
+def test_a_lambertian_ray_set_faced_down_traces_as_the_closed_form(tmp_path):
+    rays = 1_000_000
+    _lambertian_led(tmp_path / "led.TM25RAY", n=rays)
+    scene = read_stage(_stage(tmp_path, "./led.TM25RAY"))
+    (e,) = scene.emitters
+    assert e.rays == str(tmp_path / "led.TM25RAY")
+    assert e.flux == pytest.approx(200.0, rel=1e-5)  # the file's luminous flux
+    photons = 400_000
+    r = run(scene, TraceSettings(photons=photons, resolution=16, seed=2))
+    got = measure(r.accumulator, GAMMAS, 15.0, "rotational")
+    g = np.radians(GAMMAS)
+    edges = np.radians(np.concatenate([[0.0], 0.5 * (GAMMAS[1:] + GAMMAS[:-1]), [180.0]]))
+    # cell means of (flux / pi) cos(gamma) over the gamma cells
+    lo, hi = edges[:-1], edges[1:]
+    cos_hi, cos_lo = np.cos(np.minimum(hi, np.pi / 2)), np.cos(np.minimum(lo, np.pi / 2))
+    want = e.flux / np.pi * 0.5 * (cos_lo**2 - cos_hi**2) / (np.cos(lo) - np.cos(hi))
+    sigma = got.sigma[0] * math.sqrt(1.0 + photons / rays)  # photons and the ray set's noise
+    live = sigma > 0
+    z = (got.candela[0] - want)[live] / sigma[live]
+    assert np.abs(z).max() < 5.0, z
+    assert np.all(got.candela[0][g > np.radians(92.5)] == 0)  # nothing goes up
+
+
+def test_the_light_prims_frame_turns_the_rays(tmp_path):
+    _lambertian_led(tmp_path / "led.TM25RAY", n=20_000)
+    scene = read_stage(_stage(tmp_path, "./led.TM25RAY", turn=0.0))
+    r = run(scene, TraceSettings(photons=20_000, resolution=8, seed=1))
+    up = measure(r.accumulator, GAMMAS, 15.0, "rotational").candela[0]
+    assert up[GAMMAS < 87.5].sum() == 0 and up[GAMMAS > 92.5].sum() > 0
+
+
+def test_flux_and_errors(tmp_path):
+    _lambertian_led(tmp_path / "w.TM25RAY", n=1000, photometric=False)
+    with pytest.raises(StageError) as info:
+        read_stage(_stage(tmp_path, "./w.TM25RAY"))
+    assert "radiant flux only" in str(info.value) and "luminousFlux" in str(info.value)
+    (e,) = read_stage(_stage(tmp_path, "./w.TM25RAY", flux=350.0, name="given")).emitters
+    assert e.flux == 350.0
+    with pytest.raises(StageError) as info:
+        read_stage(_stage(tmp_path, "./nowhere.TM25RAY", name="missing"))
+    assert "nowhere.TM25RAY" in str(info.value) and "lumitrace:rayFile" in str(info.value)
