@@ -185,6 +185,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run batches in worker processes (each alone in its process, as "
                         "the bare-Embree reference runs) or threads")
     b.add_argument("--json", action="store_true", help="print one JSON object")
+
+    y = sub.add_parser("rays", help="write the luminaire's exit rays as an IES TM-25 ray file",
+                       description="Trace photons through the luminaire and write every "
+                                   "escaping one as a ray (where it leaves the luminaire's box, "
+                                   "mm, its direction and flux, in the luminaire's frame): the "
+                                   "luminaire as a near-field source for optics tools, or for "
+                                   "a light's lumitrace:rayFile.")
+    y.add_argument("stage", type=Path)
+    y.add_argument("--photons", type=_positive_int, default=1_000_000,
+                   help="photons to trace (default 1e6): the rays are those that escape")
+    y.add_argument("--seed", type=int, default=0)
+    y.add_argument("--out", type=Path, default=None,
+                   help="the ray file (default NAME.TM25RAY beside the stage)")
+    y.add_argument("--max-rays", type=_positive_int, default=None,
+                   help="refuse more photons than this (default 20e6: 560 MB)")
+    y.add_argument("--luminaire", default=None, help="the luminaire prim (default: defaultPrim)")
     return p
 
 
@@ -340,6 +356,19 @@ def cmd_trace(args) -> int:
         raise LumitraceError(f"the outputs were written, but the summary could not be "
                              f"printed: {exc.strerror or exc}", "standard output") from None
     return NOT_CONVERGED_EXIT if missed else 0
+
+
+def cmd_rays(args) -> int:
+    from .filenames import stage_name
+    from .publish.rays import MAX_RAYS, write_exit_rays
+    from .stage.reader import read_stage
+
+    scene = read_stage(args.stage, args.luminaire)
+    out = args.out or args.stage.with_name(f"{stage_name(args.stage)}.TM25RAY")
+    rays = write_exit_rays(out, scene, args.photons, args.seed, args.max_rays or MAX_RAYS)
+    print(f"{out}: {len(rays):,} rays, {rays.flux.astype(float).sum():.6g} lm "
+          f"(of {args.photons:,} photons)")
+    return 0
 
 
 def cmd_check(args) -> int:
@@ -574,6 +603,8 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
             return cmd_edits(args)
         if args.command == "check":
             return cmd_check(args)
+        if args.command == "rays":
+            return cmd_rays(args)
     except LumitraceError as exc:
         print(f"lumitrace: error: {exc}", file=sys.stderr)
         return 2

@@ -35,6 +35,7 @@ class BatchTally:
     rays: list | None = None
     records: object | None = None  # the photons' PhotonRecords, when asked for
     part_hits: np.ndarray | None = None  # surface hits per part (Scene.parts order)
+    exit_rays: tuple | None = None  # (positions, directions) of the escapes, when asked for
 
     @property
     def escaped(self) -> int:

@@ -355,7 +355,8 @@ def _box_exit(q, e, lo, hi):
 @numba.njit(**_INLINE)
 def _gonio_exit(qx, qy, qz, x, y, z, axes, lo, hi, side, n_cells):
     """The exit bin (offset by ``n_cells``) where the ray from world point ``q`` (m) along
-    ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi`` in photometric axes)."""
+    ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi`` in photometric axes),
+    and the distance (m) to where it leaves it."""
     q = (axes[0, 0] * qx + axes[0, 1] * qy + axes[0, 2] * qz,
          axes[1, 0] * qx + axes[1, 1] * qy + axes[1, 2] * qz,
          axes[2, 0] * qx + axes[2, 1] * qy + axes[2, 2] * qz)
@@ -376,7 +377,7 @@ def _gonio_exit(qx, qy, qz, x, y, z, axes, lo, hi, side, n_cells):
     vv = (min(max(q[va] + t * e[va], lo[va]), hi[va]) - lo[va]) / max(hi[va] - lo[va], 1e-12)
     col = min(int(uu * side), side - 1)
     row = min(int(vv * side), side - 1)
-    return n_cells + (face * side + row) * side + col
+    return n_cells + (face * side + row) * side + col, t
 
 
 @numba.njit(**_JIT)
@@ -389,7 +390,7 @@ def gonio_bins(p, d, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, si
     for i in range(n):
         cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], axes, extra_edges, 1.0 / c_step,
                               1.0 / g_step, n_c, n_gamma)
-        ex[i] = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], axes, lo,
+        ex[i], _ = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], axes, lo,
                             hi, side, n_c * n_gamma)
     return cell, ex
 
@@ -428,14 +429,17 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
            ior, alpha, polarised, counts, res, layout, escaped, n_escaped, part_hits,
            center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, side,
            n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
-           rec_cells, part_bit, glo, ghi, gn, m0, m1, m2, epsilon, backoff, near_hit):
+           rec_cells, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
+           backoff, near_hit):
     """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
     (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
 
     Escapes are counted in ``counts`` (2, texels), their goniophotometer bins appended to
     ``escaped`` from ``n_escaped``; survivors are written compacted into ``o2`` .. ``pid2``
     and, as float32 rays, into ``o32``, ``d32``. With ``records`` each photon's record
-    (rows ``pid``) is updated. Returns (survivors, escaped bins, cut, absorbed).
+    (rows ``pid``) is updated; with ``exits`` each escape's ray where it leaves the
+    goniophotometer's box (world m) and its direction, at its row of ``exit_pos`` and
+    ``exit_dir``. Returns (survivors, escaped bins, cut, absorbed).
     """
     n_out, cut, absorbed = 0, 0, 0
     n_parts = part_hits.shape[0]
@@ -454,9 +458,13 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             counts[half, tex] += 1
             cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
                                n_c, n_gamma)
-            ex = _gonio_exit(ox * scale + center[0], oy * scale + center[1],
-                             oz * scale + center[2], dx, dy, dz, axes, lo, hi, side,
-                             n_c * n_gamma)
+            wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
+            ex, t_out = _gonio_exit(wx, wy, wz, dx, dy, dz, axes, lo, hi, side, n_c * n_gamma)
+            if exits:  # the exit ray: where it leaves the luminaire's box (world m)
+                exit_pos[row, 0] = wx + t_out * dx
+                exit_pos[row, 1] = wy + t_out * dy
+                exit_pos[row, 2] = wz + t_out * dz
+                exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = dx, dy, dz
             escaped[n_escaped] = cell + n_bins * half
             escaped[n_escaped + 1] = ex + n_bins * half
             n_escaped += 2

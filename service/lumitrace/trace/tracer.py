@@ -64,6 +64,7 @@ class _Waves:
 
 
 _NO_RECORDS = PhotonRecords.empty(0)
+_NO_EXITS = np.zeros((0, 3))
 #: The cube map's texel layout (:mod:`lumitrace.film.cubemap`) as the kernel takes it.
 _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cubemap._RX,
                          cubemap._RY])
@@ -71,14 +72,17 @@ _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cub
 
 
 def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
-                photons: np.ndarray | None = None, records: bool = False) -> BatchTally:
+                photons: np.ndarray | None = None, records: bool = False,
+                exit_rays: bool = False) -> BatchTally:
     """Trace the photons of ``job`` and tally them.
 
     ``photons`` (indices of the job's emitter) traces those photons instead of the job's
     range: an edit retraces exactly the photons it affects. With ``records`` the tally
     carries a :class:`~lumitrace.trace.records.PhotonRecords` per photon (in ``photons``
     order). With ``record_rays`` every traced ray (float32 origins, directions) is kept, for
-    the benchmark that replays the same rays through bare Embree.
+    the benchmark that replays the same rays through bare Embree. With ``exit_rays`` the
+    tally's ``exit_rays`` holds, for every photon that escaped, where it left the
+    luminaire's box (world m) and its direction, (M, 3) float64 each, in photon order.
     """
     e: Emitter = ps.scene.emitters[job.emitter]
     key = rng.stream_key(job.seed, e.key)
@@ -92,6 +96,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     w = _Waves.at_least(n)
     k = ps.kernel_args
     rec = PhotonRecords.empty(n) if records else None
+    exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
+    exit_dir = np.zeros((n, 3)) if exit_rays else _NO_EXITS
     r = rec if rec is not None else _NO_RECORDS
     cur = 0
     # emitted into the second set of buffers (free until the first bounce), then moved
@@ -129,7 +135,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, tally.counts, job.resolution,
             _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
             rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, *ps.grid_args,
-            RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
+            exit_rays, exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
         tally.cut += cut
         tally.absorbed += absorbed
         cur, n = nxt, n_next
@@ -140,6 +146,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         tally.cells = counts_of(w.escaped[:n_escaped].copy(), N_BINS)
     if rec is not None:
         tally.records = rec
+    if exit_rays:
+        out = ~np.isnan(exit_pos[:, 0])
+        tally.exit_rays = (exit_pos[out], exit_dir[out])
     return tally
 
 
