@@ -6,8 +6,9 @@ The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` an
 - ``LumitraceMaterialAPI`` on a UsdShade Material or a gprim: ``lumitrace:scattering``,
   ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
   ``lumitrace:ior``, ``lumitrace:roughness``;
-- ``LumitraceEmitterAPI`` on a UsdLux light: ``lumitrace:luminousFlux`` (lm) and
-  ``lumitrace:rayFile`` (a TM-25 ray file the light emits);
+- ``LumitraceEmitterAPI`` on a UsdLux light: ``lumitrace:luminousFlux`` (lm),
+  ``lumitrace:body`` (the light's surface is geometry too) and ``lumitrace:rayFile`` (a
+  TM-25 ray file the light emits);
 - ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``.
 
 Regenerate the generated files after editing ``schema.usda`` with::
@@ -84,6 +85,7 @@ IOR_EXCLUSIVE_MIN = 0.0
 #: Luminous flux in lm; only an authored value counts, and it must be finite and > 0.
 LUMINOUS_FLUX = "lumitrace:luminousFlux"
 RAY_FILE = "lumitrace:rayFile"
+BODY = "lumitrace:body"
 
 # -- LumitraceLuminaireAPI and the result record ---------------------------------------
 RESULT_PREFIX = "lumitrace:result:"

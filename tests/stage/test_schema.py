@@ -42,7 +42,7 @@ def test_material_api_properties_and_fallbacks():
 def test_emitter_and_luminaire_api_properties():
     registry = Usd.SchemaRegistry()
     emitter = registry.FindAppliedAPIPrimDefinition(schema.EMITTER_API)
-    assert emitter.GetPropertyNames() == [schema.LUMINOUS_FLUX, schema.RAY_FILE]
+    assert emitter.GetPropertyNames() == [schema.BODY, schema.LUMINOUS_FLUX, schema.RAY_FILE]
     assert (emitter.GetSchemaAttributeSpec(schema.LUMINOUS_FLUX).typeName
             == Sdf.ValueTypeNames.Float)
     assert (emitter.GetSchemaAttributeSpec(schema.RAY_FILE).typeName

@@ -266,6 +266,55 @@ def _shaping(prim: Usd.Prim, kind: str, time: Usd.TimeCode, warn: Callable[[str]
     return angle, softness, focus, None
 
 
+#: Segments round a light body's disk, sphere or cylinder.
+BODY_SEGMENTS = 64
+
+
+def has_body(prim: Usd.Prim, time: Usd.TimeCode) -> bool:
+    """Whether the light's own surface is geometry too (``lumitrace:body``)."""
+    attr = prim.GetAttribute(schema.BODY)
+    return bool(attr and attr.HasAuthoredValue() and attr.Get(time))
+
+
+def body_triangles(kind: str, dims: dict) -> np.ndarray:
+    """The surface (T, 3, 3) of a light of ``kind`` with sizes ``dims``, local units, front
+    faces toward where it emits: a disk or rect in its XY plane facing -Z, a sphere, a
+    cylinder along X with its caps (a closed package). The polygons are inscribed: every
+    emitted photon starts on or outside them."""
+    n = BODY_SEGMENTS
+    phi = 2.0 * np.pi * np.arange(n) / n
+    ring = np.c_[np.cos(phi), np.sin(phi)]
+    if kind == "disk":
+        r = dims["radius"]
+        p = np.c_[r * ring, np.zeros(n)]
+        return np.stack([np.zeros((n, 3)), np.roll(p, -1, axis=0), p], axis=1)
+    if kind == "rect":
+        w, h = 0.5 * dims["width"], 0.5 * dims["height"]
+        c = np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+        return np.stack([c[[0, 2, 1]], c[[0, 3, 2]]])
+    if kind == "sphere":
+        r = dims["radius"]
+        theta = np.pi * np.arange(n // 2 + 1) / (n // 2)
+        v = np.stack([np.sin(theta)[:, None] * ring[None, :, 0],
+                      np.sin(theta)[:, None] * ring[None, :, 1],
+                      np.repeat(np.cos(theta)[:, None], n, axis=1)], axis=-1) * r
+        a, b = v[:-1], v[1:]
+        a1, b1 = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+        tri = np.concatenate([np.stack([a, b, b1], 2), np.stack([a, b1, a1], 2)])
+        tri = tri.reshape(-1, 3, 3)
+        area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        return tri[area > 1e-12 * r * r]  # the poles' degenerate triangles
+    r, half = dims["radius"], 0.5 * dims["length"]
+    yz = r * ring
+    left = np.c_[np.full(n, -half), yz]
+    right = np.c_[np.full(n, half), yz]
+    l1, r1 = np.roll(left, -1, axis=0), np.roll(right, -1, axis=0)
+    side = np.concatenate([np.stack([left, l1, r1], 1), np.stack([left, r1, right], 1)])
+    caps = np.concatenate([np.stack([np.tile([-half, 0, 0], (n, 1)), l1, left], 1),
+                           np.stack([np.tile([half, 0, 0], (n, 1)), right, r1], 1)])
+    return np.concatenate([side, caps])
+
+
 def _ray_file(prim: Usd.Prim, time: Usd.TimeCode) -> str | None:
     """The TM-25 ray file a light emits (``lumitrace:rayFile``), resolved beside the layer
     that authors it, or None."""

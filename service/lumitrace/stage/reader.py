@@ -56,7 +56,7 @@ from ..scene import Emitter, Scene
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
-from .lights import light_kind, read_light, read_mesh_light
+from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
 from .materials import BoundMaterials
 from .representation import is_stand_in_light, modelled_luminaire
 from .timing import read_time, requested_time, scene_time_code
@@ -277,8 +277,11 @@ class _Reader:
                 it.PruneChildren()
                 continue
             if kind is not None:
-                self.emitters.extend(read_light(prim, kind, frame, self.xf,
-                                                self.meters_per_unit, self._warn))
+                emitters = read_light(prim, kind, frame, self.xf, self.meters_per_unit,
+                                      self._warn)
+                self.emitters.extend(emitters)
+                if has_body(prim, self.time):
+                    self._light_body(prim, kind, emitters)
                 continue
             if prim.HasAPI(UsdLux.LightAPI) and not prim.IsA(UsdGeom.Gprim):
                 self._warn(f"{prim.GetPath()}: {prim.GetTypeName() or 'light'} is not "
@@ -380,6 +383,26 @@ class _Reader:
             self.triangles.append(world[keep])
             self.material_index.append(local.material_index[keep])
             self.part_index.append(np.full(int(np.count_nonzero(keep)), part, dtype=np.int32))
+
+    def _light_body(self, prim: Usd.Prim, kind: str, emitters: list[Emitter]) -> None:
+        """The light's own surface as a part of the material bound to the light, at each of
+        its placements (``lumitrace:body``)."""
+        e = emitters[0] if emitters else None
+        if e is None or (kind == "sphere" and (e.treat_as_point or e.radius == 0.0)):
+            self._warn(f"{prim.GetPath()}.{schema.BODY}: a point light has no body: ignored")
+            return
+        dims = {"radius": e.radius, "width": e.width, "height": e.height, "length": e.length}
+        local = body_triangles(kind, dims).reshape(-1, 3)
+        material = self.materials.material_for(prim, prim)
+        part = self.parts.setdefault(str(prim.GetPath()), len(self.parts))
+        for em in emitters:
+            m = np.asarray(em.to_world, np.float64)  # local units to world m
+            world = (local @ m[:3, :3].T + m[:3, 3]).reshape(-1, 3, 3)
+            if np.linalg.det(m[:3, :3]) < 0.0:
+                world = world[:, [0, 2, 1]]
+            self.triangles.append(world)
+            self.material_index.append(np.full(len(world), material, np.int32))
+            self.part_index.append(np.full(len(world), part, np.int32))
 
     def _warn(self, message: str) -> None:
         self.warnings.setdefault(message, None)
