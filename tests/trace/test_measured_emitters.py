@@ -52,13 +52,13 @@ def _cell_means(profile, sub=96):
     return (v * w[None, :, None, :]).sum(axis=(2, 3)) / (w.sum(axis=1)[None, :] * sub)
 
 
-def _assert_reproduces(scene, profile, photons=1_000_000, seed=3):
+def _assert_reproduces(scene, profile, photons=1_000_000, seed=3, sub=96):
     """Photon counts per cell against the profile's expected counts (Poisson): the scaled
     deviations of well-filled cells have zero mean and unit variance, no cell is far off."""
     r = run(scene, TraceSettings(photons=photons, resolution=16, seed=seed))
     got = measure(r.accumulator, GAMMAS, C_STEP).full()
     omega = cell_solid_angle_grid(GAMMAS, C_STEP)
-    want = _cell_means(profile)
+    want = _cell_means(profile, sub)
     per_photon = FLUX / photons
     lam = want * omega * (photons / float((want * omega).sum()))  # the light's flux, shaped
     n = np.round(got.candela * omega / per_photon)
@@ -111,6 +111,29 @@ def test_an_asymmetric_profile_keeps_c0_toward_the_lights_local_x(tmp_path):
     turned = _assert_reproduces(_free_space(ies, to_world=turn),
                                 lambda c, g: asymmetric(c - 90.0, g), seed=4)
     assert abs(_c_phase(turned) - 90.0) < 2.0
+
+
+def test_an_eulumdat_profile_is_read_by_its_extension(tmp_path):
+    from lumitrace.photometry.eulumdat import write_ldt
+
+    g = np.arange(0.0, 180.0 + 1e-9, 2.5)
+    planes = np.arange(0.0, 360.0, 15.0)
+    grid = CGammaGrid(planes, g, asymmetric(planes[:, None], g[None, :]), "none")
+    dims = {k: 10.0 for k in ("length", "width", "height", "lum_length", "lum_width",
+                              "lum_height")}
+    path = write_ldt(tmp_path / "a.ldt", grid, FLUX, "test", dims, 0.9, 1.0)
+
+    def file_profile(c, gamma):  # what the file holds: linear between planes and angles
+        c, gamma = np.broadcast_arrays(np.mod(c, 360.0), gamma)
+        per_plane = np.stack([np.interp(gamma, g, row) for row in grid.candela])
+        pos = c / 15.0
+        i0 = np.floor(pos).astype(int) % len(planes)
+        t = pos - np.floor(pos)
+        at = lambda i: np.take_along_axis(per_plane, i[None], axis=0)[0]  # noqa: E731
+        return (1 - t) * at(i0) + t * at((i0 + 1) % len(planes))
+
+    _assert_reproduces(_free_space(IesShaping(str(path))), file_profile, photons=400_000,
+                       sub=24)
 
 
 def test_a_disc_light_emits_its_profile_upward_too(tmp_path):
