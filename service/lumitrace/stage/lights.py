@@ -110,16 +110,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         raise StageError("light has no luminous flux: author lumitrace:luminousFlux (lm) "
                          "or inputs:intensity", path)
     else:
-        intensity = validate.check_non_negative(light.GetIntensityAttr().Get(time),
-                                                path, "inputs:intensity")
-        exposure = validate.check_finite(light.GetExposureAttr().Get(time), path,
-                                         "inputs:exposure")
-        color = check_array(light.GetColorAttr().Get(time), path, "inputs:color",
-                            width=3).ravel()
-        if color.size != 3 or not np.isfinite(color).all() or (color < 0).any():
-            raise StageError(f"must be finite and >= 0, got {tuple(color)}", path,
-                             "inputs:color")
-        normalize = bool(light.GetNormalizeAttr().Get(time))
+        intensity, exposure, color, normalize = _intensity_inputs(light, time, path)
         fraction = shaping_fraction(kind, cone_angle, cone_softness, focus)
         if ies is not None and not ies.normalize:
             warn(f"{path}.inputs:shaping:ies:normalize: an IES profile that is not "
@@ -161,6 +152,19 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
     return emitters
 
 
+def _intensity_inputs(light: UsdLux.LightAPI, time: Usd.TimeCode, path: str
+                      ) -> tuple[float, float, np.ndarray, bool]:
+    """A light's UsdLux intensity, exposure, colour and normalize, checked."""
+    intensity = validate.check_non_negative(light.GetIntensityAttr().Get(time), path,
+                                            "inputs:intensity")
+    exposure = validate.check_finite(light.GetExposureAttr().Get(time), path,
+                                     "inputs:exposure")
+    color = check_array(light.GetColorAttr().Get(time), path, "inputs:color", width=3).ravel()
+    if color.size != 3 or not np.isfinite(color).all() or (color < 0).any():
+        raise StageError(f"must be finite and >= 0, got {tuple(color)}", path, "inputs:color")
+    return intensity, exposure, color, bool(light.GetNormalizeAttr().Get(time))
+
+
 def read_mesh_light(prim: Usd.Prim, placed: list[np.ndarray], time: Usd.TimeCode,
                     warn: Callable[[str], None]) -> list[Emitter]:
     """The emitters of a gprim with UsdLux MeshLightAPI (or the older GeometryLight's
@@ -183,14 +187,8 @@ def read_mesh_light(prim: Usd.Prim, placed: list[np.ndarray], time: Usd.TimeCode
             flux = validate.check_luminous_flux(flux_attr.Get(time), path,
                                                 schema.LUMINOUS_FLUX)
         elif light.GetIntensityAttr().HasAuthoredValue():
-            intensity = validate.check_non_negative(light.GetIntensityAttr().Get(time),
-                                                    path, "inputs:intensity")
-            exposure = validate.check_finite(light.GetExposureAttr().Get(time), path,
-                                             "inputs:exposure")
-            color = check_array(light.GetColorAttr().Get(time), path, "inputs:color",
-                                width=3).ravel()
-            flux = light_flux("mesh", intensity, exposure, color,
-                              bool(light.GetNormalizeAttr().Get(time)), area,
+            intensity, exposure, color, normalize = _intensity_inputs(light, time, path)
+            flux = light_flux("mesh", intensity, exposure, color, normalize, area,
                               2.0 if two_sided else 1.0)
             if not (math.isfinite(flux) and 0.0 < flux <= validate.MAX_LUMINOUS_FLUX):
                 raise StageError(f"mesh light emits no usable flux ({flux:g} lm)", path,

@@ -22,19 +22,15 @@ import numpy as np
 
 from ..scene import DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT
 from .records import CUT
+from .rng import _INV32, _LOW32, _M1, _M2, _S32, _S33, GOLDEN
 
 _JIT = dict(nogil=True, cache=True, error_model="numpy")
 _INLINE = _JIT  # small helpers: LLVM inlines them
 
-# --- counter-based random numbers (bit-identical to :mod:`lumitrace.trace.rng`) ----------
-_M1 = np.uint64(0xFF51AFD7ED558CCD)
-_M2 = np.uint64(0xC4CEB9FE1A85EC53)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_S33 = np.uint64(33)
-_S32 = np.uint64(32)
-_LOW32 = np.uint64(0xFFFFFFFF)
+# --- counter-based random numbers (bit-identical to :mod:`lumitrace.trace.rng`, whose
+# constants they are: fixed for good, as every stored map depends on them) --------------
+_GOLDEN = np.uint64(GOLDEN)
 _ONE = np.uint64(1)
-_INV32 = 1.0 / 4294967296.0
 
 
 

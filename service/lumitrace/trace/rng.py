@@ -15,6 +15,8 @@ _S33 = np.uint64(33)
 _S32 = np.uint64(32)
 _LOW32 = np.uint64(0xFFFFFFFF)
 _INV32 = 1.0 / 4294967296.0
+#: The 64-bit golden-ratio increment that spreads seeds and counters.
+GOLDEN = 0x9E3779B97F4A7C15
 
 #: Random dimensions each bounce may use (pairs of 32-bit uniforms per hash).
 DIMS_PER_BOUNCE = 4
@@ -31,7 +33,7 @@ def fmix64(k: np.ndarray) -> np.ndarray:
 
 def stream_key(seed: int, emitter_key: int) -> np.uint64:
     """The 64-bit key of one emitter's photon stream under one seed."""
-    a = np.array([(seed * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF], dtype=np.uint64)
+    a = np.array([(seed * GOLDEN) & 0xFFFFFFFFFFFFFFFF], dtype=np.uint64)
     b = np.array([emitter_key & 0xFFFFFFFFFFFFFFFF], dtype=np.uint64)
     return fmix64(fmix64(a) ^ b)[0]
 
@@ -54,7 +56,7 @@ def uniforms_from(base: np.ndarray, counter: int, count: int = 2) -> list[np.nda
     """:func:`uniforms` from the photons' :func:`photon_hash` values (kept along the path)."""
     out: list[np.ndarray] = []
     for j in range((count + 1) // 2):
-        c = np.uint64(((counter + j + 1) * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF)
+        c = np.uint64(((counter + j + 1) * GOLDEN) & 0xFFFFFFFFFFFFFFFF)
         h = fmix64(base + c)
         out.append((h >> _S32).astype(np.float64) * _INV32)
         if len(out) < count:
