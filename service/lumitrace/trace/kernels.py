@@ -275,9 +275,10 @@ def scatter_many(kind, refl, spec, trans, ior, alpha, material, d, n, u0, u1, u2
 # --- binning of escapes ---------------------------------------------------------------------
 
 @numba.njit(**_INLINE)
-def _texel(x, y, z, res, c0, cx, cy, r0, rx, ry):
+def _texel(x, y, z, res, layout):
     """Cube-map texel of direction (x, y, z), as :func:`lumitrace.film.cubemap.texel_index`
-    (ImfEnvmap's face choice and pixel positions, nearest pixel)."""
+    (ImfEnvmap's face choice and pixel positions, nearest pixel); ``layout`` holds the rows
+    c0, cx, cy, r0, rx, ry of its pixel placement per face."""
     ax, ay, az = abs(x), abs(y), abs(z)
     if ax >= ay and ax >= az:
         major, a, b, face = x, y, z, 0
@@ -298,8 +299,8 @@ def _texel(x, y, z, res, c0, cx, cy, r0, rx, ry):
         pb = min(max(pb, 0.0), float(s))
     ia = min(max(int(math.floor(pa + 0.5)), 0), res - 1)
     ib = min(max(int(math.floor(pb + 0.5)), 0), res - 1)
-    col = s * c0[face] + cx[face] * ia + cy[face] * ib
-    row = face * res + s * r0[face] + rx[face] * ia + ry[face] * ib
+    col = s * layout[0, face] + layout[1, face] * ia + layout[2, face] * ib
+    row = face * res + s * layout[3, face] + layout[4, face] * ia + layout[5, face] * ib
     return row * res + col
 
 
@@ -309,8 +310,7 @@ def texels(d, res, layout):
     c0, cx, cy, r0, rx, ry of :mod:`lumitrace.film.cubemap`."""
     out = np.empty(d.shape[1], np.int64)
     for i in range(d.shape[1]):
-        out[i] = _texel(d[0, i], d[1, i], d[2, i], res, layout[0], layout[1], layout[2],
-                        layout[3], layout[4], layout[5])
+        out[i] = _texel(d[0, i], d[1, i], d[2, i], res, layout)
     return out
 
 
@@ -449,8 +449,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
         tri = prim[i]
         if tri < 0:  # escaped: binned, in the half its hash's lowest bit picks
             half = int(h & _ONE)
-            tex = _texel(dx, dy, dz, res, layout[0], layout[1], layout[2], layout[3],
-                         layout[4], layout[5])
+            tex = _texel(dx, dy, dz, res, layout)
             counts[half, tex] += 1
             cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
                                n_c, n_gamma)

@@ -1,0 +1,730 @@
+"""The compiled per-bounce photon work: scattering, offsets, binning and compaction in one
+pass over a wave of Embree hits, without the GIL.
+
+Between two Embree calls a photon needs a few hundred floating-point operations; done as
+numpy array passes that cost more than the intersection itself (temporaries, gathers,
+page faults). Here each photon of a wave is handled once, in a loop compiled by numba:
+an escape is binned into the cube map, the goniophotometer's cell and exit bin (and the
+photon's record, when kept); a hit is offset, scattered by its material's model and, if
+it survives, written compacted into the next wave's buffers, float32 rays included.
+
+Everything jitted lives in this one module: numba's on-disk cache is keyed by the file
+of each entry point, so a helper in another file could change without its callers being
+recompiled. Per photon the arithmetic is scalar float64, the same for any wave size,
+batch size or thread, so maps stay bit-identical across them.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..scene import DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT
+from .records import CUT
+from .rng import _INV32, _LOW32, _M1, _M2, _S32, _S33, GOLDEN
+
+_JIT = dict(nogil=True, cache=False, error_model="numpy")
+_INLINE = _JIT  # small helpers: LLVM inlines them
+
+# --- counter-based random numbers (bit-identical to :mod:`lumitrace.trace.rng`, whose
+# constants they are: fixed for good, as every stored map depends on them) --------------
+_GOLDEN = np.uint64(GOLDEN)
+_ONE = np.uint64(1)
+
+
+
+
+@numba.njit(**_INLINE)
+def _fmix64(k):
+    k = k ^ (k >> _S33)
+    k = k * _M1
+    k = k ^ (k >> _S33)
+    k = k * _M2
+    return k ^ (k >> _S33)
+
+
+@numba.njit(**_INLINE)
+def _uniform_pair(base, counter):
+    """Two uniforms in [0, 1) of draw ``counter`` of the photon with hash ``base``."""
+    h = _fmix64(base + numba.uint64(counter + 1) * _GOLDEN)
+    return float(h >> _S32) * _INV32, float(h & _LOW32) * _INV32
+
+
+# --- scalar vector helpers ----------------------------------------------------------------
+
+@numba.njit(**_INLINE)
+def _dot(ax, ay, az, bx, by, bz):
+    return ax * bx + ay * by + az * bz
+
+
+@numba.njit(**_INLINE)
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@numba.njit(**_INLINE)
+def _turn(u):
+    """cos and sin of the angle 2 pi ``u``, ``u`` in [0, 1): one libm call (the sine from
+    the cosine, its sign from the half turn), as precise as a direction needs."""
+    c = math.cos(2.0 * math.pi * u)
+    s = math.sqrt(max(0.0, 1.0 - c * c))
+    return c, (s if u <= 0.5 else -s)
+
+
+@numba.njit(**_INLINE)
+def _basis(nx, ny, nz):
+    """Two unit tangents completing unit ``n`` to a right-handed frame (Duff et al. 2017)."""
+    sign = math.copysign(1.0, nz)
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    return (1.0 + sign * nx * nx * a, sign * b, -sign * nx), (b, sign + ny * ny * a, -ny)
+
+
+@numba.njit(**_INLINE)
+def _cosine_about(nx, ny, nz, u1, u2):
+    """A cosine-weighted direction about unit ``n`` (pdf cos / pi per sr)."""
+    t, b = _basis(nx, ny, nz)
+    st = math.sqrt(u1)
+    c, s = _turn(u2)
+    c, s = st * c, st * s
+    ct = math.sqrt(1.0 - u1)
+    return (c * t[0] + s * b[0] + ct * nx, c * t[1] + s * b[1] + ct * ny,
+            c * t[2] + s * b[2] + ct * nz)
+
+
+@numba.njit(**_INLINE)
+def _reflect(dx, dy, dz, nx, ny, nz):
+    k = 2.0 * _dot(dx, dy, dz, nx, ny, nz)
+    return dx - k * nx, dy - k * ny, dz - k * nz
+
+
+@numba.njit(**_INLINE)
+def _random_polarisation(dx, dy, dz, u):
+    """Unpolarised light: a uniformly random unit direction across ``d``."""
+    t, b = _basis(dx, dy, dz)
+    c, s = _turn(0.5 * u)
+    return c * t[0] + s * b[0], c * t[1] + s * b[1], c * t[2] + s * b[2]
+
+
+@numba.njit(**_INLINE)
+def _s_p(dx, dy, dz, nx, ny, nz, px, py, pz):
+    """The s direction of the plane of incidence of ``d`` on ``n`` and the (s, p)
+    components of the polarisation ``p`` (at normal incidence s is along ``p``)."""
+    sx, sy, sz = _cross(dx, dy, dz, nx, ny, nz)
+    ls = math.sqrt(_dot(sx, sy, sz, sx, sy, sz))
+    if ls > 1e-12:
+        sx, sy, sz = sx / ls, sy / ls, sz / ls
+    else:
+        sx, sy, sz = px, py, pz
+    qx, qy, qz = _cross(sx, sy, sz, dx, dy, dz)
+    return sx, sy, sz, _dot(px, py, pz, sx, sy, sz), _dot(px, py, pz, qx, qy, qz)
+
+
+@numba.njit(**_INLINE)
+def _polarise(sx, sy, sz, c, sn, amp_s, amp_p, ox, oy, oz, fx, fy, fz):
+    """The polarisation of a wave leaving along ``o`` with s and p amplitudes."""
+    qx, qy, qz = _cross(sx, sy, sz, ox, oy, oz)
+    a, b = amp_s * c, amp_p * sn
+    ex, ey, ez = a * sx + b * qx, a * sy + b * qy, a * sz + b * qz
+    le = math.sqrt(_dot(ex, ey, ez, ex, ey, ez))
+    if le > 1e-12:
+        return ex / le, ey / le, ez / le
+    return fx, fy, fz
+
+
+@numba.njit(**_INLINE)
+def _metal_polarisation(dx, dy, dz, nx, ny, nz, px, py, pz, ox, oy, oz):
+    """The polarisation after an ideal metallic reflection (r_s = -1, r_p = 1) about ``n``."""
+    sx, sy, sz, c, sn = _s_p(dx, dy, dz, nx, ny, nz, px, py, pz)
+    return _polarise(sx, sy, sz, c, sn, -1.0, 1.0, ox, oy, oz, px, py, pz)
+
+
+@numba.njit(**_INLINE)
+def _fresnel(cos_i, eta):
+    """Fresnel amplitudes (r_s, r_p, t_s, t_p) and cos(theta_t) for ``eta = n1 / n2``."""
+    sin2_t = eta * eta * max(0.0, 1.0 - cos_i * cos_i)
+    if sin2_t >= 1.0:
+        return -1.0, 1.0, 0.0, 0.0, 0.0
+    cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
+    a = eta * cos_i
+    b = eta * cos_t
+    return ((a - cos_t) / (a + cos_t), (cos_i - b) / (cos_i + b), 2.0 * a / (a + cos_t),
+            2.0 * a / (cos_i + b), cos_t)
+
+
+@numba.njit(**_INLINE)
+def _smith_g1(cos_theta, alpha):
+    if not cos_theta > 0.0:
+        return 0.0
+    c2 = min(max(cos_theta * cos_theta, 1e-300), 1.0)
+    return 2.0 / (1.0 + math.sqrt(1.0 + alpha * alpha * (1.0 - c2) / c2))
+
+
+@numba.njit(**_INLINE)
+def _ggx_visible_normal(wx, wy, wz, alpha, u1, u2):
+    """A GGX microfacet normal (local frame, z up) drawn from the normals visible from
+    ``w`` (Heitz 2018, "Sampling the GGX distribution of visible normals")."""
+    vx, vy, vz = alpha * wx, alpha * wy, wz
+    lv = math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / lv, vy / lv, vz / lv
+    lensq = vx * vx + vy * vy
+    if lensq > 0.0:
+        inv = 1.0 / math.sqrt(lensq)
+        t1x, t1y = -vy * inv, vx * inv
+    else:
+        t1x, t1y = 1.0, 0.0
+    t2x, t2y, t2z = _cross(vx, vy, vz, t1x, t1y, 0.0)
+    r = math.sqrt(u1)
+    cphi, sphi = _turn(u2)
+    p1 = r * cphi
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * r * sphi
+    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nx = p1 * t1x + p2 * t2x + p3 * vx
+    ny = p1 * t1y + p2 * t2y + p3 * vy
+    nz = p2 * t2z + p3 * vz
+    ex, ey, ez = alpha * nx, alpha * ny, max(nz, 1e-12)
+    le = math.sqrt(ex * ex + ey * ey + ez * ez)
+    return ex / le, ey / le, ez / le
+
+
+@numba.njit(**_JIT)
+def scatter_one(kind, refl, spec, trans, ior, alpha, dx, dy, dz, nx, ny, nz,
+                u0, u1, u2, u3, polarised, px, py, pz):
+    """One photon arriving along ``d`` at a surface of scattering model ``kind`` with unit
+    geometric normal ``n`` (front = counter-clockwise): (survives, new direction, new
+    polarisation). ``p`` is its polarisation (x NaN: unpolarised), used when ``polarised``.
+    Analog: a photon survives with the probability of the material's albedo."""
+    cos_d = _dot(dx, dy, dz, nx, ny, nz)
+    front = cos_d < 0.0
+    fx, fy, fz = (nx, ny, nz) if front else (-nx, -ny, -nz)  # normal on the photon's side
+    nan = math.nan
+    if kind == DIFFUSE:
+        ox, oy, oz = _cosine_about(fx, fy, fz, u1, u2)
+        return u0 < refl, ox, oy, oz, nan, 0.0, 0.0
+    if kind == TRANSLUCENT:
+        if u0 < refl:
+            ox, oy, oz = _cosine_about(fx, fy, fz, u1, u2)
+        else:
+            ox, oy, oz = _cosine_about(-fx, -fy, -fz, u1, u2)
+        return u0 < refl + trans, ox, oy, oz, nan, 0.0, 0.0
+    if kind == MIRROR:
+        ox, oy, oz = _reflect(dx, dy, dz, nx, ny, nz)
+        if polarised:
+            if math.isnan(px):
+                px, py, pz = _random_polarisation(dx, dy, dz, u3)
+            px, py, pz = _metal_polarisation(dx, dy, dz, nx, ny, nz, px, py, pz, ox, oy, oz)
+        return u0 < spec, ox, oy, oz, px, py, pz
+    if kind == GLOSSY:
+        t, b = _basis(fx, fy, fz)
+        wx = -_dot(dx, dy, dz, t[0], t[1], t[2])
+        wy = -_dot(dx, dy, dz, b[0], b[1], b[2])
+        wz = max(-_dot(dx, dy, dz, fx, fy, fz), 1e-9)
+        hx, hy, hz = _ggx_visible_normal(wx, wy, wz, alpha, u1, u2)
+        k = 2.0 * (wx * hx + wy * hy + wz * hz)
+        lx, ly, lz = k * hx - wx, k * hy - wy, k * hz - wz
+        ox = lx * t[0] + ly * b[0] + lz * fx
+        oy = lx * t[1] + ly * b[1] + lz * fy
+        oz = lx * t[2] + ly * b[2] + lz * fz
+        if polarised:
+            if math.isnan(px):
+                px, py, pz = _random_polarisation(dx, dy, dz, u3)
+            mx = hx * t[0] + hy * b[0] + hz * fx
+            my = hx * t[1] + hy * b[1] + hz * fy
+            mz = hx * t[2] + hy * b[2] + hz * fz
+            px, py, pz = _metal_polarisation(dx, dy, dz, mx, my, mz, px, py, pz, ox, oy, oz)
+        return (u0 < spec * _smith_g1(lz, alpha)) and lz > 0.0, ox, oy, oz, px, py, pz
+    if kind == DIELECTRIC:
+        eta = 1.0 / ior if front else ior
+        cos_i = abs(cos_d)
+        rs, rp, ts, tp, cos_t = _fresnel(cos_i, eta)
+        if not polarised or math.isnan(px):
+            px, py, pz = _random_polarisation(dx, dy, dz, u3)
+        sx, sy, sz, c, sn = _s_p(dx, dy, dz, fx, fy, fz, px, py, pz)
+        if u0 < rs * rs * c * c + rp * rp * sn * sn:
+            ox, oy, oz = _reflect(dx, dy, dz, fx, fy, fz)
+            a_s, a_p = rs, rp
+        else:
+            k = eta * cos_i - cos_t
+            ox, oy, oz = eta * dx + k * fx, eta * dy + k * fy, eta * dz + k * fz
+            a_s, a_p = ts, tp
+        px, py, pz = _polarise(sx, sy, sz, c, sn, a_s, a_p, ox, oy, oz, px, py, pz)
+        return True, ox, oy, oz, px, py, pz
+    return False, dx, dy, dz, px, py, pz  # ABSORBER
+
+
+@numba.njit(**_JIT)
+def scatter_many(kind, refl, spec, trans, ior, alpha, material, d, n, u0, u1, u2, u3,
+                 pol, polarised, d_out, pol_out, alive):
+    """:func:`scatter_one` over photons (3, N) of materials ``material`` (N,), into
+    ``d_out``, ``pol_out`` (3, N) and ``alive`` (N,): the tracer's scattering, for tests."""
+    for i in range(d.shape[1]):
+        m = material[i]
+        px = pol[0, i] if polarised else math.nan
+        py = pol[1, i] if polarised else 0.0
+        pz = pol[2, i] if polarised else 0.0
+        ok, ox, oy, oz, qx, qy, qz = scatter_one(
+            kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], d[0, i], d[1, i], d[2, i],
+            n[0, i], n[1, i], n[2, i], u0[i], u1[i], u2[i], u3[i], polarised, px, py, pz)
+        alive[i] = ok
+        d_out[0, i], d_out[1, i], d_out[2, i] = ox, oy, oz
+        pol_out[0, i], pol_out[1, i], pol_out[2, i] = qx, qy, qz
+
+
+# --- binning of escapes ---------------------------------------------------------------------
+
+@numba.njit(**_INLINE)
+def _texel(x, y, z, res, layout):
+    """Cube-map texel of direction (x, y, z), as :func:`lumitrace.film.cubemap.texel_index`
+    (ImfEnvmap's face choice and pixel positions, nearest pixel); ``layout`` holds the rows
+    c0, cx, cy, r0, rx, ry of its pixel placement per face."""
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax >= ay and ax >= az:
+        major, a, b, face = x, y, z, 0
+    elif ay < az:
+        major, a, b, face = z, x, y, 4
+    else:
+        major, a, b, face = y, x, z, 2
+    if major <= 0.0:
+        face += 1
+    amax = abs(major)
+    s = res - 1
+    if amax == 0.0:
+        face, pa, pb = 0, 0.0, 0.0
+    else:
+        pa = (a / amax + 1.0) * (0.5 * s)
+        pb = (b / amax + 1.0) * (0.5 * s)
+        pa = min(max(pa, 0.0), float(s))
+        pb = min(max(pb, 0.0), float(s))
+    ia = min(max(int(math.floor(pa + 0.5)), 0), res - 1)
+    ib = min(max(int(math.floor(pb + 0.5)), 0), res - 1)
+    col = s * layout[0, face] + layout[1, face] * ia + layout[2, face] * ib
+    row = face * res + s * layout[3, face] + layout[4, face] * ia + layout[5, face] * ib
+    return row * res + col
+
+
+@numba.njit(**_JIT)
+def texels(d, res, layout):
+    """Cube-map texels (N,) of directions ``d`` (3, N); ``layout`` is (6, 6) int64 rows
+    c0, cx, cy, r0, rx, ry of :mod:`lumitrace.film.cubemap`."""
+    out = np.empty(d.shape[1], np.int64)
+    for i in range(d.shape[1]):
+        out[i] = _texel(d[0, i], d[1, i], d[2, i], res, layout)
+    return out
+
+
+@numba.njit(**_INLINE)
+def _gonio_cell(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma):
+    """The goniophotometer's C-gamma cell of world direction (x, y, z)."""
+    px = axes[0, 0] * x + axes[0, 1] * y + axes[0, 2] * z
+    py = axes[1, 0] * x + axes[1, 1] * y + axes[1, 2] * z
+    pz = axes[2, 0] * x + axes[2, 1] * y + axes[2, 2] * z
+    gamma = math.degrees(math.acos(min(max(-pz, -1.0), 1.0)))
+    g = int(gamma * g_scale)
+    for e in extra_edges:
+        if gamma >= e:
+            g += 1
+    c = math.degrees(math.atan2(py, px))
+    if c < 0.0:
+        c += 360.0
+    return min(int(c * c_scale), n_c - 1) * n_gamma + min(g, n_gamma - 1)
+
+
+@numba.njit(**_INLINE)
+def _box_exit(q, e, lo, hi):
+    """The axis (0, 1, 2) across which the ray from ``q`` along ``e`` (3-tuples) leaves
+    the box ``lo``..``hi`` (first on ties) and the distance to it (0 if behind)."""
+    best, axis = math.inf, 0
+    for k in range(3):
+        if e[k] > 0.0:
+            t = (hi[k] - q[k]) / e[k]
+        elif e[k] < 0.0:
+            t = (lo[k] - q[k]) / e[k]
+        else:
+            t = math.inf
+        if t < best:
+            best, axis = t, k
+    return axis, max(best, 0.0)
+
+
+@numba.njit(**_INLINE)
+def _gonio_exit(qx, qy, qz, x, y, z, axes, lo, hi, side, n_cells):
+    """The exit bin (offset by ``n_cells``) where the ray from world point ``q`` (m) along
+    ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi`` in photometric axes),
+    and the distance (m) to where it leaves it."""
+    q = (axes[0, 0] * qx + axes[0, 1] * qy + axes[0, 2] * qz,
+         axes[1, 0] * qx + axes[1, 1] * qy + axes[1, 2] * qz,
+         axes[2, 0] * qx + axes[2, 1] * qy + axes[2, 2] * qz)
+    e = (axes[0, 0] * x + axes[0, 1] * y + axes[0, 2] * z,
+         axes[1, 0] * x + axes[1, 1] * y + axes[1, 2] * z,
+         axes[2, 0] * x + axes[2, 1] * y + axes[2, 2] * z)
+    axis, t = _box_exit(q, e, lo, hi)
+    # in-face axes: C0 faces (axis 0) use (C90, up), C90 faces (C0, up), up faces (C0, C90)
+    if axis == 0:
+        ua, va, face = 1, 2, 2
+    elif axis == 1:
+        ua, va, face = 0, 2, 4
+    else:
+        ua, va, face = 0, 1, 0
+    if e[axis] > 0.0:
+        face += 1
+    uu = (min(max(q[ua] + t * e[ua], lo[ua]), hi[ua]) - lo[ua]) / max(hi[ua] - lo[ua], 1e-12)
+    vv = (min(max(q[va] + t * e[va], lo[va]), hi[va]) - lo[va]) / max(hi[va] - lo[va], 1e-12)
+    col = min(int(uu * side), side - 1)
+    row = min(int(vv * side), side - 1)
+    return n_cells + (face * side + row) * side + col, t
+
+
+@numba.njit(**_JIT)
+def gonio_bins(p, d, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, side):
+    """The goniophotometer's cells and exit bins (N,) of rays from ``p`` (3, N, world m)
+    along unit ``d`` (3, N)."""
+    n = d.shape[1]
+    cell = np.empty(n, np.int64)
+    ex = np.empty(n, np.int64)
+    for i in range(n):
+        cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], axes, extra_edges, 1.0 / c_step,
+                              1.0 / g_step, n_c, n_gamma)
+        ex[i], _ = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], axes, lo,
+                            hi, side, n_c * n_gamma)
+    return cell, ex
+
+
+# --- per-photon records' cell masks -------------------------------------------------------
+
+@numba.njit(**_INLINE)
+def _grid_index(x, lo, hi, n):
+    return min(max(int(math.floor((x - lo) / (hi - lo) * n)), 0), n - 1)
+
+
+@numba.njit(**_INLINE)
+def _segment_mask(ax, ay, az, bx, by, bz, glo, ghi, gn, m0, m1, m2):
+    """The cells of the record grid that the box of segment a -> b overlaps."""
+    i0 = _grid_index(min(ax, bx), glo[0], ghi[0], gn[0])
+    j0 = _grid_index(max(ax, bx), glo[0], ghi[0], gn[0])
+    i1 = _grid_index(min(ay, by), glo[1], ghi[1], gn[1])
+    j1 = _grid_index(max(ay, by), glo[1], ghi[1], gn[1])
+    i2 = _grid_index(min(az, bz), glo[2], ghi[2], gn[2])
+    j2 = _grid_index(max(az, bz), glo[2], ghi[2], gn[2])
+    return m0[i0, j0] & m1[i1, j1] & m2[i2, j2]
+
+
+@numba.njit(**_INLINE)
+def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
+    """Where the ray from o along d leaves the record grid's box."""
+    _, t = _box_exit((ox, oy, oz), (dx, dy, dz), glo, ghi)
+    return ox + t * dx, oy + t * dy, oz + t * dz
+
+
+# --- one bounce of a wave -------------------------------------------------------------------
+
+@numba.njit(**_JIT)
+def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
+           o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
+           ior, alpha, polarised, counts, res, layout, escaped, n_escaped, part_hits,
+           center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, side,
+           n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
+           rec_cells, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
+           backoff, near_hit):
+    """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
+    (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
+
+    Escapes are counted in ``counts`` (2, texels), their goniophotometer bins appended to
+    ``escaped`` from ``n_escaped``; survivors are written compacted into ``o2`` .. ``pid2``
+    and, as float32 rays, into ``o32``, ``d32``. With ``records`` each photon's record
+    (rows ``pid``) is updated; with ``exits`` each escape's ray where it leaves the
+    goniophotometer's box (world m) and its direction, at its row of ``exit_pos`` and
+    ``exit_dir``. Returns (survivors, escaped bins, cut, absorbed).
+    """
+    n_out, cut, absorbed = 0, 0, 0
+    n_parts = part_hits.shape[0]
+    for i in range(prim.shape[0]):
+        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        h = base[i]
+        row = pid[i]
+        if records and rec_segments[row] < 65535:
+            rec_segments[row] += 1
+        tri = prim[i]
+        if tri < 0:  # escaped: binned, in the half its hash's lowest bit picks
+            half = int(h & _ONE)
+            tex = _texel(dx, dy, dz, res, layout)
+            counts[half, tex] += 1
+            cell = 0
+            wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
+            ex, t_out = _gonio_exit(wx, wy, wz, dx, dy, dz, axes, lo, hi, side, n_c * n_gamma)
+            if exits:  # the exit ray: where it leaves the luminaire's box (world m)
+                exit_pos[row, 0] = wx + t_out * dx
+                exit_pos[row, 1] = wy + t_out * dy
+                exit_pos[row, 2] = wz + t_out * dz
+                exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = dx, dy, dz
+            escaped[n_escaped] = cell + n_bins * half
+            escaped[n_escaped + 1] = ex + n_bins * half
+            n_escaped += 2
+            if records:
+                rec_texel[row] = tex
+                rec_cell[row] = cell
+                rec_exit[row] = ex - n_c * n_gamma
+                qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
+                rec_cells[row] |= _segment_mask(ox, oy, oz, qx, qy, qz, glo, ghi, gn,
+                                                m0, m1, m2)
+            continue
+        if n_parts:
+            part_hits[part_index[tri]] += 1
+        # Embree's float32 tfar can put the hit a few ulps beyond the surface, behind an
+        # adjoining face near an edge: back up along the ray (never beyond the origin)
+        t = float(tfar[i])
+        t = t - min(backoff, 0.5 * t)
+        px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+        nx, ny, nz = normals[tri, 0], normals[tri, 1], normals[tri, 2]
+        if records:
+            rec_parts[row] |= part_bit[tri]
+            rec_cells[row] |= _segment_mask(ox, oy, oz, px, py, pz, glo, ghi, gn, m0, m1, m2)
+        if depth == last:
+            cut += 1
+            if records:
+                rec_texel[row] = CUT
+            continue
+        cos_in = _dot(dx, dy, dz, nx, ny, nz)
+        stay = False
+        if float(tfar[i]) * abs(cos_in) < near_hit:
+            # a hit at about the origin, on a face the float64 origin lies in front of while
+            # the ray moves away from it, is float32 rounding: the photon goes on unchanged
+            rx = ox - corners[tri, 0]
+            ry = oy - corners[tri, 1]
+            rz = oz - corners[tri, 2]
+            stay = _dot(rx, ry, rz, nx, ny, nz) * cos_in > 0.0
+        qx = pol[i, 0] if polarised else math.nan
+        qy = pol[i, 1] if polarised else 0.0
+        qz = pol[i, 2] if polarised else 0.0
+        if stay:
+            alive = True
+        else:
+            m = material_index[tri]
+            counter = (depth + 1) * 4
+            u0, u1 = _uniform_pair(h, counter)
+            u2, u3 = _uniform_pair(h, counter + 1)
+            alive, dx, dy, dz, qx, qy, qz = scatter_one(
+                kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
+                nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
+        if not alive:
+            absorbed += 1
+            continue
+        side_sign = _dot(dx, dy, dz, nx, ny, nz)
+        k = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
+        px, py, pz = px + k * nx, py + k * ny, pz + k * nz
+        o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
+        d2[n_out, 0], d2[n_out, 1], d2[n_out, 2] = dx, dy, dz
+        o32[n_out, 0], o32[n_out, 1], o32[n_out, 2] = px, py, pz
+        d32[n_out, 0], d32[n_out, 1], d32[n_out, 2] = dx, dy, dz
+        if polarised:
+            pol2[n_out, 0], pol2[n_out, 1], pol2[n_out, 2] = qx, qy, qz
+        base2[n_out] = h
+        pid2[n_out] = row
+        n_out += 1
+    return n_out, n_escaped, cut, absorbed
+
+
+@numba.njit(**_JIT)
+def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
+    """Emitted photons into the first wave: origins moved into the normalised frame and
+    off the emitting surface along its normal ``n`` (3, N), float32 rays beside them."""
+    for i in range(p.shape[1]):
+        for k in range(3):
+            x = (p[k, i] - center[k]) / scale + epsilon * n[k, i]
+            o[i, k] = x
+            d_out[i, k] = d[k, i]
+            o32[i, k] = x
+            d32[i, k] = d[k, i]
+
+
+
+# --- emission -------------------------------------------------------------------------------
+
+#: Emitter shapes as :func:`emit_photons` takes them.
+DISK, RECT, SPHERE, CYLINDER, MESH, RAYS = 0, 1, 2, 3, 4, 5
+
+
+@numba.njit(**_INLINE)
+def _to_world(lx, ly, lz, nx, ny, nz):
+    """Local (z along unit ``n``) to world."""
+    t, b = _basis(nx, ny, nz)
+    return (lx * t[0] + ly * b[0] + lz * nx, lx * t[1] + ly * b[1] + lz * ny,
+            lx * t[2] + ly * b[2] + lz * nz)
+
+
+@numba.njit(**_INLINE)
+def _cosine_local(u1, u2):
+    st = math.sqrt(u1)
+    c, s = _turn(u2)
+    return st * c, st * s, math.sqrt(max(0.0, 1.0 - u1))
+
+
+@numba.njit(**_INLINE)
+def _profile_local(u1, u2, theta_tab, cdf):
+    """A direction about +z drawn from a tabulated profile (inverse CDF, linear in theta)."""
+    j = np.searchsorted(cdf, u1, side="right") - 1
+    j = min(max(j, 0), cdf.shape[0] - 2)
+    w = cdf[j + 1] - cdf[j]
+    f = (u1 - cdf[j]) / w if w > 0.0 else 0.0
+    theta = theta_tab[j] + min(max(f, 0.0), 1.0) * (theta_tab[j + 1] - theta_tab[j])
+    st = math.sin(theta)
+    c, s = _turn(u2)
+    return st * c, st * s, math.cos(theta)
+
+
+@numba.njit(**_INLINE)
+def _measured_local(u1, u2, c_cdf, gamma_cdf, cos_edges, c_step):
+    """A direction in a light's frame drawn from a measured profile's table (see
+    :mod:`lumitrace.trace.profiles`): gamma from local -Z, C from local +X toward +Y."""
+    m = c_cdf.shape[0] - 1
+    j = min(max(np.searchsorted(c_cdf, u1, side="right") - 1, 0), m - 1)
+    w = c_cdf[j + 1] - c_cdf[j]
+    f = min(max((u1 - c_cdf[j]) / w, 0.0), 1.0) if w > 0.0 else 0.5
+    row = gamma_cdf[j]
+    n = row.shape[0] - 1
+    k = min(max(np.searchsorted(row, u2, side="right") - 1, 0), n - 1)
+    w2 = row[k + 1] - row[k]
+    f2 = min(max((u2 - row[k]) / w2, 0.0), 1.0) if w2 > 0.0 else 0.5
+    cg = cos_edges[k] + f2 * (cos_edges[k + 1] - cos_edges[k])  # uniform in solid angle
+    sg = math.sqrt(max(0.0, 1.0 - cg * cg))
+    c = (j + f) * c_step
+    return sg * math.cos(c), sg * math.sin(c), -cg
+
+
+@numba.njit(**_INLINE)
+def _unit(x, y, z):
+    n = math.sqrt(x * x + y * y + z * z)
+    return x / n, y / n, z / n
+
+
+@numba.njit(**_INLINE)
+def _apply(m, x, y, z):
+    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z, m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
+            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
+
+
+@numba.njit(**_JIT)
+def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
+                 cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, ray_cdf,
+                 ray_pos, ray_dir, lin, offset, normal_map, key, index, p, d, n, base):
+    """Photons ``index`` of one light: start points ``p`` (world m), unit directions ``d``
+    and the emitting surface's unit normals ``n`` (3, N; world), and the photons' hashes
+    ``base``. ``size`` is (radius, width, height, length) in the light's units; ``lin``,
+    ``offset`` its world transform, ``normal_map`` the normals' (inverse transpose).
+    ``shaped``: the UsdLux cone and focus table; ``measured``: a measured profile's table,
+    which is the light's whole distribution (a disk or rect then emits on both sides).
+    A mesh light picks a triangle by area (``mesh_cdf``), a point uniform on it and, if
+    ``two_sided``, a side, from its first two numbers; a ray-file light picks one of its
+    rays (start points ``ray_pos``, directions ``ray_dir``, local) by flux (``ray_cdf``)."""
+    ax, ay, az = _unit(*_apply(normal_map, 0.0, 0.0, -1.0))
+    for i in range(index.shape[0]):
+        h = _fmix64(numba.uint64(index[i]) ^ key)
+        base[i] = h
+        u1, u2 = _uniform_pair(h, 0)
+        u3, u4 = _uniform_pair(h, 1)
+        if shape == DISK or shape == RECT:
+            if shape == DISK:
+                r = size[0] * math.sqrt(u1)
+                c, s = _turn(u2)
+                x, y, z = r * c, r * s, 0.0
+            else:
+                x, y, z = (u1 - 0.5) * size[1], (u2 - 0.5) * size[2], 0.0
+            if measured:
+                dx, dy, dz = _unit(*_apply(lin, *_measured_local(u3, u4, c_cdf, gamma_cdf,
+                                                                 cos_edges, c_step)))
+                side = 1.0 if dx * ax + dy * ay + dz * az >= 0.0 else -1.0
+                nx, ny, nz = side * ax, side * ay, side * az
+            else:
+                if shaped:
+                    lx, ly, lz = _profile_local(u3, u4, theta_tab, cdf)
+                else:
+                    lx, ly, lz = _cosine_local(u3, u4)
+                dx, dy, dz = _to_world(lx, ly, lz, ax, ay, az)
+                nx, ny, nz = ax, ay, az
+        elif shape == SPHERE:
+            if measured:
+                wx, wy, wz = _measured_local(u1, u2, c_cdf, gamma_cdf, cos_edges, c_step)
+            elif shaped:
+                wx, wy, wz = _profile_local(u1, u2, theta_tab, cdf)
+                wy, wz = -wy, -wz  # about the light's -Z
+            else:
+                ct = 1.0 - 2.0 * u1
+                st = math.sqrt(max(0.0, 1.0 - ct * ct))
+                c, s = _turn(u2)
+                wx, wy, wz = st * c, st * s, ct
+            dx, dy, dz = _unit(*_apply(lin, wx, wy, wz))
+            if point:
+                x, y, z = 0.0, 0.0, 0.0
+                nx, ny, nz = dx, dy, dz
+            else:
+                lx, ly, lz = _cosine_local(u3, u4)
+                x, y, z = _to_world(lx, ly, lz, wx, wy, wz)
+                x, y, z = size[0] * x, size[0] * y, size[0] * z
+                nx, ny, nz = _unit(*_apply(normal_map, x, y, z))
+        elif shape == MESH:
+            m = mesh_cdf.shape[0] - 1
+            t = min(max(np.searchsorted(mesh_cdf, u1, side="right") - 1, 0), m - 1)
+            w = mesh_cdf[t + 1] - mesh_cdf[t]
+            f = min(max((u1 - mesh_cdf[t]) / w, 0.0), 1.0) if w > 0.0 else 0.5
+            side = 1.0
+            if two_sided:
+                f, side = (2.0 * f, 1.0) if f < 0.5 else (2.0 * f - 1.0, -1.0)
+            a = math.sqrt(f)
+            b0, b1, b2 = 1.0 - a, a * (1.0 - u2), a * u2  # uniform on the triangle
+            x = b0 * mesh_tris[t, 0, 0] + b1 * mesh_tris[t, 1, 0] + b2 * mesh_tris[t, 2, 0]
+            y = b0 * mesh_tris[t, 0, 1] + b1 * mesh_tris[t, 1, 1] + b2 * mesh_tris[t, 2, 1]
+            z = b0 * mesh_tris[t, 0, 2] + b1 * mesh_tris[t, 1, 2] + b2 * mesh_tris[t, 2, 2]
+            nx, ny, nz = _apply(normal_map, side * mesh_normals[t, 0], side * mesh_normals[t, 1],
+                                side * mesh_normals[t, 2])
+            nx, ny, nz = _unit(nx, ny, nz)
+            lx, ly, lz = _cosine_local(u3, u4)
+            dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
+        elif shape == RAYS:
+            m = ray_cdf.shape[0] - 1
+            t = min(max(np.searchsorted(ray_cdf, u1, side="right") - 1, 0), m - 1)
+            x, y, z = ray_pos[t, 0], ray_pos[t, 1], ray_pos[t, 2]
+            dx, dy, dz = _unit(*_apply(lin, ray_dir[t, 0], ray_dir[t, 1], ray_dir[t, 2]))
+            nx, ny, nz = dx, dy, dz  # offset along the ray
+        else:  # CYLINDER: its side, not its caps
+            c, s = _turn(u2)
+            x, y, z = (u1 - 0.5) * size[3], size[0] * c, size[0] * s
+            nx, ny, nz = _unit(*_apply(normal_map, 0.0, c, s))
+            lx, ly, lz = _cosine_local(u3, u4)
+            dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
+        wx, wy, wz = _apply(lin, x, y, z)
+        p[0, i], p[1, i], p[2, i] = wx + offset[0], wy + offset[1], wz + offset[2]
+        d[0, i], d[1, i], d[2, i] = dx, dy, dz
+        n[0, i], n[1, i], n[2, i] = nx, ny, nz
+
+
+@numba.njit(**_JIT)
+def cull(n, o, d, base, pid, o32, d32, lo, hi):
+    """Put the first ``n`` rays (o, d: (N, 3), normalised frame) that can meet the box
+    ``lo``..``hi`` (the geometry's bounds, with a margin) first, the rest after them, moving
+    their hashes, rows and float32 rays along; return how many can meet it. A ray that
+    misses the box escapes without Embree."""
+    k = 0
+    for i in range(n):
+        t0, t1 = 0.0, math.inf
+        for a in range(3):
+            if d[i, a] != 0.0:
+                u = (lo[a] - o[i, a]) / d[i, a]
+                v = (hi[a] - o[i, a]) / d[i, a]
+                t0 = max(t0, min(u, v))
+                t1 = min(t1, max(u, v))
+            elif o[i, a] < lo[a] or o[i, a] > hi[a]:
+                t1 = -1.0
+        if t1 < t0:
+            continue
+        if i != k:
+            for a in range(3):
+                o[i, a], o[k, a] = o[k, a], o[i, a]
+                d[i, a], d[k, a] = d[k, a], d[i, a]
+                o32[i, a], o32[k, a] = o32[k, a], o32[i, a]
+                d32[i, a], d32[k, a] = d32[k, a], d32[i, a]
+            base[i], base[k] = base[k], base[i]
+            pid[i], pid[k] = pid[k], pid[i]
+        k += 1
+    return k
