@@ -91,6 +91,43 @@ def test_an_edit_saved_on_disk_is_a_revision_and_our_own_writes_are_not(stage):
         assert r["photons"] == 40_000
 
 
+def _ies(path, half_angle):
+    """A rotational IES profile: 1000 cd within ``half_angle`` of the axis, 0 beyond."""
+    from lumitrace.photometry.grid import CGammaGrid
+    from lumitrace.photometry.lm63 import format_ies
+
+    g = np.arange(0.0, 180.0 + 1e-9, 0.5)
+    cd = np.where(g <= half_angle, 1000.0, 0.0)[None, :]
+    path.write_text(format_ies(CGammaGrid(np.array([0.0]), g, cd, "rotational"), 1000.0,
+                               0.0, 0.0, 0.0, {}))
+
+
+def test_a_lights_ies_file_saved_on_disk_is_a_revision(stage):
+    """The files lights read (IES profiles, ray files) are watched like the layers: a new
+    profile retraces that light."""
+    _ies(stage.parent / "led.ies", 60.0)
+    stage.write_text(stage.read_text().replace(
+        'prepend apiSchemas = ["LumitraceEmitterAPI"]\n    )\n    {\n        float inputs:height',
+        'prepend apiSchemas = ["LumitraceEmitterAPI", "ShapingAPI"]\n    )\n    {\n'
+        '        asset inputs:shaping:ies:file = @./led.ies@\n        float inputs:height'))
+    assert "led.ies" in stage.read_text()
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        wide = s.client.results()
+        _ies(stage.parent / "led.ies", 10.0)
+        s.wait_status(lambda st: st["revision"] == 1)
+        revision = [e for e in _events(s, {"revision"}) if e.data["revision"] == 1][0]
+        assert revision.data["source"] == "file"
+        assert revision.data["effect"]["kind"] == "emitter"
+        assert revision.data["layers"] == [str(stage.parent / "led.ies")]
+        s.wait_done(1)
+        narrow = s.client.results()
+        # a new light: a new scene hash and the light's photons traced again (behind the
+        # opal diffuser the beam's shape shows in the light output ratio, not the peak)
+        assert narrow["input_hash"] != wide["input_hash"] and narrow["photons"] == 40_000
+        assert narrow["escaped_lm"] != wide["escaped_lm"]
+
+
 def test_a_half_written_layer_is_retried_and_a_broken_one_reported(stage):
     good = stage.read_text()
     with Service(stage, *FAST) as s:

@@ -72,6 +72,7 @@ class IesShaping:
     file: str
     angle_scale: float = 0.0
     normalize: bool = False
+    stamp: str = ""  # the file's size and modification time when read: a new file, a new light
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,7 @@ class Emitter:
     #: the light's local units per millimetre (the file's unit)
     rays: str | None = None
     ray_scale: float = 1.0
+    rays_stamp: str = ""  # the ray file's size and modification time when read
     ray_extent: tuple = ()  # half extents (3,) of the rays' start points, local units
 
     @property

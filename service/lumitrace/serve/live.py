@@ -109,12 +109,18 @@ class LiveStage:
         files.add(self.edits_path)
         return files
 
+    def asset_files(self) -> set[Path]:
+        """Files the scene's lights read besides the layers: IES profiles, ray files."""
+        return {Path(f).absolute() for e in self.scene.emitters
+                for f in ((e.ies.file,) if e.ies is not None else ()) + (
+                    (e.rays,) if e.rays is not None else ())}
+
     def _remember_files(self) -> None:
-        self.known = {p: file_digest(p) for p in self.layer_files()}
+        self.known = {p: file_digest(p) for p in self.layer_files() | self.asset_files()}
 
     def folders(self) -> set[Path]:
-        """The folders to watch (those of :meth:`layer_files`)."""
-        return {p.parent for p in self.layer_files()}
+        """The folders to watch (those of :meth:`layer_files` and :meth:`asset_files`)."""
+        return {p.parent for p in self.layer_files() | self.asset_files()}
 
     def start(self) -> Revision:
         """The revision the service starts from (the edits layer's last one)."""
@@ -145,6 +151,8 @@ class LiveStage:
         self.known[self.edits_path] = file_digest(self.edits_path)
         effect = classify(self.scene, scene, self.changes.take())
         self.scene, self.revision = scene, revision
+        for path in self.asset_files():  # a light's file a delta named: watched from now on
+            self.known.setdefault(path, file_digest(path))
         return Revision(revision, scene, effect, "delta")
 
     def reload(self, paths: set[Path]) -> Revision | None:
@@ -154,7 +162,7 @@ class LiveStage:
         for a file that cannot be read now, :class:`StageError` for a bad new scene."""
         files = self.layer_files()
         changed = []
-        for path in sorted({Path(p).absolute() for p in paths} & files):
+        for path in sorted({Path(p).absolute() for p in paths} & (files | self.asset_files())):
             digest = file_digest(path)
             if digest is not None and digest != self.known.get(path):
                 changed.append((path, digest))
@@ -162,6 +170,8 @@ class LiveStage:
             return None
         self.changes.take()
         for path, _ in changed:
+            if path not in files:  # a light's file: read again with the scene below
+                continue
             try:
                 validate.check_layer_file(path)
             except StageError as exc:
@@ -180,10 +190,10 @@ class LiveStage:
         if self.edits_path in {p for p, _ in changed}:
             self.revision = max(self.revision, revision_of(self.edits))
         scene = scene_from_stage(self.stage, self.luminaire)
-        self._remember_files()  # new sublayers or references are watched from now on
         effect = classify(self.scene, scene, self.changes.take())
         self.revision += 1
         self.scene = scene
+        self._remember_files()  # new sublayers, references or light files are watched now
         return Revision(self.revision, scene, effect, "file",
                         tuple(str(p) for p, _ in changed))
 

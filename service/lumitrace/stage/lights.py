@@ -146,7 +146,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         emitters.append(Emitter(
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
             cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, rays=rays,
-            ray_scale=0.001 / meters_per_unit,
+            ray_scale=0.001 / meters_per_unit, rays_stamp=file_stamp(rays) if rays else "",
             ray_extent=tuple(ray_extent * 0.001 / meters_per_unit) if rays else (),
             **dims, **extra))
     return emitters
@@ -313,6 +313,13 @@ def body_triangles(kind: str, dims: dict) -> np.ndarray:
     return np.concatenate([side, caps])
 
 
+def file_stamp(path: str) -> str:
+    """Size and modification time of a file a light reads (an IES profile, a ray file): a
+    light whose file changed is another light."""
+    st = os.stat(path)
+    return f"{st.st_size}:{st.st_mtime_ns}"
+
+
 def _ray_file(prim: Usd.Prim, time: Usd.TimeCode) -> str | None:
     """The TM-25 ray file a light emits (``lumitrace:rayFile``), resolved beside the layer
     that authors it, or None."""
@@ -347,7 +354,8 @@ def _ies_shaping(shaping: UsdLux.ShapingAPI, kind: str, time: Usd.TimeCode, path
         raise StageError(f"must be finite and > -1, got {scale:g}", path,
                          "inputs:shaping:ies:angleScale")
     return IesShaping(os.path.abspath(resolved), scale,
-                      bool(shaping.GetShapingIesNormalizeAttr().Get(time)))
+                      bool(shaping.GetShapingIesNormalizeAttr().Get(time)),
+                      file_stamp(resolved))
 
 
 def _cofactor(a: np.ndarray) -> np.ndarray:
