@@ -207,3 +207,19 @@ def test_result_layer_offers_an_ies_shaped_light_instead_of_the_emitters(tmp_pat
     assert flux == pytest.approx(written.luminous_flux, rel=1e-6)
     # the light emits along its -Z: down in this Z-up stage, like the IES nadir
     assert light.GetRadiusAttr().Get() > 0
+
+
+def test_a_lower_hemisphere_file_has_no_light_above_its_last_angle():
+    """A 0-90 deg file whose 90 deg value is not 0: nothing between 90 and 180 deg, and the
+    flux is the hemisphere's (the 90 deg sample covers up to 90 deg, not to 135)."""
+    from lumitrace.photometry.lm63 import parse_ies
+
+    g = np.arange(0.0, 90.0 + 1e-9, 2.5)
+    text = "\n".join(["IESNA:LM-63-2002", "TILT=NONE",
+                      f"1 -1 1 {len(g)} 1 1 2 0 0 0", "1 1 0",
+                      " ".join(f"{x:g}" for x in g), "0", " ".join(["100"] * len(g))])
+    grid = parse_ies(text).grid()
+    assert np.all(grid.at(np.array([0.0]))[0][grid.gamma > 90.01] == 0.0)
+    assert np.interp(100.0, grid.gamma, grid.candela[0]) == 0.0
+    assert grid.flux() == pytest.approx(2 * np.pi * 100.0 * (1 - np.cos(np.radians(90.0005))),
+                                        rel=1e-6)

@@ -26,6 +26,10 @@ FILE_GENERATION_SIMULATION = 1.0001
 _LINE = 240  # keep lines well inside the 256-character limit
 
 
+#: Gap (deg) between a partial file's outermost angle and the zeros beyond it.
+EDGE = 1e-3
+
+
 @dataclass
 class IESFile:
     """The content of an LM-63 file. ``candela`` is (len(horizontal), len(vertical)) cd,
@@ -55,12 +59,17 @@ class IESFile:
         if self.photometric_type != 1:
             raise LumitraceError(f"photometric type {self.photometric_type} is not type C")
         h, v, cd = self.horizontal, self.vertical, self.candela
+        # a file that covers part of the gammas has no light beyond them: zeros from a
+        # hair (EDGE) past its last angle, so that neither interpolation nor the zones
+        # between sample midpoints spread its outermost values over the rest
         if v[0] > 0.0:  # upper-hemisphere-only data: nothing below
-            v = np.insert(v, 0, 0.0)
-            cd = np.hstack([np.zeros((len(h), 1)), cd])
+            pre = [0.0] + ([v[0] - EDGE] if v[0] - EDGE > 0.0 else [])
+            v = np.concatenate([pre, v])
+            cd = np.hstack([np.zeros((len(h), len(pre))), cd])
         if v[-1] < 180.0:  # lower-hemisphere-only data: nothing above
-            v = np.append(v, 180.0)
-            cd = np.hstack([cd, np.zeros((len(h), 1))])
+            post = ([v[-1] + EDGE] if v[-1] + EDGE < 180.0 else []) + [180.0]
+            v = np.concatenate([v, post])
+            cd = np.hstack([cd, np.zeros((len(h), len(post)))])
         lo, hi = float(h[0]), float(h[-1])
         if len(h) == 1:
             sym = "rotational"
