@@ -79,6 +79,20 @@ def test_goniometer_cells_follow_their_edges(seed):
     assert np.array_equal(cell[clear], want[clear])
 
 
+def test_directions_exactly_on_c_axes_and_diagonals_take_the_cell_above():
+    """As atan2 puts them: C = 0, 45, ..., 315 deg exactly start their cells."""
+    s, z = 0.6, -0.8  # gamma = acos(0.8), well inside its gamma cell
+    h = s / np.sqrt(2.0)
+    local = np.array([[s, 0, z], [h, h, z], [0, s, z], [-h, h, z], [-s, 0, z], [-h, -h, z],
+                      [0, -s, z], [h, -h, z]]).T
+    cell, _ = kernels.gonio_bins(np.zeros_like(local), np.ascontiguousarray(local), np.eye(3),
+                                 np.full(3, -1.0), np.ones(3), gm.EXTRA_EDGES, gm.C_STEP,
+                                 gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA, gm.EXIT_SIDE)
+    g = np.searchsorted(gm.GAMMA_EDGES, np.degrees(np.arccos(0.8)), side="right") - 1
+    c = np.arange(8) * int(round(45.0 / gm.C_STEP))
+    assert np.array_equal(cell, c * gm.N_GAMMA + g)
+
+
 def _exits_by_definition(p, d, lo, hi):
     """Exit bins of rays from p along d (N, 3, photometric axes = world) from the box."""
     with np.errstate(divide="ignore"):
