@@ -153,3 +153,32 @@ def _quiet_warnings():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yield
+
+
+@pytest.mark.parametrize("kind", ["active", "move"])
+@pytest.mark.parametrize("part", PARTS)
+def test_photons_cut_by_the_depth_limit_are_retraced_when_their_last_part_changes(
+        tmp_path, kind, part):
+    """At a depth limit of 2 many photons are cut; removing or moving the part a cut photon
+    last met changes its fate, so its record holds that last segment too."""
+    import dataclasses
+
+    shallow = dataclasses.replace(SETTINGS, max_depth=2)
+    path = _luminaire(tmp_path / "lum.usda")
+    scene = read_stage(path)
+    frame = TracingFrame.of(scene)
+    r = Refinement(scene, shallow, records_cap=1 << 30)
+    _refine(r, prepare(scene, frame))
+    assert r.accumulator.emitters[0].cut > 1000
+    stage = Usd.Stage.Open(str(path))
+    _edit(stage, kind, part, 0.7)
+    stage.GetRootLayer().Save()
+    new = read_stage(path)
+    sel = select(r.records, r.scene, new, frame)
+    ps = prepare(new, frame)
+    retrace(r, new, sel, lambda work: [trace_batch(ps, j, photons=ids, records=True)
+                                       for j, ids in work], 4096)
+    fresh = run(new, shallow, frame=frame)
+    a, b = r.accumulator.emitters[0], fresh.accumulator.emitters[0]
+    assert (a.cut, a.absorbed) == (b.cut, b.absorbed)
+    assert np.array_equal(r.accumulator.counts(), fresh.accumulator.counts())
