@@ -52,6 +52,7 @@ from lumitrace.film.cubemap import texel_directions, texel_solid_angles  # noqa:
 from lumitrace.film.texel_quadrature import texel_integrals  # noqa: E402
 from lumitrace.photometry import frame  # noqa: E402
 from lumitrace.photometry.measured import cell_solid_angle_grid, grid_counts  # noqa: E402
+from lumitrace.report.convergence_report import crossing_time  # noqa: E402
 from lumitrace.report.references import expected_intensity, read_expectation  # noqa: E402
 from lumitrace.run.session import TraceSettings, run  # noqa: E402
 from lumitrace.stage.reader import read_stage  # noqa: E402
@@ -169,19 +170,6 @@ def rms(value: np.ndarray, ref: np.ndarray, ref_var: np.ndarray | None = None) -
     return math.sqrt(num / float((omega * ref**2).sum()))
 
 
-def _crossing(rows, key, level, axis):
-    """Where the error first falls to ``level``, interpolated in log-log between rows."""
-    prev = None
-    for r in rows:
-        if r[key] <= level:
-            if prev is None or prev[key] <= 0 or r[key] <= 0:
-                return float(r[axis])
-            f = (math.log(prev[key]) - math.log(level)) / (math.log(prev[key]) - math.log(r[key]))
-            return float(math.exp(math.log(prev[axis]) + f * (math.log(r[axis]) - math.log(prev[axis]))))
-        prev = r
-    return None
-
-
 class _Done(Exception):
     pass
 
@@ -232,8 +220,10 @@ def convergence(stage: Path, max_photons: int, resolution: int, seed: int = 1) -
     out = {"reference": source, "iterations": rows}
     for key in ("raw", "filtered"):
         for lv in LEVELS:
-            out[f"{key}_{lv:g}"] = {"photons": _crossing(rows, key, lv, "photons"),
-                                    "seconds": _crossing(rows, key, lv, "seconds")}
+            errors = [r[key] for r in rows]
+            out[f"{key}_{lv:g}"] = {
+                axis: crossing_time([r[axis] for r in rows], errors, lv)
+                for axis in ("photons", "seconds")}
     return out
 
 

@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 
 from lumitrace.report.metrics import psnr, ssim
-from lumitrace.report.convergence_report import ReportSettings, _crossing_time, run_report
+from lumitrace.report.convergence_report import ReportSettings, crossing_time, run_report
 from helpers.paths import ROOT
 
 
 
-def test_crossing_time_interpolates_in_log_log():
+def testcrossing_time_interpolates_in_log_log():
     t = [1.0, 4.0]
     e = [0.1, 0.025]  # error ~ t^-1
-    assert _crossing_time(t, e, 0.05) == pytest.approx(2.0)
-    assert _crossing_time(t, e, 0.2) == 1.0
-    assert _crossing_time(t, e, 0.01) is None
+    assert crossing_time(t, e, 0.05) == pytest.approx(2.0)
+    assert crossing_time(t, e, 0.2) == 1.0
+    assert crossing_time(t, e, 0.01) is None
 
 
 def test_psnr_and_ssim_of_identical_and_noisy_maps():

@@ -81,7 +81,7 @@ class ReportSettings:
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
 
 
-def _crossing_time(times, errors, level) -> float | None:
+def crossing_time(times, errors, level) -> float | None:
     """First time the error falls to ``level``, interpolated in log-log between iterations."""
     for i, (t, e) in enumerate(zip(times, errors)):
         if e <= level:
@@ -145,7 +145,7 @@ def run_report(stage: str | os.PathLike, out_dir: str | os.PathLike,
         for t in settings.thresholds:
             key = f"{t:g}"
             errs = [r["true"][key] for r in rows]
-            crossings[key] = {f"{lv:g}": _crossing_time(times, errs, lv) for lv in ERROR_LEVELS}
+            crossings[key] = {f"{lv:g}": crossing_time(times, errs, lv) for lv in ERROR_LEVELS}
     speedups = {}
     for key, c in crossings.items():
         if key == "0":

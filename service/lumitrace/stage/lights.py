@@ -8,7 +8,7 @@ from dataclasses import fields
 from typing import Callable
 
 import numpy as np
-from pxr import Usd, UsdGeom, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
 from ..errors import StageError
@@ -104,12 +104,10 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
                 raise StageError("the ray file carries radiant flux only: author "
                                  "lumitrace:luminousFlux (lm)", path, schema.RAY_FILE)
             authored_flux = validate.check_luminous_flux(stated, path, schema.RAY_FILE)
-    if authored_flux is not None:
-        pass
-    elif not light.GetIntensityAttr().HasAuthoredValue():
-        raise StageError("light has no luminous flux: author lumitrace:luminousFlux (lm) "
-                         "or inputs:intensity", path)
-    else:
+    if authored_flux is None:
+        if not light.GetIntensityAttr().HasAuthoredValue():
+            raise StageError("light has no luminous flux: author lumitrace:luminousFlux "
+                             "(lm) or inputs:intensity", path)
         intensity, exposure, color, normalize = _intensity_inputs(light, time, path)
         fraction = shaping_fraction(kind, cone_angle, cone_softness, focus)
         if ies is not None and not ies.normalize:
@@ -327,10 +325,15 @@ def _ray_file(prim: Usd.Prim, time: Usd.TimeCode) -> str | None:
     asset = attr.Get(time) if attr and attr.HasAuthoredValue() else None
     if not asset or not asset.path:
         return None
+    return _existing_file(asset, "ray file", str(prim.GetPath()), schema.RAY_FILE)
+
+
+def _existing_file(asset: Sdf.AssetPath, what: str, path: str, prop: str) -> str:
+    """The absolute path of a file an attribute names, resolved beside the layer that
+    authors it; a StageError naming the attribute where there is no such file."""
     resolved = asset.resolvedPath
     if not resolved or not os.path.isfile(resolved):
-        raise StageError(f"ray file not found: {asset.path}", str(prim.GetPath()),
-                         schema.RAY_FILE)
+        raise StageError(f"{what} not found: {asset.path}", path, prop)
     return os.path.abspath(resolved)
 
 
@@ -345,15 +348,13 @@ def _ies_shaping(shaping: UsdLux.ShapingAPI, kind: str, time: Usd.TimeCode, path
     if kind == "cylinder":
         warn(f"{path}.{prop}: IES profiles on a CylinderLight are ignored")
         return None
-    resolved = asset.resolvedPath  # relative to the layer that authored it
-    if not resolved or not os.path.isfile(resolved):
-        raise StageError(f"IES profile not found: {asset.path}", path, prop)
+    resolved = _existing_file(asset, "IES profile", path, prop)
     scale_attr = shaping.GetShapingIesAngleScaleAttr()
     scale = float(scale_attr.Get(time)) if scale_attr.HasAuthoredValue() else 0.0
     if not (math.isfinite(scale) and scale > -1.0):
         raise StageError(f"must be finite and > -1, got {scale:g}", path,
                          "inputs:shaping:ies:angleScale")
-    return IesShaping(os.path.abspath(resolved), scale,
+    return IesShaping(resolved, scale,
                       bool(shaping.GetShapingIesNormalizeAttr().Get(time)),
                       file_stamp(resolved))
 

@@ -90,7 +90,7 @@ def emission_args(e: Emitter) -> tuple:
 
 
 def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,
-         out: tuple | None = None):
+         out: tuple | None = None, args: tuple | None = None):
     """Start points (3, N; world m) and unit directions (3, N; world) of photons ``index``.
 
     Uses the random dimensions of bounce 0, so photon i of an emitter always starts the same.
@@ -98,13 +98,14 @@ def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,
     points, on the side the photons leave (a point light's are its directions): the tracer
     offsets ray origins along them, so that a photon leaving at a grazing angle does not
     start inside a part the light touches. ``out`` is (p, d, n, hashes) to fill instead of
-    new arrays.
+    new arrays; ``args`` the light's :func:`emission_args`, when made already (a prepared
+    scene makes them once, not per batch).
     """
     index = np.asarray(index, dtype=np.int64)
     k = index.shape[0]
     p, d, n, h = out if out is not None else (np.empty((3, k)), np.empty((3, k)),
                                               np.empty((3, k)), np.empty(k, np.uint64))
-    kernels.emit_photons(*emission_args(e), np.uint64(key), index, p, d, n, h)
+    kernels.emit_photons(*(args or emission_args(e)), np.uint64(key), index, p, d, n, h)
     if normals:
         return p, d, n
     return p, d

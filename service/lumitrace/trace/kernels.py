@@ -82,15 +82,26 @@ def _basis(nx, ny, nz):
 
 
 @numba.njit(**_INLINE)
-def _cosine_about(nx, ny, nz, u1, u2):
-    """A cosine-weighted direction about unit ``n`` (pdf cos / pi per sr)."""
+def _to_world(lx, ly, lz, nx, ny, nz):
+    """Local (z along unit ``n``) to world."""
     t, b = _basis(nx, ny, nz)
+    return (lx * t[0] + ly * b[0] + lz * nx, lx * t[1] + ly * b[1] + lz * ny,
+            lx * t[2] + ly * b[2] + lz * nz)
+
+
+@numba.njit(**_INLINE)
+def _cosine_local(u1, u2):
+    """A cosine-weighted direction about +z (pdf cos / pi per sr)."""
     st = math.sqrt(u1)
     c, s = _turn(u2)
-    c, s = st * c, st * s
-    ct = math.sqrt(1.0 - u1)
-    return (c * t[0] + s * b[0] + ct * nx, c * t[1] + s * b[1] + ct * ny,
-            c * t[2] + s * b[2] + ct * nz)
+    return st * c, st * s, math.sqrt(max(0.0, 1.0 - u1))
+
+
+@numba.njit(**_INLINE)
+def _cosine_about(nx, ny, nz, u1, u2):
+    """A cosine-weighted direction about unit ``n`` (pdf cos / pi per sr)."""
+    lx, ly, lz = _cosine_local(u1, u2)
+    return _to_world(lx, ly, lz, nx, ny, nz)
 
 
 @numba.njit(**_INLINE)
@@ -545,21 +556,6 @@ def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
 
 #: Emitter shapes as :func:`emit_photons` takes them.
 DISK, RECT, SPHERE, CYLINDER, MESH, RAYS = 0, 1, 2, 3, 4, 5
-
-
-@numba.njit(**_INLINE)
-def _to_world(lx, ly, lz, nx, ny, nz):
-    """Local (z along unit ``n``) to world."""
-    t, b = _basis(nx, ny, nz)
-    return (lx * t[0] + ly * b[0] + lz * nx, lx * t[1] + ly * b[1] + lz * ny,
-            lx * t[2] + ly * b[2] + lz * nz)
-
-
-@numba.njit(**_INLINE)
-def _cosine_local(u1, u2):
-    st = math.sqrt(u1)
-    c, s = _turn(u2)
-    return st * c, st * s, math.sqrt(max(0.0, 1.0 - u1))
 
 
 @numba.njit(**_INLINE)

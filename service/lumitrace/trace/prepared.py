@@ -18,6 +18,7 @@ from ..scene import DIELECTRIC, Scene
 from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
 from .vectors import cross, dot
+from .emission import emission_args
 from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
@@ -95,6 +96,11 @@ class PreparedScene:
                 np.ascontiguousarray(part, np.int64), np.ascontiguousarray(t.kind, np.int64),
                 f64(t.reflectance), f64(t.specular), f64(t.transmittance), f64(t.ior),
                 f64(t.alpha), bool(self.polarised))
+
+    @cached_property
+    def emitter_args(self) -> list[tuple]:
+        """Every emitter as the emission kernel takes it (tables, transforms), made once."""
+        return [emission_args(e) for e in self.scene.emitters]
 
     @cached_property
     def reach_box(self) -> tuple[np.ndarray, np.ndarray]:

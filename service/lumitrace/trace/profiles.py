@@ -73,8 +73,8 @@ def _table(ies: IesShaping, _mtime_ns: int, _size: int) -> ProfileTable:
     if grid.symmetry == "rotational":
         n_c = 1
     else:
-        step = float(np.min(np.diff(np.unique(np.mod(grid.full().c, 360.0))))) \
-            if len(grid.full().c) > 1 else 360.0
+        planes = np.unique(np.mod(grid.full().c, 360.0))
+        step = float(np.min(np.diff(planes))) if len(planes) > 1 else 360.0
         n_c = int(math.ceil(360.0 / min(C_STEP_MAX, step / 4.0)))
     c_step = 360.0 / n_c
     n_g = int(round(180.0 / GAMMA_STEP))

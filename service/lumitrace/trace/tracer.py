@@ -104,7 +104,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     # into the normalised frame as the first wave
     p, d, n_emit = emit(e, key, idx, normals=True,
                         out=tuple(a.reshape(-1)[:3 * n].reshape(3, n)
-                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[cur][:n],))
+                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[cur][:n],),
+                        args=ps.emitter_args[job.emitter])
     kernels.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
                   w.o32, w.d32)
     w.pid[cur][:n] = np.arange(n)
