@@ -5,10 +5,13 @@ The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` an
 
 - ``LumitraceMaterialAPI`` on a UsdShade Material or a gprim: ``lumitrace:scattering``,
   ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
-  ``lumitrace:ior``, ``lumitrace:roughness``;
+  ``lumitrace:ior``, ``lumitrace:roughness``, their spectra
+  (``lumitrace:reflectanceSpectrum``, ``...specularSpectrum``, ``...transmittanceSpectrum``)
+  and a dielectric's ``lumitrace:abbeNumber``;
 - ``LumitraceEmitterAPI`` on a UsdLux light: ``lumitrace:luminousFlux`` (lm),
-  ``lumitrace:body`` (the light's surface is geometry too) and ``lumitrace:rayFile`` (a
-  TM-25 ray file the light emits);
+  ``lumitrace:body`` (the light's surface is geometry too), ``lumitrace:rayFile`` (a
+  TM-25 ray file the light emits) and its colour, ``lumitrace:spectrum`` or
+  ``lumitrace:illuminant``;
 - ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``.
 
 Regenerate the generated files after editing ``schema.usda`` with::
@@ -50,6 +53,14 @@ SPECULAR_REFLECTANCE = "lumitrace:specularReflectance"
 TRANSMITTANCE = "lumitrace:transmittance"
 IOR = "lumitrace:ior"
 ROUGHNESS = "lumitrace:roughness"
+#: Spectral material attributes ((nm, value) pairs) and a dielectric's dispersion.
+REFLECTANCE_SPECTRUM = "lumitrace:reflectanceSpectrum"
+SPECULAR_SPECTRUM = "lumitrace:specularSpectrum"
+TRANSMITTANCE_SPECTRUM = "lumitrace:transmittanceSpectrum"
+ABBE_NUMBER = "lumitrace:abbeNumber"
+#: The material attributes of colour (read by :mod:`lumitrace.stage.colour`).
+MATERIAL_COLOUR_ATTRIBUTES = (REFLECTANCE_SPECTRUM, SPECULAR_SPECTRUM, TRANSMITTANCE_SPECTRUM,
+                              ABBE_NUMBER)
 #: Material attribute name -> :class:`lumitrace.scene.Material` field name.
 MATERIAL_ATTRIBUTES = {
     SCATTERING: "scattering",
@@ -85,6 +96,9 @@ IOR_EXCLUSIVE_MIN = 0.0
 #: Luminous flux in lm; only an authored value counts, and it must be finite and > 0.
 LUMINOUS_FLUX = "lumitrace:luminousFlux"
 RAY_FILE = "lumitrace:rayFile"
+#: A light's colour: sampled relative power ((nm, power) pairs), or a named illuminant.
+SPECTRUM = "lumitrace:spectrum"
+ILLUMINANT = "lumitrace:illuminant"
 BODY = "lumitrace:body"
 
 # -- LumitraceLuminaireAPI and the result record ---------------------------------------

@@ -27,7 +27,11 @@ def test_registry_knows_the_api_schemas():
 
 def test_material_api_properties_and_fallbacks():
     definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(schema.MATERIAL_API)
-    assert set(definition.GetPropertyNames()) == set(schema.MATERIAL_ATTRIBUTES)
+    assert set(definition.GetPropertyNames()) == set(schema.MATERIAL_ATTRIBUTES) | set(
+        schema.MATERIAL_COLOUR_ATTRIBUTES)
+    for name in schema.MATERIAL_COLOUR_ATTRIBUTES[:3]:
+        assert definition.GetSchemaAttributeSpec(name).typeName == Sdf.ValueTypeNames.Float2Array
+    assert definition.GetAttributeFallbackValue(schema.ABBE_NUMBER) == 0.0
     for name, fallback in schema.MATERIAL_FALLBACKS.items():
         value = definition.GetAttributeFallbackValue(name)
         if isinstance(fallback, str):
@@ -42,7 +46,10 @@ def test_material_api_properties_and_fallbacks():
 def test_emitter_and_luminaire_api_properties():
     registry = Usd.SchemaRegistry()
     emitter = registry.FindAppliedAPIPrimDefinition(schema.EMITTER_API)
-    assert emitter.GetPropertyNames() == [schema.BODY, schema.LUMINOUS_FLUX, schema.RAY_FILE]
+    assert emitter.GetPropertyNames() == [schema.BODY, schema.ILLUMINANT, schema.LUMINOUS_FLUX,
+                                          schema.RAY_FILE, schema.SPECTRUM]
+    assert (emitter.GetSchemaAttributeSpec(schema.SPECTRUM).typeName
+            == Sdf.ValueTypeNames.Float2Array)
     assert (emitter.GetSchemaAttributeSpec(schema.LUMINOUS_FLUX).typeName
             == Sdf.ValueTypeNames.Float)
     assert (emitter.GetSchemaAttributeSpec(schema.RAY_FILE).typeName

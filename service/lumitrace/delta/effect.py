@@ -2,7 +2,8 @@
 
 The kinds, from the cheapest to the dearest to follow: ``none`` (nothing the tracer sees:
 names, display colour, prims outside the luminaire, untraced purposes), ``flux`` (emitter
-fluxes only: a rescale of their counts, nothing traced), ``emitter`` (an emitter's shape,
+fluxes, or lights' colours where no surface has one: a rescale of their counts, nothing
+traced), ``emitter`` (an emitter's shape,
 shaping or placement), ``material``, ``geometry`` (a part's transform or points) and
 ``topology`` (emitters or parts added or removed).
 """
@@ -54,7 +55,9 @@ def classify(old: Scene, new: Scene, prims=()) -> Effect:
         if a.same_as(b):
             continue
         emitters.append(path)
-        kinds.append("flux" if a.same_as(b, ignore=("flux",)) else "emitter")
+        # where no surface has a colour, a light's colour is a rescale of X and Z too
+        rescaled = ("flux", "spectrum") if new.colour != "spectral" else ("flux",)
+        kinds.append("flux" if a.same_as(b, ignore=rescaled) else "emitter")
     old_m = {m.path: m for m in old.materials}
     new_m = {m.path: m for m in new.materials}
     materials += sorted(p for p in set(old_m) | set(new_m) if old_m.get(p) != new_m.get(p))

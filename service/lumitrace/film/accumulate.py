@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cubemap import texel_solid_angles
-from .goniometer import N_BINS, Goniometer
+from .goniometer import N_BINS, N_CELLS, Goniometer
 from ..scene import Scene
 from .tally import BatchTally
 
@@ -99,15 +99,20 @@ def compact(counts):
         np.count_nonzero(counts.any(axis=0)) * 4 < counts.shape[1] else counts
 
 
-def counts_of(bins: np.ndarray, n: int):
-    """(2, n) counts of the flat indices ``bins`` (bin + n * half): dense, or sparse when
-    they are few against ``n`` (a small batch must not fill and send a large array)."""
+def counts_of(bins: np.ndarray, n: int, weights: np.ndarray | None = None):
+    """(2, n) counts of the flat indices ``bins`` (bin + n * half), or sums of integer
+    ``weights`` (int64, exact) at them: dense, or sparse when they are few against ``n``
+    (a small batch must not fill and send a large array)."""
     if len(bins) * 8 >= n:
-        return np.bincount(bins, minlength=2 * n).reshape(2, n)
+        if weights is None:
+            return np.bincount(bins, minlength=2 * n).reshape(2, n)
+        # float sums of integers are exact below 2**53: a batch stays far below
+        return np.rint(np.bincount(bins, weights=weights, minlength=2 * n)).astype(
+            np.int64).reshape(2, n)
     half, b = np.divmod(bins, n)
     idx, inv = np.unique(b, return_inverse=True)
     val = np.zeros((2, len(idx)), np.int64)
-    np.add.at(val, (half, inv), 1)
+    np.add.at(val, (half, inv), 1 if weights is None else weights)
     return SparseCounts(n, idx, val)
 
 
@@ -144,6 +149,11 @@ class EmitterTally:
     absorbed: int = 0
     cut: int = 0
     segments: int = 0
+    #: a spectral scene's X and Z tallies: x, z per texel, x, z per C-gamma cell (see
+    #: :class:`~lumitrace.film.tally.BatchTally`); None otherwise
+    xz: list | None = field(default=None, repr=False)
+    #: (X/Y, Z/Y) of the light's spectrum: its colour where no surface changes it
+    ratios: tuple = (0.0, 0.0)
 
     @property
     def escaped(self) -> int:
@@ -167,8 +177,13 @@ class Accumulator:
         sparse = len(scene.emitters) * 2 * (ntex + N_BINS) * 8 > DENSE_COUNTS_BYTES
         new = (lambda n: SparseCounts(n)) if sparse else \
             (lambda n: np.zeros((2, n), np.int64))  # noqa: E731
-        self.emitters = [EmitterTally(e.path, e.flux, counts=new(ntex), cells=new(N_BINS))
+        #: the scene's colour mode (:attr:`lumitrace.scene.Scene.colour`)
+        self.colour = scene.colour
+        self.emitters = [EmitterTally(e.path, e.flux, counts=new(ntex), cells=new(N_BINS),
+                                      xz=[new(ntex), new(ntex), new(N_CELLS), new(N_CELLS)]
+                                      if self.colour == "spectral" else None)
                          for e in scene.emitters]
+        self.set_colours(scene)
         self._solid_angles = texel_solid_angles(self.resolution)
         #: surface hits per part since the start (None once a batch without them, or a
         #: removal, makes the count unknown): parts no photon reaches are reported
@@ -177,6 +192,16 @@ class Accumulator:
         # a mesh light's own surface: its photons leave it, none need reach it
         self.emitting_parts = frozenset(e.path.split("[")[0] for e in scene.emitters
                                         if e.kind == "mesh")
+
+    def set_colours(self, scene: Scene) -> None:
+        """Take each light's colour (X/Y, Z/Y of its spectrum, D65 without one) from
+        ``scene``: a light's colour edit in a scene of neutral surfaces retraces nothing."""
+        if self.colour == "none":
+            return
+        from ..scene.spectra import chromaticity_ratios, d65
+
+        for t, e in zip(self.emitters, scene.emitters):
+            t.ratios = chromaticity_ratios(e.spectrum if e.spectrum else d65())
 
     def unreached_parts(self) -> list[str] | None:
         """Parts no traced photon hit (fully enclosed, behind an absorber, hidden), or None
@@ -216,6 +241,9 @@ class Accumulator:
         _add_counts(t.counts, batch.counts, sign)
         if batch.cells is not None:
             _add_counts(t.cells, batch.cells, sign)
+        if t.xz is not None and batch.xz is not None:
+            for target, part in zip(t.xz, batch.xz):
+                _add_counts(target, part, sign)
         t.absorbed += sign * batch.absorbed
         t.cut += sign * batch.cut
         t.segments += sign * batch.segments
@@ -227,7 +255,10 @@ class Accumulator:
         copy.resolution = self.resolution
         copy.goniometer = self.goniometer
         copy._solid_angles = self._solid_angles
-        copy.emitters = [dataclasses.replace(t, counts=t.counts.copy(), cells=t.cells.copy())
+        copy.colour = self.colour
+        copy.emitters = [dataclasses.replace(t, counts=t.counts.copy(), cells=t.cells.copy(),
+                                             xz=None if t.xz is None else
+                                             [a.copy() for a in t.xz])
                          for t in self.emitters]
         copy.part_hits = None if self.part_hits is None else self.part_hits.copy()
         copy.parts = self.parts
@@ -296,6 +327,51 @@ class Accumulator:
                 else:
                     var[idx] += term
         return var.reshape(self.shape)
+
+    def tristimulus_flux(self, half: int | None = None) -> np.ndarray:
+        """CIE X, Y, Z of the flux (lm for Y) that left through each texel, (3, 6R, R);
+        ``half`` as in :meth:`texel_flux`. Y is :meth:`texel_flux`."""
+        from ..scene.spectra import FIXED_POINT
+
+        out = np.zeros((3, self.shape[0] * self.shape[1]))
+        for t in self.emitters:
+            if not t.photons:
+                continue
+            w = t.photon_flux if half is None else 2.0 * t.photon_flux
+            v, idx = _half(t.counts, half)
+            at = slice(None) if idx is None else idx
+            out[1, at] += v * w
+            for row in (0, 2):
+                if t.xz is None:
+                    out[row, at] += v * (w * t.ratios[row // 2])
+                else:
+                    q, qidx = _half(t.xz[row // 2], half)
+                    out[row, slice(None) if qidx is None else qidx] += q * (w / FIXED_POINT)
+        return out.reshape(3, *self.shape)
+
+    def cell_tristimulus(self, half: int | None = None) -> np.ndarray:
+        """CIE X, Y, Z of the flux (lm for Y) counted in each C-gamma cell of the
+        goniophotometer, (3, N_CELLS); ``half`` as in :meth:`emitter_cells`."""
+        from ..scene.spectra import FIXED_POINT
+
+        out = np.zeros((3, N_CELLS))
+        for t in self.emitters:
+            if not t.photons:
+                continue
+            w = t.photon_flux if half is None else 2.0 * t.photon_flux
+            v, idx = _half(t.cells, half)
+            if idx is None:
+                v, idx = v[:N_CELLS], np.arange(N_CELLS)
+            else:
+                v, idx = v[idx < N_CELLS], idx[idx < N_CELLS]
+            out[1, idx] += v * w
+            for row in (0, 2):
+                if t.xz is None:
+                    out[row, idx] += v * (w * t.ratios[row // 2])
+                else:
+                    q, qidx = _half(t.xz[2 + row // 2], half)
+                    out[row, slice(None) if qidx is None else qidx] += q * (w / FIXED_POINT)
+        return out
 
     def emitter_cells(self, half: int | None = None):
         """Per emitter with photons: (photon flux (lm), photons, goniometer counts, their bin

@@ -22,6 +22,10 @@ class BatchTally:
     :class:`~lumitrace.film.accumulate.SparseCounts`; None when none escaped.
     ``emitter``, ``start`` and ``photons`` name the batch (emitter number, first photon
     index, photon count); ``segments`` counts traced path segments (rays).
+    In a spectral scene ``xz`` holds the escapes' X and Z tallies: ``(x_counts, z_counts,
+    x_cells, z_cells)``, each (2, n) int64 like ``counts`` (texels) and the C-gamma cells
+    (:data:`~lumitrace.film.goniometer.N_CELLS`), in units of
+    1/:data:`~lumitrace.scene.spectra.FIXED_POINT` of a photon's Y.
     """
 
     emitter: int
@@ -36,6 +40,7 @@ class BatchTally:
     records: object | None = None  # the photons' PhotonRecords, when asked for
     part_hits: np.ndarray | None = None  # surface hits per part (Scene.parts order)
     exit_rays: tuple | None = None  # (positions, directions) of the escapes, when asked for
+    xz: tuple | None = None  # spectral scenes: X and Z tallies (see above)
 
     @property
     def escaped(self) -> int:

@@ -61,11 +61,15 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
         return Selection(restart="the luminaire turned: its photometric frame changed")
     if [e.path for e in old.emitters] != [e.path for e in new.emitters]:
         return Selection(restart="emitters were added or removed")
+    if (old.colour == "spectral") != (new.colour == "spectral"):
+        return Selection(restart="a surface's colour changed whether photons carry "
+                                 "wavelengths")
     changed_emitters = []
     for i, (a, b) in enumerate(zip(old.emitters, new.emitters)):
         if a.flux != b.flux:
             return Selection(restart="an emitter's flux changed along with other edits")
-        if not a.same_as(b):
+        # where no surface has a colour, a light's spectrum changes no photon's path
+        if not a.same_as(b, ignore=("spectrum",) if new.colour != "spectral" else ()):
             changed_emitters.append(i)
     new_tri = _normalised(new.triangles, frame)
     if not frame.grid.inside(new_tri):
@@ -105,10 +109,18 @@ def tally_of(emitter: int, key: np.uint64, photons: np.ndarray, rec: PhotonRecor
                          minlength=2 * ntex).reshape(2, ntex)
     cells = counts_of(escape_bins(rec.cell[esc].astype(np.int64),
                                   rec.exit[esc].astype(np.int64) + N_CELLS, half), N_BINS)
+    xz = None
+    if rec.colour:  # a spectral scene's X and Z, as the photons added them
+        texels = rec.texel[esc].astype(np.int64) + ntex * half
+        flat = rec.cell[esc].astype(np.int64) + N_CELLS * half
+        x, z = rec.x[esc].astype(np.int64), rec.z[esc].astype(np.int64)
+        xz = tuple(np.bincount(texels, weights=q, minlength=2 * ntex).round().astype(
+            np.int64).reshape(2, ntex) for q in (x, z)) + (
+            counts_of(flat, N_CELLS, x), counts_of(flat, N_CELLS, z))
     return BatchTally(emitter, int(photons[0]) if len(photons) else 0, int(len(photons)),
                       counts, cells, absorbed=int(np.count_nonzero(rec.texel == ABSORBED)),
                       cut=int(np.count_nonzero(rec.texel == CUT)),
-                      segments=int(rec.segments.astype(np.int64).sum()))
+                      segments=int(rec.segments.astype(np.int64).sum()), xz=xz)
 
 
 @dataclass(frozen=True)
@@ -148,6 +160,8 @@ def retrace(refinement, scene: Scene, selection: Selection,
     refinement.scene = scene
     for i, e in enumerate(scene.emitters):
         acc.emitters[i].path = e.path
+    acc.colour = scene.colour
+    acc.set_colours(scene)
     refinement.reestimate()
     traced = sum(len(r) for r in refinement.records)
     return Retraced(selection.photons, traced, time.perf_counter() - t0)

@@ -224,10 +224,13 @@ class Refinement:
                 and not any(t.escaped for t in acc.emitters))
 
     def rescale(self, scene: Scene) -> None:
-        """Take ``scene``, which differs from this one in emitter fluxes only: the counts
-        stay and scale with the new fluxes (photons are analog), nothing is retraced."""
+        """Take ``scene``, which differs from this one in emitter fluxes (and, with no
+        coloured surface, lights' colours) only: the counts stay and scale with the new
+        fluxes (photons are analog), the lights' colours are taken, nothing is retraced."""
         for i, e in enumerate(scene.emitters):
             self.accumulator.rescale(i, e.flux)
+        self.accumulator.colour = scene.colour
+        self.accumulator.set_colours(scene)
         self.scene = scene
         self.estimate = estimate(self.accumulator, self.settings.threshold)
 

@@ -37,10 +37,38 @@ class Material:
     transmittance: float = 0.0
     ior: float = 1.5
     roughness: float = 0.2
+    #: spectral values on :data:`lumitrace.scene.spectra.WAVELENGTHS` of the diffuse
+    #: reflectance, the specular reflectance and the transmittance; () where the scalar
+    #: above holds at every wavelength (a neutral surface)
+    reflectance_spectrum: tuple = ()
+    specular_spectrum: tuple = ()
+    transmittance_spectrum: tuple = ()
+    #: a dielectric's Abbe number (0: no dispersion; ``ior`` holds at every wavelength)
+    abbe_number: float = 0.0
 
     @property
     def kind(self) -> int:
         return SCATTERING_MODELS.index(self.scattering)
+
+    @property
+    def neutral(self) -> bool:
+        """Whether the surface treats every wavelength alike (no spectral work needed)."""
+        return not (self.reflectance_spectrum or self.specular_spectrum
+                    or self.transmittance_spectrum or self.abbe_number)
+
+    def spectrum(self, name: str) -> np.ndarray:
+        """A property (``reflectance``, ``specular``, ``transmittance`` or ``ior``) at
+        every grid wavelength, (401,)."""
+        from .spectra import WAVELENGTHS, cauchy_ior
+
+        if name == "ior":
+            return (cauchy_ior(self.ior, self.abbe_number) if self.abbe_number
+                    else np.full(WAVELENGTHS.size, self.ior))
+        values = {"reflectance": (self.reflectance_spectrum, self.reflectance),
+                  "specular": (self.specular_spectrum, self.specular_reflectance),
+                  "transmittance": (self.transmittance_spectrum, self.transmittance)}[name]
+        return (np.asarray(values[0], np.float64) if values[0]
+                else np.full(WAVELENGTHS.size, values[1]))
 
 
 #: Unit vector of each stage up axis.
@@ -112,6 +140,9 @@ class Emitter:
     ray_scale: float = 1.0
     rays_stamp: str = ""  # the ray file's size and modification time when read
     ray_extent: tuple = ()  # half extents (3,) of the rays' start points, local units
+    #: relative spectral power on :data:`lumitrace.scene.spectra.WAVELENGTHS` (401,);
+    #: () when the stage gives the light no colour (white)
+    spectrum: tuple = ()
 
     @property
     def key(self) -> int:
@@ -195,6 +226,16 @@ class Scene:
         return photometric_axes(self.up_axis, np.asarray(m)[:3, :3] if len(m) else ())
 
     @property
+    def colour(self) -> str:
+        """How much colour work the scene needs: ``none`` (no light or surface has a
+        colour: luminance only), ``emitters`` (coloured lights, neutral surfaces: each
+        light's colour is the same in every direction, nothing is traced per wavelength)
+        or ``spectral`` (a coloured or dispersive surface: photons carry wavelengths)."""
+        if any(not m.neutral for m in self.materials):
+            return "spectral"
+        return "emitters" if any(e.spectrum for e in self.emitters) else "none"
+
+    @property
     def total_flux(self) -> float:
         """Luminous flux of all emitters together (lm)."""
         return float(sum(e.flux for e in self.emitters))
@@ -240,10 +281,15 @@ class Scene:
         for m in self.materials:
             h.update(repr((m.scattering, m.reflectance, m.specular_reflectance,
                            m.transmittance, m.ior, m.roughness)).encode())
+            if not m.neutral:
+                h.update(repr((m.reflectance_spectrum, m.specular_spectrum,
+                               m.transmittance_spectrum, m.abbe_number)).encode())
         for e in self.emitters:
             h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
                            e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())
             h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
+            if e.spectrum:
+                h.update(np.asarray(e.spectrum, np.float64).tobytes())
             if e.triangles is not None:
                 h.update(repr(e.two_sided).encode())
                 h.update(np.ascontiguousarray(e.triangles, dtype=np.float64).tobytes())

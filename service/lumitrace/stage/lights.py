@@ -11,6 +11,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
+from .colour import light_spectrum
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
 from .. import tm25
@@ -92,6 +93,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         warn(f"{path}: a light that emits a ray file is not shaped: its shaping is ignored")
         cone_angle, cone_softness, focus, ies = unshaped_cone_angle(kind), 0.0, 0.0, None
 
+    spectrum = light_spectrum(prim, light, time)
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     authored_flux = None
     if flux_attr and flux_attr.HasAuthoredValue():
@@ -143,6 +145,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
         emitters.append(Emitter(
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
+            spectrum=spectrum,
             cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, rays=rays,
             ray_scale=0.001 / meters_per_unit, rays_stamp=file_stamp(rays) if rays else "",
             ray_extent=tuple(ray_extent * 0.001 / meters_per_unit) if rays else (),
@@ -175,6 +178,7 @@ def read_mesh_light(prim: Usd.Prim, placed: list[np.ndarray], time: Usd.TimeCode
         warn(f"{path}: shaping of a mesh light is ignored")
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     light = UsdLux.LightAPI(prim)
+    spectrum = light_spectrum(prim, light, time)
     emitters = []
     for k, tris in enumerate(placed):
         if len(tris) == 0:
@@ -199,6 +203,7 @@ def read_mesh_light(prim: Usd.Prim, placed: list[np.ndarray], time: Usd.TimeCode
         to_world[:3, 3] = centre
         emitters.append(Emitter(path=path + (f"[{k}]" if len(placed) > 1 else ""),
                                 kind="mesh", flux=float(flux), to_world=to_world,
+                                spectrum=spectrum,
                                 triangles=np.ascontiguousarray(tris - centre),
                                 two_sided=two_sided))
     return emitters

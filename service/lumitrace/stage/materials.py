@@ -2,6 +2,7 @@
 ``UsdPreviewSurface`` mapping and the ``LumitraceMaterialAPI`` values layered over it."""
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable, Iterable
 
 import numpy as np
@@ -10,10 +11,15 @@ from pxr import Usd, UsdShade
 from .. import schema
 from ..scene import Material
 from . import validate
+from .colour import surface_spectra
 from .validate import Sourced, check_array
 
 #: Rec.709 / sRGB luminance weights (linear RGB -> relative luminance Y).
 REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+#: Key of the UsdPreviewSurface colour behind an albedo (its spectral shape) among the
+#: values :func:`preview_values` returns.
+PREVIEW_COLOUR = "preview:colour"
 
 #: Path of the default material given to gprims with no material (no prim has it).
 DEFAULT_MATERIAL_PATH = ""
@@ -104,7 +110,8 @@ class BoundMaterials:
         gprim_values = material_api_values(gprim, self.time)
         if _has_api(gprim, schema.MATERIAL_API):  # every value comes from the gprim
             key = gprim_path
-        elif gprim_values:  # some values from the gprim, the rest from this binding
+        elif gprim_values or _authored_spectra(gprim):
+            # some values from the gprim, the rest from this binding
             key = str(bind_prim.GetPath())
         elif material_prim is not None:
             key = str(material_prim.GetPath())
@@ -120,8 +127,20 @@ class BoundMaterials:
             values.update(preview_values(material, self.time, self.warn))
             values.update(material_api_values(material_prim, self.time))
         values.update(gprim_values)
+        colour = values.pop(PREVIEW_COLOUR, None)
         validate.check_material(values)
         self._warn_lossless(values)
+        scattering = str(values[schema.SCATTERING].value)
+        spectral = surface_spectra(
+            ([gprim] if key in (gprim_path, str(bind_prim.GetPath())) else [])
+            + ([material_prim] if material_prim is not None and key != gprim_path else []),
+            self.time,
+            scattering, {"reflectance": float(values[schema.REFLECTANCE].value),
+                         "specular": float(values[schema.SPECULAR_REFLECTANCE].value),
+                         "transmittance": float(values[schema.TRANSMITTANCE].value)},
+            colour.value if colour is not None else None)
+        scalars = {f: spectral.pop(f) for f in ("reflectance", "specular_reflectance",
+                                               "transmittance") if f in spectral}
         mat = Material(
             path=key,
             scattering=str(values[schema.SCATTERING].value),
@@ -131,6 +150,7 @@ class BoundMaterials:
             ior=float(values[schema.IOR].value),
             roughness=float(values[schema.ROUGHNESS].value),
         )
+        mat = dataclasses.replace(mat, **scalars, **spectral)
         self.index[key] = len(self.materials)
         self.materials.append(mat)
         return self.index[key]
@@ -154,6 +174,12 @@ class BoundMaterials:
 
 #: A PreviewSurface albedo from which the surface is taken for a lossless one (warned).
 LOSSLESS = 0.99
+
+
+def _authored_spectra(prim: Usd.Prim) -> bool:
+    """Whether ``prim`` has a spectral material attribute of its own."""
+    return any(prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()
+               for n in schema.MATERIAL_COLOUR_ATTRIBUTES)
 
 
 def _has_api(prim: Usd.Prim, name: str) -> bool:
@@ -216,9 +242,13 @@ def preview_values(material: UsdShade.Material, time: Usd.TimeCode,
                                             else "diffuseColor"),
               schema.ROUGHNESS: "roughness", schema.IOR: "ior",
               schema.TRANSMITTANCE: "opacity"}
-    return {name: Sourced(value, *sources[origin[name]]) if origin[name] in sources
-            else Sourced(value, where, name)
-            for name, value in derived.items()}
+    out = {name: Sourced(value, *sources[origin[name]]) if origin[name] in sources
+           else Sourced(value, where, name)
+           for name, value in derived.items()}
+    albedo = origin[schema.SPECULAR_REFLECTANCE if schema.SPECULAR_REFLECTANCE in derived
+                    else schema.REFLECTANCE]
+    out[PREVIEW_COLOUR] = Sourced(inputs[albedo], *sources[albedo])
+    return out
 
 
 def _shader_input(shader: UsdShade.Shader, name: str, default, time: Usd.TimeCode,

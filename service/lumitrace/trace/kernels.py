@@ -428,15 +428,104 @@ def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
     return ox + t * dx, oy + t * dy, oz + t * dz
 
 
+# --- spectral photons -------------------------------------------------------------------
+#
+# A spectral photon carries a throughput per wavelength band, scaled so that its luminous
+# weight (the sum over bands of the emitter's Y per band times the throughput) is 1: every
+# photon still carries the same luminous flux, and Y stays a photon count. At a coloured
+# surface it survives with the probability of its luminous albedo (the luminous weight of
+# throughput times albedo) and its throughput is multiplied by the albedo over that
+# probability, which keeps the weight at 1 and the estimate of every band unbiased. X and
+# Z of an escape are then the sums over bands of the emitter's X and Z per band times the
+# throughput: no wavelength is sampled, so a neutral path has exactly its light's colour.
+# A dispersive dielectric must send each wavelength its own way: there the photon picks one
+# band (with the probability of its luminous share, draw 2, which no bounce uses) and
+# becomes monochromatic, its throughput 1 / Y of that band.
+
+FIXED = 1 << 20  # = lumitrace.scene.spectra.FIXED_POINT
+
+
+@numba.njit(**_INLINE)
+def _luminous(tp, i, w, table, m):
+    """Luminous weight of photon ``i``'s throughput times ``table[m]`` (per band)."""
+    acc = 0.0
+    for b in range(tp.shape[1]):
+        acc += w[1, b] * tp[i, b] * table[m, b]
+    return acc
+
+
+@numba.njit(**_INLINE)
+def _rescale(tp, i, j, table, m, p):
+    """Row ``j`` := row ``i`` times ``table[m]`` / ``p`` (in place when i == j)."""
+    for b in range(tp.shape[1]):
+        tp[j, b] = tp[i, b] * table[m, b] / p
+
+
+@numba.njit(**_INLINE)
+def _fixed_xz(tp, i, w):
+    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums)."""
+    x, z = 0.0, 0.0
+    for b in range(tp.shape[1]):
+        x += w[0, b] * tp[i, b]
+        z += w[2, b] * tp[i, b]
+    return np.int64(round(x * FIXED)), np.int64(round(z * FIXED))
+
+
+@numba.njit(**_INLINE)
+def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, w, tp, tband,
+                  i, j, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised, px, py, pz):
+    """:func:`scatter_one` for a spectral photon ``i`` on material ``m``, its new
+    throughput written to row ``j`` (``j`` <= ``i``) if it survives."""
+    band = tband[i]
+    ior = s_ior[m, 0]
+    if kind == DIELECTRIC and dispersive[m]:
+        if band < 0:  # a dispersive surface: one band goes on, picked by luminous share
+            u, _ = _uniform_pair(h, 2)
+            band = tp.shape[1] - 1
+            acc = 0.0
+            for b in range(tp.shape[1]):
+                acc += w[1, b] * tp[i, b]
+                if u < acc:
+                    band = b
+                    break
+            for b in range(tp.shape[1]):
+                tp[i, b] = 0.0
+            tp[i, band] = 1.0 / w[1, band]
+        ior = s_ior[m, band]
+    refl = spec = trans = 0.0
+    if kind == DIFFUSE or kind == TRANSLUCENT:
+        refl = _luminous(tp, i, w, s_refl, m)
+    if kind == TRANSLUCENT:
+        trans = _luminous(tp, i, w, s_trans, m)
+    if kind == MIRROR or kind == GLOSSY:
+        spec = _luminous(tp, i, w, s_spec, m)
+    alive, ox, oy, oz, qx, qy, qz = scatter_one(kind, refl, spec, trans, ior, alpha, dx, dy, dz,
+                                                nx, ny, nz, u0, u1, u2, u3, polarised,
+                                                px, py, pz)
+    if alive:
+        if kind == DIFFUSE or (kind == TRANSLUCENT and u0 < refl):
+            _rescale(tp, i, j, s_refl, m, refl)
+        elif kind == TRANSLUCENT:
+            _rescale(tp, i, j, s_trans, m, trans)
+        elif kind == MIRROR or kind == GLOSSY:
+            _rescale(tp, i, j, s_spec, m, spec)
+        elif j != i:
+            for b in range(tp.shape[1]):
+                tp[j, b] = tp[i, b]
+        tband[j] = band
+    return alive, ox, oy, oz, qx, qy, qz
+
+
 # --- one bounce of a wave -------------------------------------------------------------------
 
 @numba.njit(**_JIT)
 def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
            o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
-           ior, alpha, polarised, counts, res, layout, escaped, n_escaped, part_hits,
-           center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, side,
-           n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
-           rec_cells, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
+           ior, alpha, polarised, spectral, s_refl, s_spec, s_trans, s_ior, dispersive,
+           band_w, tp, tband, xz, escaped_xz, counts, res, layout, escaped, n_escaped,
+           part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
+           side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
+           rec_cells, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
            backoff, near_hit):
     """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
     (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
@@ -446,7 +535,12 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     and, as float32 rays, into ``o32``, ``d32``. With ``records`` each photon's record
     (rows ``pid``) is updated; with ``exits`` each escape's ray where it leaves the
     goniophotometer's box (world m) and its direction, at its row of ``exit_pos`` and
-    ``exit_dir``. Returns (survivors, escaped bins, cut, absorbed).
+    ``exit_dir``. In a ``spectral`` scene each photon carries its spectral throughput
+    ``tp`` (N, bands; compacted in place) and its band ``tband`` (-1 until a dispersive
+    surface picks one); see :func:`_spectral_hit`. An escape adds its fixed-point X and Z
+    (``band_w`` (3, bands): the emitter's X, Y, Z per band) to ``xz`` (rows X, X, Z, Z of
+    the two halves), to ``escaped_xz`` (2, escapes) and to its record.
+    Returns (survivors, escaped bins, cut, absorbed).
     """
     n_out, cut, absorbed = 0, 0, 0
     n_parts = part_hits.shape[0]
@@ -462,6 +556,15 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             half = int(h & _ONE)
             tex = _texel(dx, dy, dz, res, layout)
             counts[half, tex] += 1
+            if spectral:
+                qx_, qz_ = _fixed_xz(tp, i, band_w)
+                xz[half, tex] += qx_
+                xz[2 + half, tex] += qz_
+                escaped_xz[0, n_escaped >> 1] = qx_
+                escaped_xz[1, n_escaped >> 1] = qz_
+                if records:
+                    rec_x[row] = qx_
+                    rec_z[row] = qz_
             cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
                                n_c, n_gamma)
             wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
@@ -517,9 +620,15 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             counter = (depth + 1) * 4
             u0, u1 = _uniform_pair(h, counter)
             u2, u3 = _uniform_pair(h, counter + 1)
-            alive, dx, dy, dz, qx, qy, qz = scatter_one(
-                kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
-                nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
+            if spectral:
+                alive, dx, dy, dz, qx, qy, qz = _spectral_hit(
+                    m, kind[m], alpha[m], s_refl, s_spec, s_trans, s_ior, dispersive,
+                    band_w, tp, tband, i, n_out, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
+                    polarised, qx, qy, qz)
+            else:
+                alive, dx, dy, dz, qx, qy, qz = scatter_one(
+                    kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
+                    nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
         if not alive:
             absorbed += 1
             continue
@@ -534,6 +643,10 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             pol2[n_out, 0], pol2[n_out, 1], pol2[n_out, 2] = qx, qy, qz
         base2[n_out] = h
         pid2[n_out] = row
+        if spectral and stay:  # moved on unchanged: its throughput moves along
+            tband[n_out] = tband[i]
+            for b in range(tp.shape[1]):
+                tp[n_out, b] = tp[i, b]
         n_out += 1
     return n_out, n_escaped, cut, absorbed
 

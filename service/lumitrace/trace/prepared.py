@@ -82,12 +82,27 @@ class PreparedScene:
     def triangle_count(self) -> int:
         return int(self.normals.shape[1])
 
+    @property
+    def spectral(self) -> bool:
+        """Whether photons carry wavelengths: some surface has a colour or dispersion."""
+        return self.scene.colour == "spectral"
+
     @cached_property
     def kernel_args(self) -> tuple:
         """The scene's arrays as :func:`~lumitrace.trace.kernels.bounce` takes them:
-        normals and first corners (T, 3), material and part of every triangle, then the material table
-        (kind, reflectance, specular, transmittance, ior, alpha) and the polarisation flag."""
+        normals and first corners (T, 3), material and part of every triangle, then the
+        material table (kind, reflectance, specular, transmittance, ior, alpha), the
+        polarisation flag, the spectral flag, the spectral tables (M, bands) and which
+        materials disperse (M,) (1-element stand-ins when the scene is not spectral)."""
         t = self.table or MaterialTable.from_materials(self.scene.materials)
+        spectral = self.spectral
+        if spectral and t.spectra is None:
+            t = MaterialTable.from_materials(self.scene.materials, spectral=True)
+        if spectral:
+            colour = tuple(np.ascontiguousarray(a, np.float64) for a in t.spectra) + (
+                np.array([m.abbe_number != 0.0 for m in self.scene.materials]),)
+        else:
+            colour = (np.zeros((1, 1)),) * 4 + (np.zeros(1, np.bool_),)
         f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
         part = (self.part_index if self.part_index is not None and self.part_index.size
                 else np.zeros(self.triangle_count, np.int64))
@@ -95,7 +110,18 @@ class PreparedScene:
                 np.ascontiguousarray(self.material_index, np.int64),
                 np.ascontiguousarray(part, np.int64), np.ascontiguousarray(t.kind, np.int64),
                 f64(t.reflectance), f64(t.specular), f64(t.transmittance), f64(t.ior),
-                f64(t.alpha), bool(self.polarised))
+                f64(t.alpha), bool(self.polarised), spectral) + colour
+
+    @cached_property
+    def band_weights(self) -> list[np.ndarray]:
+        """Per emitter, X, Y, Z per band of a photon of unit throughput, (3, bands) (D65
+        for a light without a spectrum); stand-ins when the scene is not spectral."""
+        if not self.spectral:
+            return [np.zeros((3, 1))] * len(self.scene.emitters)
+        from ..scene.spectra import band_weights, d65
+
+        return [band_weights(e.spectrum if e.spectrum else d65())
+                for e in self.scene.emitters]
 
     @cached_property
     def emitter_args(self) -> list[tuple]:
@@ -160,7 +186,8 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
 
         embree = rtcore_scene.EmbreeScene(robust=True)
         TriangleMesh(embree, np.ascontiguousarray(tri, dtype=np.float32))
-        table = MaterialTable.from_materials(scene.materials)
+        table = MaterialTable.from_materials(scene.materials,
+                                             spectral=scene.colour == "spectral")
         kind = np.take(table.kind, np.asarray(scene.material_index))
     return PreparedScene(scene=scene, center=center, scale=scale,
                          normals=normals, corners=v0,

@@ -1,5 +1,5 @@
-"""Per-photon records: what each traced photon did, in 28 bytes, so that an edit can find
-the photons whose paths it can change and retrace exactly those.
+"""Per-photon records: what each traced photon did, in 28 bytes (36 in a spectral scene), so
+that an edit can find the photons whose paths it can change and retrace exactly those.
 
 - ``texel``: where it escaped (the cube-map texel), or :data:`ABSORBED` / :data:`CUT`;
 - ``cell``, ``exit``: where the goniophotometer counted it (C-gamma cell, exit bin less
@@ -8,7 +8,9 @@ the photons whose paths it can change and retrace exactly those.
 - ``parts``: a hash bitmask of the parts it hit (bit ``crc32(part path) % 64``);
 - ``cells``: a bitmask of the cells of a 64-cell grid over the luminaire (pinned with the
   tracing frame, :class:`CellGrid`) that the bounding boxes of its path segments overlap
-  (escaping segments clipped to the grid's box).
+  (escaping segments clipped to the grid's box);
+- ``x``, ``z``: in a spectral scene, the X and Z it added when it escaped (fixed point, see
+  :mod:`lumitrace.scene.spectra`); empty arrays otherwise.
 
 Both masks are conservative: a collision of two parts on one bit, or a box wider than its
 segment, only retraces a photon whose path then comes out the same.
@@ -23,8 +25,9 @@ import numpy as np
 #: ``texel`` of a photon absorbed on a surface, and of one cut by the depth limit.
 ABSORBED = -1
 CUT = -2
-#: Bytes of one photon's record.
+#: Bytes of one photon's record, and what a spectral scene's records add.
 RECORD_BYTES = 4 + 4 + 2 + 2 + 8 + 8
+COLOUR_RECORD_BYTES = 4 + 4
 
 
 @dataclass
@@ -37,15 +40,32 @@ class PhotonRecords:
     segments: np.ndarray  # uint16 (saturating)
     parts: np.ndarray  # uint64
     cells: np.ndarray  # uint64
+    x: np.ndarray  # int32, spectral scenes only (else empty)
+    z: np.ndarray  # int32, spectral scenes only (else empty)
 
     @classmethod
-    def empty(cls, n: int = 0) -> "PhotonRecords":
+    def empty(cls, n: int = 0, colour: bool = False) -> "PhotonRecords":
+        c = n if colour else 0
         return cls(np.full(n, ABSORBED, np.int32), np.zeros(n, np.int32),
                    np.zeros(n, np.uint16), np.zeros(n, np.uint16),
-                   np.zeros(n, np.uint64), np.zeros(n, np.uint64))
+                   np.zeros(n, np.uint64), np.zeros(n, np.uint64),
+                   np.zeros(c, np.int32), np.zeros(c, np.int32))
+
+    @property
+    def colour(self) -> bool:
+        """Whether the records hold the photons' X and Z."""
+        return len(self.x) == len(self.texel) and len(self.texel) > 0
 
     def _arrays(self) -> list[np.ndarray]:
-        return [getattr(self, f.name) for f in fields(self)]
+        """The per-photon arrays (X and Z only where the records hold them)."""
+        names = [f.name for f in fields(self)]
+        return [getattr(self, n) for n in (names if self.colour else names[:-2])]
+
+    def _make(self, arrays) -> "PhotonRecords":
+        arrays = list(arrays)
+        if len(arrays) < len(fields(self)):
+            arrays += [np.zeros(0, np.int32)] * 2
+        return PhotonRecords(*arrays)
 
     def __len__(self) -> int:
         return len(self.texel)
@@ -55,11 +75,13 @@ class PhotonRecords:
         return sum(a.nbytes for a in self._arrays())
 
     def extend(self, other: "PhotonRecords") -> "PhotonRecords":
-        return PhotonRecords(*(np.concatenate([a, b])
-                               for a, b in zip(self._arrays(), other._arrays())))
+        if not len(self) or not len(other):
+            return other if len(other) else self
+        return self._make(np.concatenate([a, b])
+                          for a, b in zip(self._arrays(), other._arrays()))
 
     def take(self, rows: np.ndarray) -> "PhotonRecords":
-        return PhotonRecords(*(a[rows] for a in self._arrays()))
+        return self._make(a[rows] for a in self._arrays())
 
     def put(self, rows: np.ndarray, other: "PhotonRecords") -> None:
         for a, b in zip(self._arrays(), other._arrays()):

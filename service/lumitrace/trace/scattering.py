@@ -30,7 +30,9 @@ UNPOLARISED = np.nan
 
 @dataclass(frozen=True)
 class MaterialTable:
-    """Per-material parameters as arrays indexed by material number (M,)."""
+    """Per-material parameters as arrays indexed by material number (M,), and for a
+    spectral scene the same per tracing band, (M, bands) each (``spectra``: reflectance,
+    specular, transmittance, ior; None when no surface has a colour)."""
 
     kind: np.ndarray
     reflectance: np.ndarray
@@ -38,14 +40,26 @@ class MaterialTable:
     transmittance: np.ndarray
     ior: np.ndarray
     alpha: np.ndarray
+    spectra: tuple | None = None
+
+    #: The spectral properties, in the order of :attr:`spectra`.
+    SPECTRAL = ("reflectance", "specular", "transmittance", "ior")
 
     @classmethod
-    def from_materials(cls, materials: tuple[Material, ...]) -> "MaterialTable":
+    def from_materials(cls, materials: tuple[Material, ...],
+                       spectral: bool = False) -> "MaterialTable":
         f = lambda name: np.array([getattr(m, name) for m in materials], dtype=np.float64)  # noqa: E731
+        spectra = None
+        if spectral:
+            from ..scene.spectra import BANDS, band_means
+
+            spectra = tuple(np.ascontiguousarray(
+                np.stack([band_means(m.spectrum(name)) for m in materials])
+                if materials else np.zeros((0, BANDS))) for name in cls.SPECTRAL)
         return cls(kind=np.array([m.kind for m in materials], dtype=np.int8),
                    reflectance=f("reflectance"), specular=f("specular_reflectance"),
                    transmittance=f("transmittance"), ior=f("ior"),
-                   alpha=np.maximum(f("roughness") ** 2, 1e-4))
+                   alpha=np.maximum(f("roughness") ** 2, 1e-4), spectra=spectra)
 
 
 def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray,

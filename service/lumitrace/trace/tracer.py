@@ -14,7 +14,7 @@ import numpy as np
 
 from ..film import cubemap
 from ..film.accumulate import counts_of
-from ..film.goniometer import N_BINS
+from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Emitter
 from . import kernels, rng
@@ -54,6 +54,20 @@ class _Waves:
         self.o32 = np.empty((n, 3), np.float32)
         self.d32 = np.empty((n, 3), np.float32)
         self.escaped = np.empty(2 * n, np.int64)
+        self.tp = self.tband = self.escaped_xz = None
+
+    def spectral(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The throughput (n, bands) set to 1, the picked bands (n,) set to -1 and room
+        for the escapes' X and Z (2, n) of a spectral batch of ``n`` photons."""
+        from ..scene.spectra import BANDS
+
+        if self.tp is None:
+            self.tp = np.empty((self.size, BANDS))
+            self.tband = np.empty(self.size, np.int64)
+            self.escaped_xz = np.empty((2, self.size), np.int64)
+        self.tp[:n] = 1.0
+        self.tband[:n] = -1
+        return self.tp, self.tband, self.escaped_xz
 
     @classmethod
     def at_least(cls, n: int) -> "_Waves":
@@ -64,6 +78,9 @@ class _Waves:
 
 
 _NO_RECORDS = PhotonRecords.empty(0)
+_NO_XZ = np.zeros((4, 1), np.int64)
+_NO_TP = np.zeros((1, 1))
+_NO_BAND = np.zeros(1, np.int64)
 _NO_EXITS = np.zeros((0, 3))
 #: The cube map's texel layout (:mod:`lumitrace.film.cubemap`) as the kernel takes it.
 _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cubemap._RX,
@@ -95,7 +112,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         return tally
     w = _Waves.at_least(n)
     k = ps.kernel_args
-    rec = PhotonRecords.empty(n) if records else None
+    spectral = ps.spectral
+    rec = PhotonRecords.empty(n, colour=spectral) if records else None
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
     exit_dir = np.zeros((n, 3)) if exit_rays else _NO_EXITS
     r = rec if rec is not None else _NO_RECORDS
@@ -116,6 +134,11 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     reach = kernels.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
                          *ps.reach_box) if ps.embree is not None else 0
     n_escaped = 0
+    if spectral:  # unit throughput in every band, no band picked yet
+        xz = np.zeros((4, tally.counts.shape[1]), np.int64)
+        tp, tband, escaped_xz = w.spectral(n)
+    else:
+        xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
     for depth in range(job.max_depth + 1):
         o32, d32 = w.o32[:reach], w.d32[:reach]
         if record_rays:
@@ -133,9 +156,11 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         n_next, n_escaped, cut, absorbed = kernels.bounce(
             depth, job.max_depth, prim, tfar, w.o[cur], w.d[cur],
             w.pol[cur], w.base[cur][:n], w.pid[cur], w.o[nxt], w.d[nxt], w.pol[nxt],
-            w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, tally.counts, job.resolution,
+            w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp, tband, xz,
+            escaped_xz, tally.counts, job.resolution,
             _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
-            rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, *ps.grid_args,
+            rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, r.x, r.z,
+            *ps.grid_args,
             exit_rays, exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
         tally.cut += cut
         tally.absorbed += absorbed
@@ -145,12 +170,23 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             break
     if n_escaped:
         tally.cells = counts_of(w.escaped[:n_escaped].copy(), N_BINS)
+    if spectral:
+        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2], escaped_xz[:, :n_escaped // 2])
     if rec is not None:
         tally.records = rec
     if exit_rays:
         out = ~np.isnan(exit_pos[:, 0])
         tally.exit_rays = (exit_pos[out], exit_dir[out])
     return tally
+
+
+def _colour_tallies(xz: np.ndarray, cells: np.ndarray, escaped_xz: np.ndarray) -> tuple:
+    """A batch's X and Z tallies: the texels' (filled by the kernel) and the C-gamma
+    cells' (from the escapes' cells, halves folded in as + N_BINS, and X and Z)."""
+    half, cell = np.divmod(cells, N_BINS)
+    flat = cell + N_CELLS * half
+    return (xz[:2], xz[2:], counts_of(flat, N_CELLS, escaped_xz[0]),
+            counts_of(flat, N_CELLS, escaped_xz[1]))
 
 
 def compile_kernels() -> None:
