@@ -60,53 +60,62 @@ def _pyramid(res: int) -> tuple[_Level, ...]:
 
 
 def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
-              solid_angles: np.ndarray | None = None, adaptive: bool = True) -> np.ndarray:
+              solid_angles: np.ndarray | None = None, adaptive: bool = True,
+              extra: np.ndarray | None = None):
     """Filtered intensity (cd), (6R, R), from texel fluxes (lm) and photon counts.
 
     ``threshold`` is the photon count from which a texel trusts its own estimate fully.
+    ``extra`` (k, 6R, R), other quantities per texel (the X and Z of the same photons), are
+    filtered with the weights the intensity's counts and noise give, so that a filtered
+    colour is a weighted mean of raw colours nearby (no fringes at a beam's edge); then
+    (intensity, extra filtered) is returned.
     """
     shape = flux.shape
     res = shape[1]
     omega = texel_solid_angles(res) if solid_angles is None else solid_angles
-    total = float(flux.sum())
-    raw = flux / omega
+    channels = np.concatenate([flux[None], extra]) if extra is not None else flux[None]
+    totals = channels.reshape(len(channels), -1).sum(axis=1)
+    total = float(totals[0])
     if threshold <= 0 or total <= 0:
-        return raw
+        raw = channels / omega
+        return raw[0] if extra is None else (raw[0], raw[1:])
 
     # pull: flux, counts and solid angle of every level, finest first
-    f, n, w = [flux.ravel()], [counts.ravel().astype(np.float64)], [omega.ravel()]
+    f = [channels.reshape(len(channels), -1)]
+    n, w = [counts.ravel().astype(np.float64)], [omega.ravel()]
     levels = _pyramid(res)
     for lv in levels[:-1]:
         size = 6 * lv.res * lv.res
-        f.append(np.bincount(lv.parent, weights=f[-1], minlength=size))
+        f.append(np.stack([np.bincount(lv.parent, weights=c, minlength=size) for c in f[-1]]))
         n.append(np.bincount(lv.parent, weights=n[-1], minlength=size))
         w.append(np.bincount(lv.parent, weights=w[-1], minlength=size))
 
     photons_per_lumen = float(n[0].sum()) / total
 
     # push: the whole sphere, then every level from coarse to fine
-    coarse = np.full(6 * levels[-1].res ** 2, total / FOUR_PI)
+    coarse = np.repeat((totals / FOUR_PI)[:, None], 6 * levels[-1].res ** 2, axis=1)
     coarse_res = levels[-1].res
     for depth in range(len(levels) - 1, -1, -1):
         lv_res = res if depth == 0 else levels[depth - 1].res
         dirs = levels[depth].directions
         own = np.divide(f[depth], w[depth], out=np.zeros_like(f[depth]), where=w[depth] > 0)
-        below = sample_map(coarse.reshape(6 * coarse_res, coarse_res), dirs,
-                           levels[depth].taps)
+        below = np.stack([sample_map(c.reshape(6 * coarse_res, coarse_res), dirs,
+                                     levels[depth].taps) for c in coarse])
         # confidence in the texel's own estimate: the photons it holds, or the photons the
         # coarser level predicts for it; an empty texel where many were expected is dark
-        expected = below * w[depth] * photons_per_lumen
+        expected = below[0] * w[depth] * photons_per_lumen
         weight = np.minimum(1.0, np.maximum(n[depth], expected) / threshold)
         if adaptive and depth < len(levels) - 1:
             # where the coarse level disagrees with the texels by more than their noise
             # explains, it is biased there (an edge, a peak): trust the texels more
-            var_own = below * below / np.maximum(expected, 1.0)
+            var_own = below[0] * below[0] / np.maximum(expected, 1.0)
             lv = levels[depth]
             size = 6 * lv.res * lv.res
             group = lambda x: np.bincount(lv.parent, weights=x, minlength=size)  # noqa: E731
             area = group(w[depth])
-            own_g = np.divide(group(f[depth]), area, out=np.zeros(size), where=area > 0)
-            pred_g = np.divide(group(below * w[depth]), area, out=np.zeros(size), where=area > 0)
+            own_g = np.divide(group(f[depth][0]), area, out=np.zeros(size), where=area > 0)
+            pred_g = np.divide(group(below[0] * w[depth]), area, out=np.zeros(size),
+                               where=area > 0)
             lam_g = group(expected)
             var_g = pred_g * pred_g / np.maximum(lam_g, 1.0)
             dev2 = (own_g - pred_g) ** 2
@@ -119,10 +128,13 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
             bias2 = np.maximum(sample_map(local, dirs, lv.taps), 0.0)
             weight = np.maximum(weight, bias2 / np.maximum(bias2 + var_own, 1e-300))
         value = weight * own + (1.0 - weight) * below
-        value = weld_seams(value.reshape(6 * lv_res, lv_res),
-                           w[depth].reshape(6 * lv_res, lv_res)).ravel()
-        coarse, coarse_res = value, lv_res
+        area = w[depth].reshape(6 * lv_res, lv_res)
+        coarse = np.stack([weld_seams(v.reshape(6 * lv_res, lv_res), area).ravel()
+                           for v in value])
+        coarse_res = lv_res
 
-    out = coarse.reshape(shape)
-    kept = float((out * omega).sum())
-    return out * (total / kept) if kept > 0 else out
+    out = coarse.reshape(len(channels), *shape)
+    kept = (out * omega).reshape(len(channels), -1).sum(axis=1)
+    scale = np.divide(totals, kept, out=np.ones_like(totals), where=kept > 0)
+    out = out * scale[:, None, None]
+    return out[0] if extra is None else (out[0], out[1:])

@@ -1,0 +1,175 @@
+"""Colour over angle: chromaticity, CCT and Duv of the light in every direction, and the
+colour uniformity within the beam, from the goniophotometer's X, Y and Z.
+
+Cells are C sectors by gamma zones of the goniophotometer (sums of its cells: unbiased),
+and the colour of every direction all round (gamma zones over all C). Chromaticity is CIE
+1976 u'v'; CCT and Duv are Ohno's (2013) method of colour-science, from CIE 1960 uv.
+Uniformity is the largest distance in u'v' of a beam cell (intensity at least half the
+peak cell's) from the beam's flux-weighted mean chromaticity, the Delta u'v' figure of
+ANSI C78.377 and ENERGY STAR. Every value has its standard error from the two
+independent halves of the photons; a maximum over noisy cells is biased upward by about
+the cells' noise, which is stated beside it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..film.accumulate import Accumulator
+from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_GAMMA, cell_solid_angles
+
+#: Cell size of the colour table (deg): C sectors and gamma zones.
+COLOUR_C_STEP = 15.0
+COLOUR_GAMMA_STEP = 5.0
+#: A cell belongs to the beam from this share of the peak cell's intensity.
+BEAM_SHARE = 0.5
+
+
+def uv_prime(xyz: np.ndarray) -> np.ndarray:
+    """CIE 1976 (u', v') (2, ...) of tristimulus values (3, ...); NaN where X+15Y+3Z is 0."""
+    x, y, z = xyz
+    d = x + 15.0 * y + 3.0 * z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack([np.where(d > 0, 4.0 * x / d, np.nan),
+                         np.where(d > 0, 9.0 * y / d, np.nan)])
+
+
+def cct_duv(uvp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Correlated colour temperature (K) and Duv of chromaticities u'v' (2, ...) (Ohno
+    2013, colour-science); NaN where undefined."""
+    import colour
+
+    shape = uvp.shape[1:]
+    uv = np.stack([uvp[0], uvp[1] * (2.0 / 3.0)], axis=-1).reshape(-1, 2)
+    out = np.full((len(uv), 2), np.nan)
+    ok = np.isfinite(uv).all(axis=1)
+    if ok.any():
+        out[ok] = np.asarray(colour.uv_to_CCT(uv[ok], method="Ohno 2013")).reshape(-1, 2)
+    return out[:, 0].reshape(shape), out[:, 1].reshape(shape)
+
+
+@dataclass(frozen=True)
+class ColourOverAngle:
+    """The colour of a result by direction.
+
+    ``c``, ``gamma``: centres (deg) of the table's C sectors and gamma zones; ``xyz`` (3,
+    C, G) mean X, Y, Z intensity (cd) of every cell; ``uv`` (2, C, G) its u'v', ``sigma``
+    (C, G) the standard error of that point (u'v' units), ``cct`` (K) and ``duv``. The
+    ``ring_*`` arrays are the same over all C (gamma zones all round). ``mean_uv`` is the
+    beam's flux-weighted chromaticity, ``uniformity`` the largest Delta u'v' of a beam cell
+    from it, ``noise`` the RMS standard error of the beam cells' u'v', ``beam_cells`` how
+    many cells the beam has; ``total`` the u'v', CCT and Duv of all the light.
+    """
+
+    c: np.ndarray
+    gamma: np.ndarray
+    xyz: np.ndarray
+    uv: np.ndarray
+    sigma: np.ndarray
+    cct: np.ndarray
+    duv: np.ndarray
+    ring_xyz: np.ndarray
+    ring_uv: np.ndarray
+    ring_sigma: np.ndarray
+    ring_cct: np.ndarray
+    ring_duv: np.ndarray
+    mean_uv: tuple[float, float]
+    uniformity: float
+    noise: float
+    beam_cells: int
+    total: dict
+
+    def as_dict(self) -> dict:
+        """The figures for the summary, ``--json`` and the result record."""
+        return {"cct_K": self.total["cct_K"], "duv": self.total["duv"],
+                "chromaticity_uv": self.total["uv"],
+                "colour_uniformity_duv": self.uniformity,
+                "colour_uniformity_noise": self.noise}
+
+    def table(self) -> dict:
+        """The table of colour over angle as JSON-ready lists."""
+        r = lambda a: np.round(np.where(np.isfinite(a), a, np.nan), 6).tolist()  # noqa: E731
+        clean = lambda a: [[None if v != v else v for v in row] for row in r(a)]  # noqa: E731
+        flat = lambda a: [None if v != v else v for v in r(a)]  # noqa: E731
+        return {
+            "definition": "cells are C sectors by gamma zones (centres given); xyz is the "
+                          "mean X, Y, Z intensity (cd) of a cell, u'v' CIE 1976, cct and "
+                          "duv by Ohno 2013; sigma is the standard error of a cell's u'v' "
+                          "point from two independent halves of the photons; uniformity "
+                          f"is the largest Delta u'v' of a cell of at least {BEAM_SHARE:.0%} "
+                          "of the peak cell's intensity from their flux-weighted mean",
+            "units": {"c": "deg", "gamma": "deg", "X": "cd", "Y": "cd", "Z": "cd",
+                      "cct": "K"},
+            "c": self.c.tolist(), "gamma": self.gamma.tolist(),
+            "X": clean(self.xyz[0]), "Y": clean(self.xyz[1]), "Z": clean(self.xyz[2]),
+            "u'": clean(self.uv[0]), "v'": clean(self.uv[1]), "sigma": clean(self.sigma),
+            "cct": clean(self.cct), "duv": clean(self.duv),
+            "allRound": {"Y": flat(self.ring_xyz[1]), "u'": flat(self.ring_uv[0]),
+                         "v'": flat(self.ring_uv[1]), "sigma": flat(self.ring_sigma),
+                         "cct": flat(self.ring_cct), "duv": flat(self.ring_duv)},
+            "beam": {"meanUV": list(self.mean_uv), "uniformityDuv": self.uniformity,
+                     "noise": self.noise, "cells": self.beam_cells},
+            "total": self.total,
+        }
+
+
+def _cell_groups(c_step: float, gamma_step: float) -> tuple[np.ndarray, int, int]:
+    """The table cell of every goniophotometer cell (N_CELLS,), and the table's size."""
+    n_c = int(round(360.0 / c_step))
+    n_g = int(round(180.0 / gamma_step))
+    g_mid = 0.5 * (GAMMA_EDGES[1:] + GAMMA_EDGES[:-1])
+    c_mid = (np.arange(N_C) + 0.5) * C_STEP
+    gi = np.minimum((g_mid // gamma_step).astype(np.int64), n_g - 1)
+    ci = np.minimum((c_mid // c_step).astype(np.int64), n_c - 1)
+    return (ci[:, None] * n_g + gi[None, :]).ravel(), n_c, n_g
+
+
+def colour_over_angle(acc: Accumulator, c_step: float = COLOUR_C_STEP,
+                      gamma_step: float = COLOUR_GAMMA_STEP) -> ColourOverAngle | None:
+    """The colour over angle of a result, or None where the scene has no colour."""
+    if acc.colour == "none":
+        return None
+    groups, n_c, n_g = _cell_groups(c_step, gamma_step)
+    omega = np.bincount(groups, weights=cell_solid_angles().ravel(), minlength=n_c * n_g)
+
+    def table(xyz_cells):  # flux per table cell (3, n_c * n_g)
+        return np.stack([np.bincount(groups, weights=v, minlength=n_c * n_g) for v in xyz_cells])
+
+    flux = table(acc.cell_tristimulus())
+    halves = [table(acc.cell_tristimulus(h)) for h in (0, 1)]
+    ring = lambda f: f.reshape(3, n_c, n_g).sum(axis=1)  # noqa: E731
+    ring_omega = omega.reshape(n_c, n_g).sum(axis=0)
+
+    def colour_of(f, fa, fb, om):
+        uv = uv_prime(f)
+        sigma = 0.5 * np.hypot(*(uv_prime(fa) - uv_prime(fb)))
+        cct, duv = cct_duv(uv)
+        return f / om, uv, sigma, cct, duv
+
+    xyz, uv, sigma, cct, duv = colour_of(flux, *halves, omega)
+    r_xyz, r_uv, r_sigma, r_cct, r_duv = colour_of(ring(flux), *map(ring, halves), ring_omega)
+
+    intensity = xyz[1]
+    beam = intensity >= BEAM_SHARE * intensity.max() if intensity.max() > 0 else \
+        np.zeros_like(intensity, bool)
+    beam &= np.isfinite(uv).all(axis=0)
+    if beam.any():
+        w = flux[1][beam]
+        mean = (uv[:, beam] * w).sum(axis=1) / w.sum()
+        spread = float(np.hypot(*(uv[:, beam] - mean[:, None])).max())
+        noise = float(np.sqrt(np.nanmean(sigma[beam] ** 2)))
+    else:
+        mean, spread, noise = np.array([np.nan, np.nan]), float("nan"), float("nan")
+    total_uv = uv_prime(flux.sum(axis=1))
+    t_cct, t_duv = cct_duv(total_uv)
+    shape = (n_c, n_g)
+    return ColourOverAngle(
+        c=(np.arange(n_c) + 0.5) * c_step, gamma=(np.arange(n_g) + 0.5) * gamma_step,
+        xyz=xyz.reshape(3, *shape), uv=uv.reshape(2, *shape), sigma=sigma.reshape(shape),
+        cct=cct.reshape(shape), duv=duv.reshape(shape), ring_xyz=r_xyz, ring_uv=r_uv,
+        ring_sigma=r_sigma, ring_cct=r_cct, ring_duv=r_duv,
+        mean_uv=(float(mean[0]), float(mean[1])), uniformity=spread, noise=noise,
+        beam_cells=int(beam.sum()),
+        total={"uv": [float(total_uv[0]), float(total_uv[1])], "cct_K": float(t_cct),
+               "duv": float(t_duv)})
