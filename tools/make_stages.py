@@ -590,6 +590,27 @@ def mirror_cup() -> Usd.Stage:
     return stage
 
 
+def warm_downlight() -> Usd.Stage:
+    """The demo downlight in colour, open (no diffuser): a 3000 K phosphor LED (CIE
+    LED-B2) and a champagne anodised reflector whose reflectance rises toward the red, so
+    the light the reflector sends out is warmer than the LED's own."""
+    stage = downlight()
+    stage.GetRootLayer().documentation = (
+        "Demo in colour: the recessed LED downlight without its diffuser, with a 3000 K "
+        "phosphor-converted LED (CIE LED-B2) and a champagne anodised reflector (spectral "
+        "reflectance 0.63 at 400 nm rising to 0.93 at 700 nm); 1200 lm.")
+    stage.RemovePrim("/Luminaire/Diffuser")
+    stage.RemovePrim("/Luminaire/Materials/DiffuserOpal")
+    led = stage.GetPrimAtPath("/Luminaire/LED")
+    led.CreateAttribute("lumitrace:illuminant", Sdf.ValueTypeNames.String).Set("LED-B2")
+    refl = stage.GetPrimAtPath("/Luminaire/Materials/ReflectorAluminium")
+    wl = np.arange(380.0, 781.0, 20.0)
+    rho = 0.62 + 0.31 / (1.0 + np.exp(-(wl - 540.0) / 40.0))
+    refl.CreateAttribute("lumitrace:specularSpectrum", Sdf.ValueTypeNames.Float2Array).Set(
+        [Gf.Vec2f(float(a), float(round(b, 4))) for a, b in zip(wl, rho)])
+    return stage
+
+
 STAGES: dict[str, Callable[[], Usd.Stage]] = {
     "louvre.usda": louvre,
     "reference/isotropic.usda": isotropic,
@@ -599,6 +620,7 @@ STAGES: dict[str, Callable[[], Usd.Stage]] = {
     "reference/paraboloid.usda": paraboloid,
     "reference/mirror_cup.usda": mirror_cup,
     "downlight.usda": downlight,
+    "warm_downlight.usda": warm_downlight,
 }
 
 

@@ -276,7 +276,16 @@ def _summary_text(r, stage) -> str:
         f"{ang(r.beam_angle_c90_c270, r.beam_angle_c90_c270_error)} (C90-C270)",
         f"  field angle     {ang(r.field_angle_c0_c180, r.field_angle_c0_c180_error)} "
         f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
-        f"  symmetry        {r.symmetry}",
+        f"  symmetry        {r.symmetry}"]
+    if r.cct_K is not None:
+        lines += [
+            f"  colour          CCT {r.cct_K:.0f} K, Duv {r.duv:+.4f}, u'v' "
+            f"({r.chromaticity_uv[0]:.4f}, {r.chromaticity_uv[1]:.4f})",
+            f"  uniformity      Delta u'v' {r.colour_uniformity_duv:.4f} within the beam "
+            f"(noise {r.colour_uniformity_noise:.5f})",
+            f"  colour files    {r.colour_data}" + (f"  {r.colour_diagram}"
+                                                     if r.colour_diagram else "")]
+    lines += [
         f"  intensity map   {r.intensity_map}",
         f"  IES / LDT       {r.ies}  {r.ldt}",
         f"  with errors     {r.photometry_data}",

@@ -18,6 +18,8 @@ LDT_SUFFIX = ".ldt"
 POLAR_SUFFIX = ".polar.png"
 SOLID_SUFFIX = ".solid.png"
 PHOTOMETRY_SUFFIX = ".photometry.json"
+COLOUR_SUFFIX = ".colour.json"
+COLOUR_DIAGRAM_SUFFIX = ".colour.png"
 
 
 def stage_name(stage_path: str | os.PathLike) -> str:

@@ -114,7 +114,8 @@ class ResultField:
     attribute after ``lumitrace:result:`` (None: not in the layer) with Sdf value ``kind``
     (asset, int64, int, double, bool, string; vector and list are JSON only); ``exr`` is
     its key in the EXR header's JSON metadata (None: not there); ``group`` nests it in the
-    JSON summary (``outputs`` for file paths, ``photometry`` for the photometric figures).
+    JSON summary (``outputs`` for file paths, ``photometry`` for the photometric figures,
+    ``colour`` for the colour figures, which a stage without colour does not have).
     """
 
     key: str
@@ -225,6 +226,20 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
     _f("symmetry", "string", "", group="photometry", doc="symmetry used in the files"),
     _f("luminous_opening", "vector", "m", group="photometry",
        doc="luminous length (C0), width (C90) and height of the opening"),
+    _f("colour_data", "asset", attribute="colourData", group="outputs",
+       doc="colour over angle: X, Y, Z, u'v', CCT and Duv per C-gamma cell (JSON)"),
+    _f("colour_diagram", "asset", attribute="colourDiagram", group="outputs",
+       doc="chromaticity over gamma and on the CIE 1976 diagram (PNG)"),
+    _f("cct_K", "double", "K", "cct", "cct", group="colour",
+       doc="correlated colour temperature of all the light (Ohno 2013)"),
+    _f("duv", "double", "", "duv", "duv", group="colour",
+       doc="Duv of all the light"),
+    _f("chromaticity_uv", "vector", "", group="colour",
+       doc="CIE 1976 u'v' of all the light"),
+    _f("colour_uniformity_duv", "double", "", "colourUniformity", "colourUniformity",
+       group="colour", doc="largest Delta u'v' of a beam direction from the beam's mean"),
+    _f("colour_uniformity_noise", "double", "", group="colour",
+       doc="RMS standard error of a beam direction's u'v' (the uniformity's noise)"),
 )
 #: Result-layer attribute (after ``lumitrace:result:``) -> Sdf value kind.
 RESULT_KINDS: dict[str, str] = {f.attribute: f.kind for f in RESULT_FIELDS if f.attribute}

@@ -114,3 +114,19 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
     return MapEstimate(raw, filtered, threshold, raw_err, rel(total2), rel(var_f2),
                        np.where(filtered > 0, texel, np.inf))
+
+
+def colour_maps(acc: Accumulator, est: MapEstimate) -> dict[str, np.ndarray]:
+    """The X and Z maps (cd-like, (6R, R)) beside ``est``'s Y: raw, and filtered with the
+    weights that filtered Y (the raw ones where Y is written raw), so that each filtered
+    texel's colour is a weighted mean of raw colours near it. Empty for a scene without
+    colour."""
+    if acc.colour == "none":
+        return {}
+    omega = texel_solid_angles(acc.resolution)
+    xyz = acc.tristimulus_flux()
+    raw = {"raw.X": xyz[0] / omega, "raw.Z": xyz[2] / omega}
+    if est.threshold <= 0 or est.stepped_back:
+        return {"X": raw["raw.X"], "Z": raw["raw.Z"], **raw}
+    _, xz = pull_push(xyz[1], acc.counts(), est.threshold, omega, extra=xyz[[0, 2]])
+    return {"X": xz[0], "Z": xz[1], **raw}

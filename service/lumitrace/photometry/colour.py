@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_GAMMA, cell_solid_angles
+from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, cell_solid_angles
 
 #: Cell size of the colour table (deg): C sectors and gamma zones.
 COLOUR_C_STEP = 15.0

@@ -126,3 +126,83 @@ def _solid_matplotlib(path, pts, tri, title) -> Path:
         fig.savefig(tmp, format="png")
     plt.close(fig)
     return Path(path)
+
+
+def colour_diagram(path: str | os.PathLike, col, title: str = "") -> Path:
+    """Write the colour over angle (PNG): u', v' and CCT over gamma (all round, with their
+    standard errors), and every cell's u'v' on the CIE 1976 diagram with the spectral
+    locus, the Planckian locus and the beam's Delta u'v' circle."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..scene.spectra import observer
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 5.0), dpi=110)
+    g, uv, sig = col.gamma, col.ring_uv, col.ring_sigma
+    lit = np.isfinite(uv).all(axis=0) & (col.ring_xyz[1] > 0)
+    mean = np.asarray(col.mean_uv if np.isfinite(col.mean_uv).all()
+                      else np.nanmean(uv[:, lit], axis=1))
+    for k, (name, colour) in enumerate((("u'", "#c0392b"), ("v'", "#2c5aa0"))):
+        left.errorbar(g[lit], 1000.0 * (uv[k][lit] - mean[k]), yerr=1000.0 * sig[lit],
+                      fmt="o-", ms=3, lw=1.2, color=colour, capsize=2,
+                      label=f"{name} - {mean[k]:.4f}")
+    left.axhline(0.0, color="#999999", lw=0.6)
+    left.set_xlabel("gamma (deg), all C")
+    left.set_ylabel("chromaticity from the beam's mean (x 1/1000, CIE 1976)")
+    left.grid(True, lw=0.4, alpha=0.6)
+    twin = left.twinx()
+    twin.plot(g[lit], col.ring_cct[lit], "s--", ms=3, lw=1, color="#555555", label="CCT")
+    twin.set_ylabel("CCT (K)")
+    lines = left.get_legend_handles_labels()
+    more = twin.get_legend_handles_labels()
+    left.legend(lines[0] + more[0], lines[1] + more[1], fontsize=8, frameon=False,
+                loc="best")
+    left.set_title("colour over gamma (standard errors as bars)", fontsize=10)
+    # the CIE 1976 diagram: spectral locus, Planckian locus, the cells' chromaticities
+    cmf = observer()
+    locus = cmf / np.maximum(cmf.sum(axis=1, keepdims=True), 1e-12)
+    d = cmf[:, 0] + 15 * cmf[:, 1] + 3 * cmf[:, 2]
+    lu, lv = 4 * cmf[:, 0] / d, 9 * cmf[:, 1] / d
+    keep = np.isfinite(lu) & np.isfinite(lv) & (locus[:, 1] > 0)
+    right.plot(np.append(lu[keep], lu[keep][0]), np.append(lv[keep], lv[keep][0]), "k-", lw=0.8)
+    temps = np.linspace(1500.0, 20000.0, 80)
+    planck = np.array([_planck_uv(t) for t in temps])
+    right.plot(planck[:, 0], planck[:, 1], "-", color="#888888", lw=0.8, label="Planckian")
+    cells = np.isfinite(col.uv).all(axis=0) & (col.xyz[1] > 0)
+    weight = col.xyz[1][cells] / col.xyz[1][cells].max()
+    right.scatter(col.uv[0][cells], col.uv[1][cells], s=4 + 30 * weight, c=weight,
+                  cmap="viridis", label="cells (size: intensity)")
+    if np.isfinite(col.uniformity):
+        circle = plt.Circle(col.mean_uv, col.uniformity, fill=False, color="#c0392b", lw=1)
+        right.add_patch(circle)
+        span = max(0.02, 3 * col.uniformity)
+        right.set_xlim(col.mean_uv[0] - span, col.mean_uv[0] + span)
+        right.set_ylim(col.mean_uv[1] - span, col.mean_uv[1] + span)
+    right.set_aspect("equal")
+    right.set_xlabel("u'")
+    right.set_ylabel("v'")
+    right.grid(True, lw=0.4, alpha=0.6)
+    right.legend(fontsize=8, frameon=False, loc="upper right")
+    cct, duv = col.total["cct_K"], col.total["duv"]
+    right.set_title(f"CIE 1976 u'v' of every cell: CCT {cct:.0f} K, Duv {duv:+.4f}\n"
+                    f"beam Delta u'v' {col.uniformity:.4f} (circle; noise {col.noise:.5f})",
+                    fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def _planck_uv(t: float) -> tuple[float, float]:
+    """u'v' of a Planckian radiator of ``t`` K (on the spectral grid)."""
+    from ..scene.spectra import WAVELENGTHS, observer
+
+    lam = WAVELENGTHS * 1e-9
+    spd = 1.0 / (lam ** 5 * np.expm1(1.4387768775e-2 / (lam * t)))
+    x, y, z = spd @ observer()
+    d = x + 15 * y + 3 * z
+    return 4 * x / d, 9 * y / d

@@ -18,12 +18,14 @@ from .. import __version__
 from ..errors import Interrupted, OutputError, OutputWarning, warn
 from ..filenames import INTENSITY_SUFFIX, LATLONG_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from ..photometry import frame
+from ..film.convergence import colour_maps
+from ..photometry.colour import ColourOverAngle, colour_over_angle
 from ..photometry.distribution import Photometry, photometry_of
 from ..run.session import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
 from .latlong import write_latlong_texture
-from .photometric import photometric_paths, write_photometric_files
+from .photometric import photometric_paths, write_colour_files, write_photometric_files
 from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
 from .runs import layer_data
@@ -59,8 +61,10 @@ def plotting_available() -> bool:
     return importlib.util.find_spec("matplotlib") is not None
 
 
-def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path]) -> ResultRecord:
-    """The result record of a traced session, its photometry and its output paths."""
+def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
+                 col: ColourOverAngle | None = None) -> ResultRecord:
+    """The result record of a traced session, its photometry, its colour over angle (None:
+    the stage has no colour) and its output paths."""
     fig = ph.figures
     peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
                                 result.scene.up_axis, frame.luminaire_rotation(result.scene))
@@ -68,6 +72,7 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path]) ->
     return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          "luminous_opening": (o.length, o.width, o.height),
+                         **(col.as_dict() if col is not None else {}),
                          **{k: str(v) for k, v in paths.items()}})
 
 
@@ -82,6 +87,8 @@ def exr_metadata(result: TraceResult, record: ResultRecord) -> dict:
         "software": f"lumitrace {__version__}",
         **record.exr_metadata(),
         "units": {"Y": "cd", "raw.Y": "cd", "count": "photons",
+                  **({c: "CIE XYZ, Y in cd" for c in ("X", "Z", "raw.X", "raw.Z")}
+                     if acc.colour != "none" else {}),
                   "relativeError": "relative standard error of Y per texel (capped at "
                                    f"{MAX_TEXEL_ERROR:g}: no estimate)"},
         "axes": f"stage axes, up {scene.up_axis}",
@@ -137,12 +144,17 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
              "installed (install lumitrace[plot])", OutputWarning)
     pictures = pictures and drawable
+    est = result.estimate
+    ph = photometry_of(scene, result.accumulator)
+    col = colour_over_angle(result.accumulator)
+    if col is None:
+        paths.pop("colour_data")
+    if not pictures or col is None:
+        paths.pop("colour_diagram")
     if not pictures:
         paths.pop("polar_diagram")
         paths.pop("photometric_solid")
-    est = result.estimate
-    ph = photometry_of(scene, result.accumulator)
-    record = build_record(result, ph, paths)
+    record = build_record(result, ph, paths, col)
     folders = [out, layer_dir]
     with locked(folders, name, wait):
         for note in recover(folders, name, [p.name for p in paths.values()]):
@@ -152,10 +164,13 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         try:
             staged = {k: tx.staged(v) for k, v in paths.items()}
             write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id)
+            if col is not None:
+                write_colour_files(col, staged, name, pictures, run_id=tx.run_id)
             acc = result.accumulator
             channels = {"Y": est.filtered, "raw.Y": est.raw,
                         "count": acc.counts().astype(np.float64),
-                        "relativeError": np.minimum(est.texel_error, MAX_TEXEL_ERROR)}
+                        "relativeError": np.minimum(est.texel_error, MAX_TEXEL_ERROR),
+                        **colour_maps(acc, est)}
             meta = {**exr_metadata(result, record), **(extra or {}), "runId": tx.run_id,
                     "stagePath": str(stage_path or "")}
             write_intensity_exr(staged["intensity_map"], channels, meta)

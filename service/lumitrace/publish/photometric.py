@@ -6,8 +6,10 @@ import json
 from pathlib import Path
 
 from ..atomic import write_text
-from ..filenames import IES_SUFFIX, LDT_SUFFIX, PHOTOMETRY_SUFFIX, POLAR_SUFFIX, SOLID_SUFFIX
+from ..filenames import (COLOUR_DIAGRAM_SUFFIX, COLOUR_SUFFIX, IES_SUFFIX, LDT_SUFFIX,
+                         PHOTOMETRY_SUFFIX, POLAR_SUFFIX, SOLID_SUFFIX)
 from ..photometry.diagrams import photometric_solid, polar_diagram
+from ..photometry.colour import ColourOverAngle
 from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
 from ..photometry.lm63 import write_ies
@@ -22,7 +24,9 @@ def photometric_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
     return {"ies": out / f"{name}{IES_SUFFIX}", "ldt": out / f"{name}{LDT_SUFFIX}",
             "photometry_data": out / f"{name}{PHOTOMETRY_SUFFIX}",
             "polar_diagram": out / f"{name}{POLAR_SUFFIX}",
-            "photometric_solid": out / f"{name}{SOLID_SUFFIX}"}
+            "photometric_solid": out / f"{name}{SOLID_SUFFIX}",
+            "colour_data": out / f"{name}{COLOUR_SUFFIX}",
+            "colour_diagram": out / f"{name}{COLOUR_DIAGRAM_SUFFIX}"}
 
 
 def photometry_json(ph: Photometry, run_id: str = "") -> str:
@@ -79,3 +83,14 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
         # a signal waits until the picture is drawn
         with signals_held():
             photometric_solid(paths["photometric_solid"], grid, scene, title)
+
+
+def write_colour_files(col: ColourOverAngle, paths: dict[str, Path], name: str,
+                       pictures: bool = True, run_id: str = "") -> None:
+    """Write the colour over angle as JSON and, with ``pictures``, its diagram."""
+    write_text(paths["colour_data"], json.dumps({"runId": run_id, **col.table()}, indent=1)
+               + "\n")
+    if pictures:
+        from ..photometry.diagrams import colour_diagram
+
+        colour_diagram(paths["colour_diagram"], col, name)

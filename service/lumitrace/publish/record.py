@@ -62,6 +62,8 @@ class ResultRecord(Mapping[str, Any]):
             if f.attribute is None:
                 continue
             v = self._values[f.key]
+            if v is None and f.group == "colour":
+                continue  # a stage without colour has no colour figures
             if f.kind == "asset":
                 if v is None:
                     continue
