@@ -133,8 +133,9 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
                            for v in value])
         coarse_res = lv_res
 
+    # the intensity's total flux restored exactly; the other quantities scaled alike, so
+    # that a colour stays a weighted mean of raw ones
     out = coarse.reshape(len(channels), *shape)
-    kept = (out * omega).reshape(len(channels), -1).sum(axis=1)
-    scale = np.divide(totals, kept, out=np.ones_like(totals), where=kept > 0)
-    out = out * scale[:, None, None]
+    kept = float((out[0] * omega).sum())
+    out = out * (total / kept) if kept > 0 else out
     return out[0] if extra is None else (out[0], out[1:])

@@ -45,7 +45,8 @@ def sampled_spectrum(prim: Usd.Prim, name: str, time: Usd.TimeCode) -> np.ndarra
     low, high = SPECTRUM_RANGES[name]
     if (v < low).any() or (v > high).any():
         bad = v[(v < low) | (v > high)][0]
-        raise StageError(f"values must be in [{low:g}, {high:g}], got {bad:g}", where, name)
+        allowed = f">= {low:g}" if np.isinf(high) else f"in [{low:g}, {high:g}]"
+        raise StageError(f"values must be {allowed}, got {bad:g}", where, name)
     hold = name != schema.SPECTRUM  # a surface keeps its end values, a light has no power
     out = spectra.resample(wl, v, hold=hold)
     if not hold and not (out @ spectra.observer()[:, 1]) > 0.0:
