@@ -59,6 +59,11 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "cieFluxCode": "44 75 94 75 99",
         "polarDiagram": out / "stage.polar.png",
         "photometricSolid": out / "stage.solid.png",
+        "colourData": out / "stage.colour.json",
+        "colourDiagram": out / "stage.colour.png",
+        "cct": 2890.5,
+        "duv": -0.0009,
+        "colourUniformity": 0.0012,
     }
 
 

@@ -182,3 +182,62 @@ def test_photons_cut_by_the_depth_limit_are_retraced_when_their_last_part_change
     a, b = r.accumulator.emitters[0], fresh.accumulator.emitters[0]
     assert (a.cut, a.absorbed) == (b.cut, b.absorbed)
     assert np.array_equal(r.accumulator.counts(), fresh.accumulator.counts())
+
+
+def _ramp(prim, x: float) -> None:
+    """A reflectance spectrum on ``prim`` rising from 0.3 to 0.3 + 0.6 x toward the red."""
+    from pxr import Sdf
+
+    prim.CreateAttribute("lumitrace:reflectanceSpectrum", Sdf.ValueTypeNames.Float2Array).Set(
+        [Gf.Vec2f(400.0, 0.3), Gf.Vec2f(700.0, 0.3 + 0.6 * float(x))])
+
+
+COLOUR_EDITS = st.lists(st.tuples(st.sampled_from(["colour", "light colour", "material",
+                                                   "move", "active"]),
+                                  st.sampled_from(PARTS), st.floats(0.05, 0.95)),
+                        min_size=1, max_size=3)
+
+
+@settings(max_examples=6, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(COLOUR_EDITS)
+def test_incremental_retrace_of_a_spectral_scene_equals_a_fresh_trace(edits):
+    """With a coloured surface photons carry a spectral throughput: retracing takes their
+    recorded X and Z out and traces them again, and X and Z match a fresh trace exactly."""
+    from pxr import Sdf
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _luminaire(Path(tmp) / "lum.usda")
+        stage = Usd.Stage.Open(str(path))
+        _ramp(stage.GetPrimAtPath(PARTS[2]), 0.8)
+        stage.GetPrimAtPath("/Luminaire/Led").CreateAttribute(
+            "lumitrace:illuminant", Sdf.ValueTypeNames.String).Set("blackbody 3000")
+        stage.GetRootLayer().Save()
+        scene = read_stage(path)
+        assert scene.colour == "spectral"
+        frame = TracingFrame.of(scene)
+        r = Refinement(scene, SETTINGS, records_cap=1 << 30)
+        _refine(r, prepare(scene, frame))
+        for kind, part, x in edits:
+            if kind == "colour":
+                _ramp(stage.GetPrimAtPath(PARTS[2] if part == PARTS[1] else part), x)
+            elif kind == "light colour":
+                stage.GetPrimAtPath("/Luminaire/Led").GetAttribute(
+                    "lumitrace:illuminant").Set(f"blackbody {2500 + 4000 * x:.0f}")
+            else:
+                _edit(stage, kind, PARTS[3] if part == PARTS[2] and kind == "active" else part,
+                      x)
+            stage.GetRootLayer().Save()
+            new = read_stage(path)
+            sel = select(r.records, r.scene, new, frame)
+            if sel.restart is not None:  # the coloured part went: no longer spectral
+                assert new.colour != "spectral"
+                return
+            ps = prepare(new, frame)
+            retrace(r, new, sel, lambda work: [trace_batch(ps, j, photons=ids, records=True)
+                                               for j, ids in work], 4096)
+            fresh = run(new, SETTINGS, frame=frame)
+            a, b = r.accumulator.emitters[0], fresh.accumulator.emitters[0]
+            assert np.array_equal(a.counts, b.counts), kind
+            for mine, theirs in zip(a.xz, b.xz):
+                assert np.array_equal(mine, theirs), kind
