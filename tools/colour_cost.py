@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import warnings
 import json
 import statistics
 import sys
@@ -59,6 +60,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")  # the short warm-up run's notes
     spectral = read_stage(ROOT / "stages" / "warm_downlight.usda")
     plain = neutral(spectral)
     assert spectral.colour == "spectral" and plain.colour == "emitters"
@@ -89,7 +91,9 @@ def main(argv=None) -> int:
             print(f"  {k:10s} {v:6.2f}")
         print(f"  spectral / monochrome = {report['spectral_over_monochrome']:.2f}")
         print(f"  escaped flux: spectral {flux['spectral']:.1f} lm, surfaces neutral "
-              f"{flux['monochrome']:.1f} lm (the champagne reflector absorbs more)")
+              f"{flux['monochrome']:.1f} lm (their scalar albedo is the D65 luminous mean "
+              "of the spectrum; the 3000 K LED weights the red, where the reflector "
+              "reflects more)")
         v = report["single_wavelength_relative_variance_per_photon"]
         print(f"  single-wavelength photons would add a relative variance per photon of "
               f"{v['X']:.2f} (X) and {v['Z']:.2f} (Z), none to Y")
