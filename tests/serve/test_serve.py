@@ -91,6 +91,29 @@ def test_an_edit_saved_on_disk_is_a_revision_and_our_own_writes_are_not(stage):
         assert r["photons"] == 40_000
 
 
+def test_a_lights_colour_is_a_rescale_and_a_surfaces_colour_a_retrace(stage):
+    """Through deltas: a colour temperature on the LED of a luminaire with neutral
+    surfaces retraces nothing, yet the result has that colour; a champagne reflector then
+    makes photons spectral (a restart), and the result is warmer."""
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        assert s.client.results()["colour"]["cct_K"] is None  # no colour: none written
+        answer = s.client.set("/Luminaire/LED", "lumitrace:illuminant", "blackbody 4000")
+        assert answer["effect"]["kind"] == "flux"
+        s.wait_done(1)
+        r = s.client.results()
+        assert r["photons"] == 40_000 and r["colour"]["cct_K"] == pytest.approx(4000, abs=10)
+        assert r["colour"]["colour_uniformity_duv"] == pytest.approx(0.0, abs=1e-9)
+        answer = s.client.set(REFLECTOR, "lumitrace:specularSpectrum",
+                              [[400.0, 0.6], [700.0, 0.95]])
+        assert answer["effect"]["kind"] == "material"
+        s.wait_done(2)
+        r = s.client.results()
+        assert r["colour"]["cct_K"] < 3950  # the reflector's light is warmer
+        assert r["colour"]["colour_uniformity_duv"] > 1e-4
+        assert Path(r["outputs"]["colour_data"]).exists()
+
+
 def _ies(path, half_angle):
     """A rotational IES profile: 1000 cd within ``half_angle`` of the axis, 0 beyond."""
     from lumitrace.photometry.grid import CGammaGrid

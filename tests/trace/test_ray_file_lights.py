@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from lumitrace import tm25
 from lumitrace.errors import StageError

@@ -5,7 +5,7 @@ import shutil
 
 import numpy as np
 import pytest
-from pxr import Usd
+from pxr import Sdf, Usd
 
 from lumitrace.film.accumulate import Accumulator
 from lumitrace.photometry.colour import colour_over_angle, uv_prime
@@ -107,10 +107,10 @@ def test_a_coloured_integrating_sphere_follows_its_closed_form(tmp_path):
     wl = np.array([380.0, 780.0])
     rho = np.array([0.55, 0.85])  # a linear ramp: warmer at every bounce
     stage.GetPrimAtPath("/Luminaire/Materials/Wall").CreateAttribute(
-        "lumitrace:reflectanceSpectrum", __import__("pxr").Sdf.ValueTypeNames.Float2Array).Set(
+        "lumitrace:reflectanceSpectrum", Sdf.ValueTypeNames.Float2Array).Set(
         [(float(a), float(b)) for a, b in zip(wl, rho)])
     stage.GetPrimAtPath("/Luminaire/Source").CreateAttribute(
-        "lumitrace:illuminant", __import__("pxr").Sdf.ValueTypeNames.String).Set("daylight 6500")
+        "lumitrace:illuminant", Sdf.ValueTypeNames.String).Set("daylight 6500")
     stage.Save()
     scene = read_stage(path)
     assert scene.colour == "spectral"
