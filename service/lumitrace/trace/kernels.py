@@ -441,8 +441,12 @@ def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
 # A dispersive dielectric must send each wavelength its own way: there the photon picks one
 # band (with the probability of its luminous share, draw 2, which no bounce uses) and
 # becomes monochromatic, its throughput 1 / Y of that band.
+# A photon's band field says what its throughput is: PRISTINE, 1 in every band (nothing
+# coloured met yet: its row is not even written, and neutral surfaces leave it so), MIXED
+# (its row holds it), or the band it picked.
 
 FIXED = 1 << 20  # = lumitrace.scene.spectra.FIXED_POINT
+PRISTINE, MIXED = -1, -2
 
 
 @numba.njit(**_INLINE)
@@ -462,21 +466,33 @@ def _rescale(tp, i, j, table, m, p):
 
 
 @numba.njit(**_INLINE)
-def _fixed_xz(tp, i, w):
-    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums)."""
+def _fixed_xz(tp, i, pristine, w):
+    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums); a ``pristine``
+    photon's throughput is 1 in every band, the same sums as a row of ones."""
     x, z = 0.0, 0.0
-    for b in range(tp.shape[1]):
-        x += w[0, b] * tp[i, b]
-        z += w[2, b] * tp[i, b]
+    for b in range(w.shape[1]):
+        t = 1.0 if pristine else tp[i, b]
+        x += w[0, b] * t
+        z += w[2, b] * t
     return np.int64(round(x * FIXED)), np.int64(round(z * FIXED))
 
 
 @numba.njit(**_INLINE)
-def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, w, tp, tband,
-                  i, j, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised, px, py, pz):
+def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, neutral, w,
+                  tp, tband, i, j, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised,
+                  px, py, pz):
     """:func:`scatter_one` for a spectral photon ``i`` on material ``m``, its new
     throughput written to row ``j`` (``j`` <= ``i``) if it survives."""
     band = tband[i]
+    if band == PRISTINE and neutral[m]:  # nothing coloured met, nor here: as monochrome
+        out = scatter_one(kind, s_refl[m, 0], s_spec[m, 0], s_trans[m, 0], s_ior[m, 0], alpha,
+                          dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised, px, py, pz)
+        tband[j] = PRISTINE
+        return out
+    if band == PRISTINE:
+        for b in range(tp.shape[1]):
+            tp[i, b] = 1.0
+        band = MIXED
     ior = s_ior[m, 0]
     if kind == DIELECTRIC and dispersive[m]:
         if band < 0:  # a dispersive surface: one band goes on, picked by luminous share
@@ -522,7 +538,7 @@ def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, w,
 def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
            o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
            ior, alpha, polarised, spectral, s_refl, s_spec, s_trans, s_ior, dispersive,
-           band_w, tp, tband, xz, escaped_xz, counts, res, layout, escaped, n_escaped,
+           neutral, band_w, tp, tband, xz, escaped_xz, counts, res, layout, escaped, n_escaped,
            part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
            side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
            rec_cells, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
@@ -536,8 +552,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     (rows ``pid``) is updated; with ``exits`` each escape's ray where it leaves the
     goniophotometer's box (world m) and its direction, at its row of ``exit_pos`` and
     ``exit_dir``. In a ``spectral`` scene each photon carries its spectral throughput
-    ``tp`` (N, bands; compacted in place) and its band ``tband`` (-1 until a dispersive
-    surface picks one); see :func:`_spectral_hit`. An escape adds its fixed-point X and Z
+    ``tp`` (N, bands; compacted in place) and its state ``tband`` (PRISTINE, MIXED or a
+    band a dispersive surface picked); see :func:`_spectral_hit`. An escape adds its fixed-point X and Z
     (``band_w`` (3, bands): the emitter's X, Y, Z per band) to ``xz`` (rows X, X, Z, Z of
     the two halves), to ``escaped_xz`` (2, escapes) and to its record.
     Returns (survivors, escaped bins, cut, absorbed).
@@ -557,7 +573,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             tex = _texel(dx, dy, dz, res, layout)
             counts[half, tex] += 1
             if spectral:
-                qx_, qz_ = _fixed_xz(tp, i, band_w)
+                qx_, qz_ = _fixed_xz(tp, i, tband[i] == PRISTINE, band_w)
                 xz[half, tex] += qx_
                 xz[2 + half, tex] += qz_
                 escaped_xz[0, n_escaped >> 1] = qx_
@@ -623,7 +639,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             if spectral:
                 alive, dx, dy, dz, qx, qy, qz = _spectral_hit(
                     m, kind[m], alpha[m], s_refl, s_spec, s_trans, s_ior, dispersive,
-                    band_w, tp, tband, i, n_out, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
+                    neutral, band_w, tp, tband, i, n_out, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
                     polarised, qx, qy, qz)
             else:
                 alive, dx, dy, dz, qx, qy, qz = scatter_one(
@@ -645,8 +661,9 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
         pid2[n_out] = row
         if spectral and stay:  # moved on unchanged: its throughput moves along
             tband[n_out] = tband[i]
-            for b in range(tp.shape[1]):
-                tp[n_out, b] = tp[i, b]
+            if tband[i] != PRISTINE:
+                for b in range(tp.shape[1]):
+                    tp[n_out, b] = tp[i, b]
         n_out += 1
     return n_out, n_escaped, cut, absorbed
 

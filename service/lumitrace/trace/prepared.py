@@ -92,17 +92,19 @@ class PreparedScene:
         """The scene's arrays as :func:`~lumitrace.trace.kernels.bounce` takes them:
         normals and first corners (T, 3), material and part of every triangle, then the
         material table (kind, reflectance, specular, transmittance, ior, alpha), the
-        polarisation flag, the spectral flag, the spectral tables (M, bands) and which
-        materials disperse (M,) (1-element stand-ins when the scene is not spectral)."""
+        polarisation flag, the spectral flag, the spectral tables (M, bands), which
+        materials disperse and which are neutral (M,) (1-element stand-ins when the scene
+        is not spectral)."""
         t = self.table or MaterialTable.from_materials(self.scene.materials)
         spectral = self.spectral
         if spectral and t.spectra is None:
             t = MaterialTable.from_materials(self.scene.materials, spectral=True)
         if spectral:
             colour = tuple(np.ascontiguousarray(a, np.float64) for a in t.spectra) + (
-                np.array([m.abbe_number != 0.0 for m in self.scene.materials]),)
+                np.array([m.abbe_number != 0.0 for m in self.scene.materials]),
+                np.array([m.neutral for m in self.scene.materials]))
         else:
-            colour = (np.zeros((1, 1)),) * 4 + (np.zeros(1, np.bool_),)
+            colour = (np.zeros((1, 1)),) * 4 + (np.zeros(1, np.bool_),) * 2
         f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
         part = (self.part_index if self.part_index is not None and self.part_index.size
                 else np.zeros(self.triangle_count, np.int64))

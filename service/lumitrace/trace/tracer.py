@@ -57,16 +57,16 @@ class _Waves:
         self.tp = self.tband = self.escaped_xz = None
 
     def spectral(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The throughput (n, bands) set to 1, the picked bands (n,) set to -1 and room
-        for the escapes' X and Z (2, n) of a spectral batch of ``n`` photons."""
+        """Room for the throughput (n, bands), the photons' states (n,) set to pristine
+        (throughput 1 in every band, the rows not written) and room for the escapes' X
+        and Z (2, n) of a spectral batch of ``n`` photons."""
         from ..scene.spectra import BANDS
 
         if self.tp is None:
             self.tp = np.empty((self.size, BANDS))
             self.tband = np.empty(self.size, np.int64)
             self.escaped_xz = np.empty((2, self.size), np.int64)
-        self.tp[:n] = 1.0
-        self.tband[:n] = -1
+        self.tband[:n] = kernels.PRISTINE
         return self.tp, self.tband, self.escaped_xz
 
     @classmethod
@@ -134,7 +134,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     reach = kernels.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
                          *ps.reach_box) if ps.embree is not None else 0
     n_escaped = 0
-    if spectral:  # unit throughput in every band, no band picked yet
+    if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
         tp, tband, escaped_xz = w.spectral(n)
     else:
