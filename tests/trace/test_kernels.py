@@ -79,6 +79,35 @@ def test_goniometer_cells_follow_their_edges(seed):
     assert np.array_equal(cell[clear], want[clear])
 
 
+def test_fast_cells_are_the_exact_cells_even_a_hair_from_an_edge():
+    """Cells come from fast angles unless those are within a margin of an edge; the result
+    is then libm's own, so even directions 1e-9 deg off an edge land where acos and atan2
+    put them."""
+    r = np.random.default_rng(3)
+    k = r.integers(0, len(gm.GAMMA_EDGES), 4000)
+    j = r.integers(0, gm.N_C, 4000)
+    off = r.choice([-1e-9, 0.0, 1e-9, -1e-6, 1e-6, 3e-5], 4000)
+    g = np.clip(gm.GAMMA_EDGES[k] + off, 0.0, 180.0)
+    c = j * gm.C_STEP + r.choice([-1e-9, 0.0, 1e-9, 2e-6], 4000)
+    g = np.concatenate([g, np.degrees(np.arccos(r.uniform(-1, 1, 4000)))])
+    c = np.concatenate([c, r.uniform(0, 360, 4000)])
+    d = np.stack([np.sin(np.radians(g)) * np.cos(np.radians(c)),
+                  np.sin(np.radians(g)) * np.sin(np.radians(c)), -np.cos(np.radians(g))])
+    args = (np.eye(3), gm.EXTRA_EDGES, 1.0 / gm.C_STEP, 1.0 / gm.GAMMA_STEP, gm.N_C,
+            gm.N_GAMMA)
+    cell, _ = kernels.gonio_bins(np.zeros_like(d), np.ascontiguousarray(d), np.eye(3),
+                                 np.full(3, -1.0), np.ones(3), gm.EXTRA_EDGES, gm.C_STEP,
+                                 gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA, gm.EXIT_SIDE)
+    exact = [kernels._gonio_cell_exact(*d[:, i], *args) for i in range(d.shape[1])]
+    assert np.array_equal(cell, exact)
+    # and the fast angles are as close as the margin assumes
+    x = np.linspace(-1.0, 1.0, 200_001)
+    assert max(abs(kernels._acos_fast(v) - np.arccos(v)) for v in x[::50]) < 2.5e-8
+    a = np.linspace(0, 2 * np.pi, 40_001)
+    assert max(abs(kernels._atan2_fast(np.sin(t), np.cos(t)) - np.arctan2(np.sin(t), np.cos(t)))
+               for t in a[:-1]) < 1.5e-8
+
+
 def test_directions_exactly_on_c_axes_and_diagonals_take_the_cell_above():
     """As atan2 puts them: C = 0, 45, ..., 315 deg exactly start their cells."""
     s, z = 0.6, -0.8  # gamma = acos(0.8), well inside its gamma cell
