@@ -54,6 +54,7 @@ class _Waves:
         self.o32 = np.empty((n, 3), np.float32)
         self.d32 = np.empty((n, 3), np.float32)
         self.escaped = np.empty(2 * n, np.int64)
+        self.rows = np.arange(n, dtype=np.int64)
         self.tp = self.tband = self.escaped_xz = None
 
     def spectral(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -126,7 +127,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                         args=ps.emitter_args[job.emitter])
     kernels.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
                   w.o32, w.d32)
-    w.pid[cur][:n] = np.arange(n)
+    w.pid[cur][:n] = w.rows[:n]
     # polarisation matters only where a dielectric can see it
     if ps.polarised:
         w.pol[cur][:n] = UNPOLARISED
@@ -169,7 +170,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         if n == 0:
             break
     if n_escaped:
-        tally.cells = counts_of(w.escaped[:n_escaped].copy(), N_BINS)
+        tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
     if spectral:
         tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2], escaped_xz[:, :n_escaped // 2])
     if rec is not None:
