@@ -157,8 +157,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         n_next, n_escaped, cut, absorbed = kernels.bounce(
             depth, job.max_depth, prim, tfar, w.o[cur], w.d[cur],
             w.pol[cur], w.base[cur][:n], w.pid[cur], w.o[nxt], w.d[nxt], w.pol[nxt],
-            w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp, tband, xz,
-            escaped_xz, tally.counts, job.resolution,
+            w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp,
+            tband, xz, escaped_xz, tally.counts, job.resolution,
             _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
             rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, r.x, r.z,
             *ps.grid_args,
@@ -172,7 +172,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     if n_escaped:
         tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
     if spectral:
-        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2], escaped_xz[:, :n_escaped // 2])
+        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2],
+                                   escaped_xz[:, :n_escaped // 2])
     if rec is not None:
         tally.records = rec
     if exit_rays:
