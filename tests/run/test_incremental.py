@@ -241,3 +241,34 @@ def test_incremental_retrace_of_a_spectral_scene_equals_a_fresh_trace(edits):
             assert np.array_equal(a.counts, b.counts), kind
             for mine, theirs in zip(a.xz, b.xz):
                 assert np.array_equal(mine, theirs), kind
+
+
+def test_slab_masks_narrow_a_geometry_edit_and_follow_their_definition(tmp_path):
+    """Moving a part retraces the photons whose path boxes can meet its new boxes: by the
+    64 cells and, along each axis, the 32 slabs; the slabs leave out photons the cells
+    alone would take, and every slab mask is the slabs its box spans."""
+    from lumitrace.trace.records import SLABS
+
+    path, scene, frame, r, stage = _traced_luminaire(tmp_path / "lum.usda")
+    grid = frame.grid
+    lo = np.random.default_rng(2).uniform(-1, 1, (3, 500))
+    hi = lo + np.random.default_rng(3).uniform(0, 0.5, (3, 500))
+    masks = grid.box_slabs(lo, hi)
+    for k in range(3):
+        a = np.clip(np.floor((lo[k] - grid.lo[k]) / (grid.hi[k] - grid.lo[k]) * SLABS), 0,
+                    SLABS - 1)
+        b = np.clip(np.floor((hi[k] - grid.lo[k]) / (grid.hi[k] - grid.lo[k]) * SLABS), 0,
+                    SLABS - 1)
+        want = [sum(1 << s for s in range(int(i), int(j) + 1)) for i, j in zip(a, b)]
+        assert masks[:, k].tolist() == want
+    _edit(stage, "move", PARTS[3], 0.6)
+    stage.GetRootLayer().Save()
+    new = read_stage(path)
+    sel = select(r.records, r.scene, new, frame)
+    from lumitrace.trace.records import part_bits
+
+    rec = r.records[0]
+    tri = (new.part_geometry()[PARTS[3]][0] - np.array(frame.center)) / frame.scale
+    by_cells = ((rec.parts & part_bits([PARTS[3]])[0]) != 0) | (
+        (rec.cells & grid.triangle_cells(tri)) != 0)
+    assert 0 < sel.photons < by_cells.sum()

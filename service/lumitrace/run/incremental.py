@@ -8,7 +8,8 @@ records (:mod:`lumitrace.trace.records`):
 - every photon of an emitter whose shape, shaping or placement changed;
 - photons that hit a part whose material changed (a material edit, a rebinding);
 - photons that hit a part whose geometry changed or that is gone, and photons whose path
-  segments pass through the cells the part's new geometry occupies.
+  segments pass through the cells the part's new geometry occupies, and through its slabs
+  along each of the three axes.
 
 :func:`retrace` takes those photons' old contributions out of the accumulator and traces
 them again with the same indices; the result equals a fresh trace of the edited scene in
@@ -79,13 +80,14 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
     new_mats = {m.path: m for m in new.materials}
     changed_mats = {p for p in set(old_mats) | set(new_mats) if old_mats.get(p) != new_mats.get(p)}
     bits_of: list[str] = []
-    cells = np.uint64(0)
+    places = []  # (cells, slabs (3,)) of every part's new geometry
     for name in set(old_parts) | set(new_parts):
         a, b = old_parts.get(name), new_parts.get(name)
         if a is None or b is None or not np.array_equal(a[0], b[0]):
             bits_of.append(name)  # moved, reshaped, added or removed
             if b is not None:
-                cells |= frame.grid.triangle_cells(_normalised(b[0], frame))
+                tri = _normalised(b[0], frame)
+                places.append((frame.grid.triangle_cells(tri), frame.grid.triangle_slabs(tri)))
         elif not np.array_equal(a[1], b[1]) or changed_mats & (set(a[1]) | set(b[1])):
             bits_of.append(name)  # other material slots, or a material it uses changed
     bits = np.bitwise_or.reduce(part_bits(bits_of)) if bits_of else np.uint64(0)
@@ -94,7 +96,9 @@ def select(records: list[PhotonRecords] | None, old: Scene, new: Scene,
         if i in changed_emitters:
             rows.append(np.arange(len(rec), dtype=np.int64))
         else:
-            hit = ((rec.parts & bits) != 0) | ((rec.cells & cells) != 0)
+            hit = (rec.parts & bits) != 0
+            for cells, slabs in places:  # a path whose boxes can meet the part's boxes
+                hit |= ((rec.cells & cells) != 0) & ((rec.slabs & slabs) != 0).all(axis=1)
             rows.append(np.flatnonzero(hit).astype(np.int64))
     return Selection(tuple(rows))
 

@@ -37,8 +37,8 @@ WRITE_INTERVAL = 2.0
 BURST_GAP = 0.15
 BURST_QUIET = 0.05
 BURST_WAIT = 0.5
-#: Bytes of per-photon records kept for selective retracing (28 bytes a photon: 1 GiB
-#: holds about 38 million photons); above it, an edit restarts the trace.
+#: Bytes of per-photon records kept for selective retracing (40 bytes a photon: 1 GiB
+#: holds about 27 million photons); above it, an edit restarts the trace.
 RECORDS_CAP = 1 << 30
 #: Above this share of the traced photons, an edit is traced afresh rather than retraced:
 #: both give the same map, and a fresh trace shows its first result within one small round.

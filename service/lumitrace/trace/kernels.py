@@ -489,6 +489,25 @@ def _segment_mask(ax, ay, az, bx, by, bz, glo, ghi, gn, m0, m1, m2):
 
 
 @numba.njit(**_INLINE)
+def _slab_bits(a, b, lo, hi):
+    """The slabs (32 across lo..hi, a uint32 mask) that the interval a..b overlaps."""
+    i = _grid_index(min(a, b), lo, hi, 32)
+    j = _grid_index(max(a, b), lo, hi, 32)
+    return numba.uint32(((numba.uint64(1) << numba.uint64(j - i + 1)) - numba.uint64(1))
+                        << numba.uint64(i))
+
+
+@numba.njit(**_INLINE)
+def _mark_segment(rec_cells, rec_slabs, row, ax, ay, az, bx, by, bz, glo, ghi, gn, m0, m1,
+                  m2):
+    """Add segment a -> b to photon ``row``'s cell mask and its slab masks."""
+    rec_cells[row] |= _segment_mask(ax, ay, az, bx, by, bz, glo, ghi, gn, m0, m1, m2)
+    rec_slabs[row, 0] |= _slab_bits(ax, bx, glo[0], ghi[0])
+    rec_slabs[row, 1] |= _slab_bits(ay, by, glo[1], ghi[1])
+    rec_slabs[row, 2] |= _slab_bits(az, bz, glo[2], ghi[2])
+
+
+@numba.njit(**_INLINE)
 def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
     """Where the ray from o along d leaves the record grid's box."""
     _, t = _box_exit((ox, oy, oz), (dx, dy, dz), glo, ghi)
@@ -608,8 +627,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
            neutral, band_w, tp, tband, xz, escaped_xz, counts, res, layout, escaped, n_escaped,
            part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
            side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
-           rec_cells, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits, exit_pos, exit_dir, epsilon,
-           backoff, near_hit):
+           rec_cells, rec_slabs, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits,
+           exit_pos, exit_dir, epsilon, backoff, near_hit):
     """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
     (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
 
@@ -665,8 +684,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                 rec_cell[row] = cell
                 rec_exit[row] = ex - n_c * n_gamma
                 qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
-                rec_cells[row] |= _segment_mask(ox, oy, oz, qx, qy, qz, glo, ghi, gn,
-                                                m0, m1, m2)
+                _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
+                              gn, m0, m1, m2)
             continue
         if n_parts:
             part_hits[part_index[tri]] += 1
@@ -678,7 +697,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
         nx, ny, nz = normals[tri, 0], normals[tri, 1], normals[tri, 2]
         if records:
             rec_parts[row] |= part_bit[tri]
-            rec_cells[row] |= _segment_mask(ox, oy, oz, px, py, pz, glo, ghi, gn, m0, m1, m2)
+            _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, px, py, pz, glo, ghi, gn,
+                          m0, m1, m2)
         if depth == last:
             cut += 1
             if records:

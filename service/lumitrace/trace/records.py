@@ -1,4 +1,4 @@
-"""Per-photon records: what each traced photon did, in 28 bytes (36 in a spectral scene), so
+"""Per-photon records: what each traced photon did, in 40 bytes (48 in a spectral scene), so
 that an edit can find the photons whose paths it can change and retrace exactly those.
 
 - ``texel``: where it escaped (the cube-map texel), or :data:`ABSORBED` / :data:`CUT`;
@@ -9,6 +9,9 @@ that an edit can find the photons whose paths it can change and retrace exactly 
 - ``cells``: a bitmask of the cells of a 64-cell grid over the luminaire (pinned with the
   tracing frame, :class:`CellGrid`) that the bounding boxes of its path segments overlap
   (escaping segments clipped to the grid's box);
+- ``slabs``: per axis of that grid's box, a bitmask of the 32 slabs across it that those
+  boxes overlap: a part far from a path along any one axis is told apart from it even
+  where the 64 cells are too coarse (a thin blade beside a path in the same cell);
 - ``x``, ``z``: in a spectral scene, the X and Z it added when it escaped (fixed point, see
   :mod:`lumitrace.scene.spectra`); empty arrays otherwise.
 
@@ -26,7 +29,7 @@ import numpy as np
 ABSORBED = -1
 CUT = -2
 #: Bytes of one photon's record, and what a spectral scene's records add.
-RECORD_BYTES = 4 + 4 + 2 + 2 + 8 + 8
+RECORD_BYTES = 4 + 4 + 2 + 2 + 8 + 8 + 3 * 4
 COLOUR_RECORD_BYTES = 4 + 4
 
 
@@ -40,6 +43,7 @@ class PhotonRecords:
     segments: np.ndarray  # uint16 (saturating)
     parts: np.ndarray  # uint64
     cells: np.ndarray  # uint64
+    slabs: np.ndarray  # (N, 3) uint32
     x: np.ndarray  # int32, spectral scenes only (else empty)
     z: np.ndarray  # int32, spectral scenes only (else empty)
 
@@ -49,7 +53,7 @@ class PhotonRecords:
         return cls(np.full(n, ABSORBED, np.int32), np.zeros(n, np.int32),
                    np.zeros(n, np.uint16), np.zeros(n, np.uint16),
                    np.zeros(n, np.uint64), np.zeros(n, np.uint64),
-                   np.zeros(c, np.int32), np.zeros(c, np.int32))
+                   np.zeros((n, 3), np.uint32), np.zeros(c, np.int32), np.zeros(c, np.int32))
 
     @property
     def colour(self) -> bool:
@@ -99,8 +103,9 @@ def part_bits(parts: tuple[str, ...] | list[str]) -> np.ndarray:
     return np.array([part_bit(p) for p in parts], dtype=np.uint64)
 
 
-#: Cells of the grid (one bit each in ``cells``).
+#: Cells of the grid (one bit each in ``cells``), and slabs across it per axis.
 GRID_CELLS = 64
+SLABS = 32
 #: Room the grid leaves around the luminaire's bounds (normalised units: the frame's
 #: largest half-extent is 1), so that an edit may grow or move a part a little.
 GRID_MARGIN = 0.25
@@ -147,6 +152,20 @@ class CellGrid:
             t = np.where(d > 0, (hi - o) / d, np.where(d < 0, (lo - o) / d, np.inf))
         return o + np.maximum(np.min(t, axis=0), 0.0) * d
 
+    def box_slabs(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Slab masks (N, 3) uint32 of boxes ``lo``..``hi`` (3, N), normalised."""
+        a, b = (_slab_index(v, self.lo, self.hi) for v in (lo, hi))
+        width = (b - a + 1).astype(np.uint64)
+        masks = ((np.uint64(1) << width) - np.uint64(1)) << a.astype(np.uint64)
+        return masks.T.astype(np.uint32)
+
+    def triangle_slabs(self, triangles: np.ndarray) -> np.ndarray:
+        """The union (3,) uint32 of the slabs the bounding boxes of ``triangles`` overlap."""
+        if len(triangles) == 0:
+            return np.zeros(3, np.uint32)
+        return np.bitwise_or.reduce(self.box_slabs(triangles.min(axis=1).T,
+                                                   triangles.max(axis=1).T), axis=0)
+
     def triangle_cells(self, triangles: np.ndarray) -> np.uint64:
         """The union of the cells the bounding boxes of ``triangles`` (T, 3, 3) overlap."""
         if len(triangles) == 0:
@@ -160,6 +179,12 @@ class CellGrid:
             return True
         pts = triangles.reshape(-1, 3)
         return bool((pts >= np.array(self.lo)).all() and (pts <= np.array(self.hi)).all())
+
+
+def _slab_index(x: np.ndarray, lo, hi) -> np.ndarray:
+    """The slab (0..SLABS-1) of coordinates ``x`` (3, N) per axis of the box lo..hi."""
+    lo, hi = (np.asarray(v, np.float64)[:, None] for v in (lo, hi))
+    return np.clip(np.floor((x - lo) / (hi - lo) * SLABS), 0, SLABS - 1).astype(np.int64)
 
 
 _MASKS: dict[tuple[int, int, int], list[np.ndarray]] = {}

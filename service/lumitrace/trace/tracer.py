@@ -160,7 +160,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp,
             tband, xz, escaped_xz, tally.counts, job.resolution,
             _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
-            rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, r.x, r.z,
+            rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, r.slabs,
+            r.x, r.z,
             *ps.grid_args,
             exit_rays, exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
         tally.cut += cut
