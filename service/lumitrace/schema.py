@@ -7,7 +7,7 @@ The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` an
   ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
   ``lumitrace:ior``, ``lumitrace:roughness``, their spectra
   (``lumitrace:reflectanceSpectrum``, ``...specularSpectrum``, ``...transmittanceSpectrum``)
-  and a dielectric's ``lumitrace:abbeNumber``;
+  and a dielectric's dispersion (``lumitrace:abbeNumber`` or ``lumitrace:sellmeier``);
 - ``LumitraceEmitterAPI`` on a UsdLux light: ``lumitrace:luminousFlux`` (lm),
   ``lumitrace:body`` (the light's surface is geometry too), ``lumitrace:rayFile`` (a
   TM-25 ray file the light emits) and its colour, ``lumitrace:spectrum`` or
@@ -58,9 +58,10 @@ REFLECTANCE_SPECTRUM = "lumitrace:reflectanceSpectrum"
 SPECULAR_SPECTRUM = "lumitrace:specularSpectrum"
 TRANSMITTANCE_SPECTRUM = "lumitrace:transmittanceSpectrum"
 ABBE_NUMBER = "lumitrace:abbeNumber"
+SELLMEIER = "lumitrace:sellmeier"
 #: The material attributes of colour (read by :mod:`lumitrace.stage.colour`).
 MATERIAL_COLOUR_ATTRIBUTES = (REFLECTANCE_SPECTRUM, SPECULAR_SPECTRUM, TRANSMITTANCE_SPECTRUM,
-                              ABBE_NUMBER)
+                              ABBE_NUMBER, SELLMEIER)
 #: Material attribute name -> :class:`lumitrace.scene.Material` field name.
 MATERIAL_ATTRIBUTES = {
     SCATTERING: "scattering",

@@ -153,6 +153,26 @@ def test_authored_spectral_albedos_and_dispersion(tmp_path):
     assert (1.49 - 1.0) / (at(486.13) - at(656.27)) == pytest.approx(57.0, rel=2e-3)
 
 
+def test_sellmeier_coefficients_give_a_glass_its_catalogue_indices(tmp_path):
+    bk7 = [1.03961212, 0.231792344, 1.01046945, 0.00600069867, 0.0200179144, 103.560653]
+    stage, mat = _surface(tmp_path, **{"lumitrace:sellmeier": (Sdf.ValueTypeNames.FloatArray,
+                                                               bk7)})
+    mat.GetPrim().ApplyAPI("LumitraceMaterialAPI")
+    mat.GetPrim().GetAttribute("lumitrace:scattering").Set("dielectric")
+    m = read(stage).materials[0]
+    assert m.dispersive and not m.neutral
+    n = m.spectrum("ior")
+    at = lambda nm: float(np.interp(nm, spectra.WAVELENGTHS, n))  # noqa: E731
+    # N-BK7's catalogue: n_d 1.5168, V_d 64.17 (float32 coefficients, 1 nm grid)
+    assert at(587.56) == pytest.approx(1.5168, abs=2e-4)
+    assert (at(587.56) - 1.0) / (at(486.13) - at(656.27)) == pytest.approx(64.17, rel=5e-3)
+    bad = bk7[:3] + [0.5, 0.02, 103.0]  # a resonance at 707 nm, inside the visible
+    mat.GetPrim().GetAttribute("lumitrace:sellmeier").Set(bad)
+    expect_error(stage, "lumitrace:sellmeier", "380-780 nm")
+    mat.GetPrim().GetAttribute("lumitrace:sellmeier").Set(bk7[:5])
+    expect_error(stage, "lumitrace:sellmeier", "six finite numbers")
+
+
 @pytest.mark.parametrize("name, kind, value, fragment", [
     ("lumitrace:reflectanceSpectrum", Sdf.ValueTypeNames.Float2Array,
      [Gf.Vec2f(400, 0.2), Gf.Vec2f(700, 1.2)], "[0, 1]"),

@@ -43,8 +43,11 @@ class Material:
     reflectance_spectrum: tuple = ()
     specular_spectrum: tuple = ()
     transmittance_spectrum: tuple = ()
-    #: a dielectric's Abbe number (0: no dispersion; ``ior`` holds at every wavelength)
+    #: a dielectric's Abbe number (0: no dispersion; ``ior`` holds at every wavelength), or
+    #: its Sellmeier coefficients (B1, B2, B3, C1, C2, C3; C in square micrometres), which
+    #: then give its index at every wavelength
     abbe_number: float = 0.0
+    sellmeier: tuple = ()
 
     @property
     def kind(self) -> int:
@@ -54,14 +57,21 @@ class Material:
     def neutral(self) -> bool:
         """Whether the surface treats every wavelength alike (no spectral work needed)."""
         return not (self.reflectance_spectrum or self.specular_spectrum
-                    or self.transmittance_spectrum or self.abbe_number)
+                    or self.transmittance_spectrum or self.dispersive)
+
+    @property
+    def dispersive(self) -> bool:
+        """Whether the refractive index depends on the wavelength."""
+        return bool(self.abbe_number or self.sellmeier)
 
     def spectrum(self, name: str) -> np.ndarray:
         """A property (``reflectance``, ``specular``, ``transmittance`` or ``ior``) at
         every grid wavelength, (401,)."""
-        from .spectra import WAVELENGTHS, cauchy_ior
+        from .spectra import WAVELENGTHS, cauchy_ior, sellmeier_ior
 
         if name == "ior":
+            if self.sellmeier:
+                return sellmeier_ior(self.sellmeier)
             return (cauchy_ior(self.ior, self.abbe_number) if self.abbe_number
                     else np.full(WAVELENGTHS.size, self.ior))
         values = {"reflectance": (self.reflectance_spectrum, self.reflectance),
@@ -283,7 +293,8 @@ class Scene:
                            m.transmittance, m.ior, m.roughness)).encode())
             if not m.neutral:
                 h.update(repr((m.reflectance_spectrum, m.specular_spectrum,
-                               m.transmittance_spectrum, m.abbe_number)).encode())
+                               m.transmittance_spectrum, m.abbe_number,
+                               m.sellmeier)).encode())
         for e in self.emitters:
             h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
                            e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())

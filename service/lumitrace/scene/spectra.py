@@ -96,6 +96,14 @@ def cauchy_ior(ior_d: float, abbe: float) -> np.ndarray:
     return a + b * WAVELENGTHS ** -2
 
 
+def sellmeier_ior(coefficients) -> np.ndarray:
+    """Refractive index on the grid from Sellmeier's equation, n^2 = 1 + sum B_k l^2 /
+    (l^2 - C_k), ``coefficients`` (B1, B2, B3, C1, C2, C3) with C in square micrometres."""
+    b, c = np.asarray(coefficients[:3], np.float64), np.asarray(coefficients[3:], np.float64)
+    l2 = (WAVELENGTHS * 1e-3)[:, None] ** 2
+    return np.sqrt(1.0 + (b * l2 / (l2 - c)).sum(axis=1))
+
+
 def resample(wavelengths, values, hold: bool = False) -> np.ndarray:
     """A spectrum given at ``wavelengths`` (nm, increasing) on the grid: linear between the
     samples; outside them zero (a light's power) or, with ``hold``, the end values (a

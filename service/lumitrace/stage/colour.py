@@ -7,7 +7,8 @@ Planckian radiator, tinted by a coloured ``inputs:color``), a coloured ``inputs:
 alone (D65 tinted by it, linear Rec.709 as UsdLux colours are). A light with none of them
 has no colour. A surface's spectral albedo comes from the ``lumitrace:*Spectrum``
 attributes, else from a coloured UsdPreviewSurface colour: a smooth reflectance recovered
-from the colour (Mallett and Yuksel 2019), scaled to the albedo the material already has.
+from the colour (Mallett and Yuksel 2019), scaled to the albedo the material already has; a
+dielectric disperses by its Abbe number (Cauchy) or its Sellmeier coefficients.
 colour-science is imported only when a stage has a colour.
 """
 from __future__ import annotations
@@ -165,6 +166,13 @@ def surface_spectra(prims: list[Usd.Prim], time: Usd.TimeCode, scattering: str,
             if abbe and scattering == "dielectric":
                 out["abbe_number"] = float(abbe)
             break
+    for prim in prims:
+        attr = prim.GetAttribute(schema.SELLMEIER)
+        if attr and attr.HasAuthoredValue():
+            coefficients = _sellmeier(attr.Get(time), str(prim.GetPath()))
+            if scattering == "dielectric":
+                out["sellmeier"] = coefficients
+            break
     field = {"diffuse": "reflectance_spectrum", "translucent": "reflectance_spectrum",
              "mirror": "specular_spectrum", "glossy": "specular_spectrum"}.get(scattering)
     shape = tint(colour) if colour is not None and field is not None else None
@@ -174,6 +182,24 @@ def surface_spectra(prims: list[Usd.Prim], time: Usd.TimeCode, scattering: str,
         if y > 0.0:
             out[field] = tuple(np.clip(shape * (albedo / y), 0.0, 1.0))
     return out
+
+
+def _sellmeier(value, where: str) -> tuple:
+    """Checked Sellmeier coefficients (B1, B2, B3, C1, C2, C3; C in um^2): six finite
+    numbers, C >= 0, giving an index >= 1 at every wavelength of the grid."""
+    v = check_array(value, where, schema.SELLMEIER)
+    if v.size != 6 or not np.isfinite(v).all():
+        raise StageError(f"needs six finite numbers (B1, B2, B3, C1, C2, C3), got {v.size}",
+                         where, schema.SELLMEIER)
+    if (v[3:] < 0).any():
+        raise StageError("C1, C2, C3 (square micrometres) must be >= 0", where,
+                         schema.SELLMEIER)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = spectra.sellmeier_ior(v)
+    if not (np.isfinite(n).all() and (n >= 1.0).all()):
+        raise StageError("gives no refractive index >= 1 somewhere in 380-780 nm (a "
+                         "resonance C inside the visible?)", where, schema.SELLMEIER)
+    return tuple(float(x) for x in v)
 
 
 def _d65_luminous() -> np.ndarray:

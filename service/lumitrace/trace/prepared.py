@@ -101,7 +101,7 @@ class PreparedScene:
             t = MaterialTable.from_materials(self.scene.materials, spectral=True)
         if spectral:
             colour = tuple(np.ascontiguousarray(a, np.float64) for a in t.spectra) + (
-                np.array([m.abbe_number != 0.0 for m in self.scene.materials]),
+                np.array([m.dispersive for m in self.scene.materials]),
                 np.array([m.neutral for m in self.scene.materials]))
         else:
             colour = (np.zeros((1, 1)),) * 4 + (np.zeros(1, np.bool_),) * 2
