@@ -56,6 +56,7 @@ class RayFile:
     luminous_flux: float = float("nan")
     radiant_flux: float = float("nan")
     wavelengths: np.ndarray | None = None
+    radiant: np.ndarray | None = None  # radiant flux (W) per ray, where the file has it
     descriptions: tuple[str, ...] = ("",) * TEXT_FIELDS
     creation_method: int = SIMULATION
     date: str = ""
@@ -159,6 +160,8 @@ def read_tm25(path: str | os.PathLike) -> RayFile:
                    luminous_flux=float(phi_v), radiant_flux=float(phi_e),
                    wavelengths=(np.ascontiguousarray(cols["wavelength"][:, 0])
                                 if flags["wavelength"] else None),
+                   radiant=(np.ascontiguousarray(cols["radiant_flux"][:, 0])
+                            if flags["radiant_flux"] else None),
                    descriptions=texts, creation_method=int(method),
                    date=date.split(b"\0", 1)[0].decode("ascii", errors="replace"),
                    spectral_id=int(spectral),
@@ -166,23 +169,29 @@ def read_tm25(path: str | os.PathLike) -> RayFile:
 
 
 def format_tm25(rays: RayFile) -> bytes:
-    """The bytes of a photometric TM-25-13 file of ``rays`` (positions, directions and
-    luminous flux per ray; no spectral data)."""
+    """The bytes of a photometric TM-25-13 file of ``rays``: positions, directions and
+    luminous flux per ray, and, where ``rays`` has wavelengths (with radiant flux), per-ray
+    wavelengths (spectral identifier 2)."""
     n = len(rays.flux)
     pos = np.asarray(rays.positions, np.float32).reshape(n, 3)
     dirs = np.asarray(rays.directions, np.float32).reshape(n, 3)
     flux = np.asarray(rays.flux, np.float32).reshape(n, 1)
     total = float(flux.astype(np.float64).sum())
+    spectral = rays.wavelengths is not None
     head = bytearray(TEXT_END + 4)
     _HEAD.pack_into(head, 0, MAGIC, VERSION, int(rays.creation_method), total,
-                    float("nan"), n, rays.date.encode("ascii")[:28], 0, 0, float("nan"),
+                    float(np.sum(rays.radiant)) if spectral else float("nan"), n,
+                    rays.date.encode("ascii")[:28], 0, 2 if spectral else 0, float("nan"),
                     float("nan"), float("nan"), 0, 0, 0)
-    struct.pack_into("<8i", head, FLAGS_AT, 1, 1, 0, 0, 1, 0, 0, 0)
+    struct.pack_into("<8i", head, FLAGS_AT, 1, 1, int(spectral), int(spectral), 1, 0, 0, 0)
     for k, text in enumerate(rays.descriptions[:TEXT_FIELDS]):
         raw = text[:TEXT_CHARS - 1].encode("utf-32-le")
         head[TEXT_AT + 4 * TEXT_CHARS * k:TEXT_AT + 4 * TEXT_CHARS * k + len(raw)] = raw
     # no spectral table; no additional item names (a zero count); no additional text
-    body = np.hstack([pos, dirs, flux]).astype("<f4").tobytes()
+    cols = [pos, dirs] + ([np.asarray(rays.radiant, np.float32).reshape(n, 1),
+                           np.asarray(rays.wavelengths, np.float32).reshape(n, 1)]
+                          if spectral else []) + [flux]
+    body = np.hstack(cols).astype("<f4").tobytes()
     return bytes(head) + body
 
 

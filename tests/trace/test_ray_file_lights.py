@@ -96,3 +96,46 @@ def test_flux_and_errors(tmp_path):
     with pytest.raises(StageError) as info:
         read_stage(_stage(tmp_path, "./nowhere.TM25RAY", name="missing"))
     assert "nowhere.TM25RAY" in str(info.value) and "lumitrace:rayFile" in str(info.value)
+
+
+def test_rays_with_wavelengths_give_each_direction_its_colour(tmp_path):
+    """A spectral ray file (a wavelength per ray): blue rays leave to one side, red ones to
+    the other; each photon starts with its ray's colour, so each side has the chromaticity
+    of its wavelength, and the light its mixture."""
+    from lumitrace.photometry.colour import colour_over_angle, uv_prime
+    from lumitrace.scene import spectra
+
+    n = 4000
+    side = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)  # blue to +X, red to -X
+    a = np.radians(30.0)
+    dirs = np.column_stack([side * np.sin(a), np.zeros(n), np.full(n, np.cos(a))])
+    wl = np.where(side > 0, 450.0, 610.0)
+    v = np.interp(wl, spectra.WAVELENGTHS, spectra.observer()[:, 1])
+    lum = np.full(n, 0.25)  # equal luminous flux per ray: as much light each way
+    rays = tm25.RayFile(positions=np.zeros((n, 3), np.float32),
+                        directions=dirs.astype(np.float32), flux=lum.astype(np.float32),
+                        wavelengths=wl.astype(np.float32),
+                        radiant=(lum / (683.0 * v)).astype(np.float32))
+    (tmp_path / "rgb.TM25RAY").write_bytes(tm25.format_tm25(rays))
+    back = tm25.read_tm25(tmp_path / "rgb.TM25RAY")
+    assert back.spectral_id == 2 and np.array_equal(back.wavelengths, wl.astype(np.float32))
+    scene = read_stage(_stage(tmp_path, "./rgb.TM25RAY"))
+    e = scene.emitters[0]
+    assert e.ray_bands and scene.colour == "spectral" and e.flux == pytest.approx(1000.0)
+    acc = run(scene, TraceSettings(photons=40_000, resolution=8, seed=2)).accumulator
+    col = colour_over_angle(acc)
+    cmf = spectra.observer()
+    lit = col.xyz[1] > 0
+    # the light points down after its turn: blue rays toward one C half, red the other
+    uv = col.uv[:, lit].T
+    want = {k: uv_prime(cmf[spectra.WAVELENGTHS == k][0]) for k in (450, 610)}
+    near = [min(np.hypot(*(p - want[450])), np.hypot(*(p - want[610]))) for p in uv]
+    assert max(near) < 1e-5  # every lit cell is one ray colour or the other, exactly
+    blue = [np.hypot(*(p - want[450])) < 1e-5 for p in uv]
+    flux = col.xyz[1][lit]
+    share = flux[np.array(blue)].sum() / flux.sum()
+    assert share == pytest.approx(0.5, abs=0.02)  # half the light each way
+    total = acc.cell_tristimulus().sum(axis=1)
+    mix = 0.5 * cmf[spectra.WAVELENGTHS == 450][0] / cmf[spectra.WAVELENGTHS == 450][0][1] \
+        + 0.5 * cmf[spectra.WAVELENGTHS == 610][0] / cmf[spectra.WAVELENGTHS == 610][0][1]
+    assert total[0] / total[1] == pytest.approx(mix[0] / mix[1], rel=0.02)

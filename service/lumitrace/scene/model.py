@@ -153,6 +153,8 @@ class Emitter:
     #: relative spectral power on :data:`lumitrace.scene.spectra.WAVELENGTHS` (401,);
     #: () when the stage gives the light no colour (white)
     spectrum: tuple = ()
+    #: a ray file with a wavelength per ray: each photon starts with its ray's colour
+    ray_bands: bool = False
 
     @property
     def key(self) -> int:
@@ -240,8 +242,10 @@ class Scene:
         """How much colour work the scene needs: ``none`` (no light or surface has a
         colour: luminance only), ``emitters`` (coloured lights, neutral surfaces: each
         light's colour is the same in every direction, nothing is traced per wavelength)
-        or ``spectral`` (a coloured or dispersive surface: photons carry wavelengths)."""
-        if any(not m.neutral for m in self.materials):
+        or ``spectral`` (a coloured or dispersive surface, or a ray file whose rays have
+        wavelengths of their own: photons carry spectra)."""
+        if any(not m.neutral for m in self.materials) or any(e.ray_bands
+                                                             for e in self.emitters):
             return "spectral"
         return "emitters" if any(e.spectrum for e in self.emitters) else "none"
 

@@ -137,6 +137,23 @@ def light_spectrum(prim: Usd.Prim, light: UsdLux.LightAPI, time: Usd.TimeCode) -
     return tuple(base * shape if shape is not None else base)
 
 
+def ray_file_colour(path: str) -> tuple[tuple, bool]:
+    """The spectrum of a TM-25 file whose rays carry wavelengths (their radiant flux per
+    nanometre) and True, or ((), False) for a file without them."""
+    from ..tm25 import read_tm25
+
+    f = read_tm25(path)
+    if f.wavelengths is None:
+        return (), False
+    nm = np.rint(f.wavelengths.astype(np.float64)).astype(np.int64) - int(spectra.WAVELENGTHS[0])
+    inside = (nm >= 0) & (nm < spectra.WAVELENGTHS.size)
+    spd = np.bincount(nm[inside], weights=f.radiant[inside].astype(np.float64),
+                      minlength=spectra.WAVELENGTHS.size)
+    if not (spd @ spectra.observer()[:, 1]) > 0.0:
+        raise StageError("its rays have no power where the eye sees (380-780 nm)", path)
+    return tuple(spd / spd.max()), True
+
+
 def surface_spectra(prims: list[Usd.Prim], time: Usd.TimeCode, scattering: str,
                     albedos: dict[str, float], colour=None) -> dict:
     """The :class:`~lumitrace.scene.Material` spectral fields of a surface: authored

@@ -11,7 +11,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
-from .colour import light_spectrum
+from .colour import light_spectrum, ray_file_colour
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
 from .. import tm25
@@ -94,6 +94,9 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         cone_angle, cone_softness, focus, ies = unshaped_cone_angle(kind), 0.0, 0.0, None
 
     spectrum = light_spectrum(prim, light, time)
+    ray_bands = False
+    if rays is not None and not spectrum:  # rays with wavelengths of their own: their colours
+        spectrum, ray_bands = ray_file_colour(rays)
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     authored_flux = None
     if flux_attr and flux_attr.HasAuthoredValue():
@@ -145,7 +148,7 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         extra = {"focus": focus} if "focus" in _EMITTER_FIELDS else {}
         emitters.append(Emitter(
             path=path + label, kind=kind, flux=float(flux), to_world=to_world,
-            spectrum=spectrum,
+            spectrum=spectrum, ray_bands=ray_bands,
             cone_angle=cone_angle, cone_softness=cone_softness, ies=ies, rays=rays,
             ray_scale=0.001 / meters_per_unit, rays_stamp=file_stamp(rays) if rays else "",
             ray_extent=tuple(ray_extent * 0.001 / meters_per_unit) if rays else (),

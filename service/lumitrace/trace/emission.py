@@ -21,7 +21,7 @@ from ..errors import LumitraceError
 from ..scene import Emitter
 from ..tm25 import read_tm25
 from ..scene.shaping import is_one_sided, is_shaped, profile_table
-from . import kernels
+from . import kernels, rng
 from .profiles import profile_table as measured_table
 
 _SHAPES = {"disk": kernels.DISK, "rect": kernels.RECT, "sphere": kernels.SPHERE,
@@ -42,7 +42,7 @@ def _ray_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 @functools.lru_cache(maxsize=4)
 def _read_rays(path: str, _mtime_ns: int, _size: int, scale: float):
     f = read_tm25(path)
-    w = f.flux.astype(np.float64)
+    w = _luminous_weights(f)
     if not (len(f) and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0):
         raise LumitraceError("the ray file's rays carry no usable flux", path)
     cdf = np.concatenate([[0.0], np.cumsum(w)]) / w.sum()
@@ -50,6 +50,45 @@ def _read_rays(path: str, _mtime_ns: int, _size: int, scale: float):
     d = f.directions.astype(np.float64)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     return cdf, np.ascontiguousarray(f.positions.astype(np.float64) * scale), d
+
+
+def _luminous_weights(f) -> np.ndarray:
+    """Each ray's share of the light for drawing photons: its luminous flux (of a file with
+    per-ray wavelengths and radiant flux only: 683 lm/W V(lambda) times it), so that every
+    photon carries the same luminous flux."""
+    if f.photometric or f.wavelengths is None:
+        return f.flux.astype(np.float64)
+    from ..scene.spectra import WAVELENGTHS, observer
+
+    v = np.interp(f.wavelengths, WAVELENGTHS, observer()[:, 1], left=0.0, right=0.0)
+    return 683.0 * v * f.radiant.astype(np.float64)
+
+
+def ray_bands(e: Emitter) -> np.ndarray:
+    """The tracing band of each ray of a light whose ray file gives per-ray wavelengths
+    (-1 outside 380-780 nm, where the ray carries no luminous flux)."""
+    st = os.stat(e.rays)
+    return _read_bands(e.rays, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_bands(path: str, _mtime_ns: int, _size: int) -> np.ndarray:
+    from ..scene.spectra import BAND_OF, WAVELENGTHS
+
+    wl = np.rint(read_tm25(path).wavelengths.astype(np.float64)).astype(np.int64)
+    inside = (wl >= WAVELENGTHS[0]) & (wl <= WAVELENGTHS[-1])
+    out = np.full(len(wl), -1, np.int64)
+    out[inside] = BAND_OF[wl[inside] - int(WAVELENGTHS[0])]
+    return out
+
+
+def photon_bands(e: Emitter, hashes: np.ndarray, args: tuple) -> np.ndarray:
+    """The band each photon (by its hash) of a per-ray-wavelength light starts in: that of
+    the ray the emission kernel draws for it from its first number."""
+    cdf = args[15]
+    u1 = rng.uniforms_from(hashes, 0, 1)[0]
+    t = np.clip(np.searchsorted(cdf, u1, side="right") - 1, 0, len(cdf) - 2)
+    return ray_bands(e)[t]
 
 
 def _mesh_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

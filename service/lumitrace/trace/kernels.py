@@ -529,7 +529,8 @@ def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
 # becomes monochromatic, its throughput 1 / Y of that band.
 # A photon's band field says what its throughput is: PRISTINE, 1 in every band (nothing
 # coloured met yet: its row is not even written, and neutral surfaces leave it so), MIXED
-# (its row holds it), or the band it picked.
+# (its row holds it), or a band: monochromatic, 1 / Y of that band (picked at a dispersive
+# surface, or the wavelength of the ray a ray-file light drew it from; no row needed).
 
 FIXED = 1 << 20  # = lumitrace.scene.spectra.FIXED_POINT
 PRISTINE, MIXED = -1, -2
@@ -552,12 +553,16 @@ def _rescale(tp, i, j, table, m, p):
 
 
 @numba.njit(**_INLINE)
-def _fixed_xz(tp, i, pristine, w):
-    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums); a ``pristine``
-    photon's throughput is 1 in every band, the same sums as a row of ones."""
+def _fixed_xz(tp, i, band, w):
+    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums), by its state
+    ``band``: a pristine photon's throughput is 1 in every band, a monochromatic one's
+    1 / Y of its band."""
+    if band >= 0:
+        return (np.int64(round(w[0, band] / w[1, band] * FIXED)),
+                np.int64(round(w[2, band] / w[1, band] * FIXED)))
     x, z = 0.0, 0.0
     for b in range(w.shape[1]):
-        t = 1.0 if pristine else tp[i, b]
+        t = 1.0 if band == PRISTINE else tp[i, b]
         x += w[0, b] * t
         z += w[2, b] * t
     return np.int64(round(x * FIXED)), np.int64(round(z * FIXED))
@@ -575,25 +580,28 @@ def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, ne
                           dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised, px, py, pz)
         tband[j] = PRISTINE
         return out
+    if kind == DIELECTRIC and dispersive[m] and band < 0:
+        # a dispersive surface: one band goes on, picked by its luminous share
+        u, _ = _uniform_pair(h, 2)
+        pick = w.shape[1] - 1
+        acc = 0.0
+        for b in range(w.shape[1]):
+            acc += w[1, b] * (1.0 if band == PRISTINE else tp[i, b])
+            if u < acc:
+                pick = b
+                break
+        band = pick
+    if band >= 0:  # monochromatic: its band's values, its throughput stays 1 / Y there
+        out = scatter_one(kind, s_refl[m, band], s_spec[m, band], s_trans[m, band],
+                          s_ior[m, band], alpha, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
+                          polarised, px, py, pz)
+        tband[j] = band
+        return out
     if band == PRISTINE:
         for b in range(tp.shape[1]):
             tp[i, b] = 1.0
         band = MIXED
     ior = s_ior[m, 0]
-    if kind == DIELECTRIC and dispersive[m]:
-        if band < 0:  # a dispersive surface: one band goes on, picked by luminous share
-            u, _ = _uniform_pair(h, 2)
-            band = tp.shape[1] - 1
-            acc = 0.0
-            for b in range(tp.shape[1]):
-                acc += w[1, b] * tp[i, b]
-                if u < acc:
-                    band = b
-                    break
-            for b in range(tp.shape[1]):
-                tp[i, b] = 0.0
-            tp[i, band] = 1.0 / w[1, band]
-        ior = s_ior[m, band]
     refl = spec = trans = 0.0
     if kind == DIFFUSE or kind == TRANSLUCENT:
         refl = _luminous(tp, i, w, s_refl, m)
@@ -659,7 +667,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             tex = _texel(dx, dy, dz, res, layout)
             counts[half, tex] += 1
             if spectral:
-                qx_, qz_ = _fixed_xz(tp, i, tband[i] == PRISTINE, band_w)
+                qx_, qz_ = _fixed_xz(tp, i, tband[i], band_w)
                 xz[half, tex] += qx_
                 xz[2 + half, tex] += qz_
                 escaped_xz[0, n_escaped >> 1] = qx_
@@ -748,7 +756,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
         pid2[n_out] = row
         if spectral and stay:  # moved on unchanged: its throughput moves along
             tband[n_out] = tband[i]
-            if tband[i] != PRISTINE:
+            if tband[i] == MIXED:
                 for b in range(tp.shape[1]):
                     tp[n_out, b] = tp[i, b]
         n_out += 1

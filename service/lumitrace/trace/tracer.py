@@ -18,7 +18,7 @@ from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Emitter
 from . import kernels, rng
-from .emission import emit
+from .emission import emit, photon_bands
 from .job import MAX_DEPTH, BatchJob
 from .prepared import PreparedScene, TracingFrame, prepare
 from .records import PhotonRecords
@@ -138,6 +138,8 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
         tp, tband, escaped_xz = w.spectral(n)
+        if e.ray_bands:  # or its ray's band (from its hash: wherever culling put it)
+            tband[:n] = photon_bands(e, w.base[cur][:n], ps.emitter_args[job.emitter])
     else:
         xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
     for depth in range(job.max_depth + 1):
