@@ -277,9 +277,10 @@ def _summary_text(r, stage) -> str:
         f"  field angle     {ang(r.field_angle_c0_c180, r.field_angle_c0_c180_error)} "
         f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
         f"  symmetry        {r.symmetry}"]
-    if r.cct_K is not None:
+    if r.chromaticity_uv is not None:
+        cct = "none (Duv beyond 0.05)" if r.cct_K is None else f"{r.cct_K:.0f} K"
         lines += [
-            f"  colour          CCT {r.cct_K:.0f} K, Duv {r.duv:+.4f}, u'v' "
+            f"  colour          CCT {cct}, Duv {r.duv:+.4f}, u'v' "
             f"({r.chromaticity_uv[0]:.4f}, {r.chromaticity_uv[1]:.4f})",
             f"  uniformity      Delta u'v' {r.colour_uniformity_duv:.4f} within the beam "
             f"(noise {r.colour_uniformity_noise:.5f})",

@@ -46,6 +46,10 @@ def test_uv_and_cct_agree_with_colour_science():
     cct, duv = cct_duv(uvp)
     assert float(cct) == pytest.approx(4224, abs=15)  # FL2's published CCT
     assert np.isnan(cct_duv(np.full((2, 1), np.nan))[0]).all()
+    # far from the Planckian locus a colour has no CCT (a saturated green LED), but a Duv
+    green = uv_prime(np.asarray(colour.wavelength_to_XYZ(530)))
+    cct, duv = cct_duv(green[:, None])
+    assert np.isnan(cct[0]) and duv[0] > 0.05
 
 
 def test_a_luminaire_without_colour_writes_none(tmp_path):
@@ -108,3 +112,25 @@ def test_the_colour_of_a_direction_is_independent_of_the_photon_split(tmp_path):
                                  batch_size=3_000)).accumulator
     assert np.array_equal(a.cell_tristimulus(), b.cell_tristimulus())
     assert np.array_equal(a.tristimulus_flux(), b.tristimulus_flux())
+
+
+def test_a_saturated_light_has_a_colour_but_no_cct(tmp_path):
+    from pxr import Gf
+
+    stage = new_stage(tmp_path)
+    light = add_disk(stage)
+    light.GetPrim().CreateAttribute("lumitrace:spectrum", Sdf.ValueTypeNames.Float2Array).Set(
+        [Gf.Vec2f(525, 0.0), Gf.Vec2f(530, 1.0), Gf.Vec2f(535, 0.0)])
+    stage.Save()
+    path = stage.GetRootLayer().realPath
+    cmd = [sys.executable, "-m", "lumitrace.cli", "trace", path, "--photons", "5000",
+           "--resolution", "8", "--out", str(tmp_path / "out"), "--no-sublayer",
+           "--no-pictures"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "CCT none (Duv beyond 0.05)" in done.stdout
+    text = (tmp_path / "out" / "luminaire.colour.json").read_text()
+    assert "NaN" not in text  # strict JSON: undefined values are null
+    table = json.loads(text)
+    assert table["total"]["cct_K"] is None
+    assert table["total"]["duv"] > 0.05

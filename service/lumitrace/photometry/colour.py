@@ -35,9 +35,14 @@ def uv_prime(xyz: np.ndarray) -> np.ndarray:
                          np.where(d > 0, 9.0 * y / d, np.nan)])
 
 
+#: Farther than this from the Planckian locus (in CIE 1960 uv) a chromaticity has no
+#: correlated colour temperature (CIE 015): its CCT is NaN, its Duv still given.
+MAX_DUV = 0.05
+
+
 def cct_duv(uvp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Correlated colour temperature (K) and Duv of chromaticities u'v' (2, ...) (Ohno
-    2013, colour-science); NaN where undefined."""
+    2013, colour-science); NaN where undefined (CCT also beyond :data:`MAX_DUV`)."""
     import colour
 
     shape = uvp.shape[1:]
@@ -46,6 +51,7 @@ def cct_duv(uvp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ok = np.isfinite(uv).all(axis=1)
     if ok.any():
         out[ok] = np.asarray(colour.uv_to_CCT(uv[ok], method="Ohno 2013")).reshape(-1, 2)
+    out[~(np.abs(out[:, 1]) <= MAX_DUV), 0] = np.nan
     return out[:, 0].reshape(shape), out[:, 1].reshape(shape)
 
 
@@ -108,9 +114,12 @@ class ColourOverAngle:
             "allRound": {"Y": flat(self.ring_xyz[1]), "u'": flat(self.ring_uv[0]),
                          "v'": flat(self.ring_uv[1]), "sigma": flat(self.ring_sigma),
                          "cct": flat(self.ring_cct), "duv": flat(self.ring_duv)},
-            "beam": {"meanUV": list(self.mean_uv), "uniformityDuv": self.uniformity,
-                     "noise": self.noise, "cells": self.beam_cells},
-            "total": self.total,
+            "beam": {"meanUV": flat(np.array(self.mean_uv)),
+                     "uniformityDuv": flat(np.array([self.uniformity]))[0],
+                     "noise": flat(np.array([self.noise]))[0], "cells": self.beam_cells},
+            "total": {"uv": flat(np.array(self.total["uv"])),
+                      "cct_K": flat(np.array([self.total["cct_K"]]))[0],
+                      "duv": flat(np.array([self.total["duv"]]))[0]},
         }
 
 
