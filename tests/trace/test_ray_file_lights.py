@@ -139,3 +139,26 @@ def test_rays_with_wavelengths_give_each_direction_its_colour(tmp_path):
     mix = 0.5 * cmf[spectra.WAVELENGTHS == 450][0] / cmf[spectra.WAVELENGTHS == 450][0][1] \
         + 0.5 * cmf[spectra.WAVELENGTHS == 610][0] / cmf[spectra.WAVELENGTHS == 610][0][1]
     assert total[0] / total[1] == pytest.approx(mix[0] / mix[1], rel=0.02)
+
+
+def test_a_radiometric_spectral_ray_file_has_its_luminous_flux(tmp_path):
+    """Rays with wavelengths and radiant flux only: the light's flux is 683 lm/W times
+    V(lambda) times the rays' radiant flux, and photons are drawn by it."""
+    from lumitrace.scene import spectra
+
+    n = 3000
+    wl = np.where(np.arange(n) % 3 == 0, 555.0, 450.0).astype(np.float32)
+    radiant = np.full(n, 1e-3, np.float32)
+    dirs = np.tile(np.array([0.0, 0.0, 1.0], np.float32), (n, 1))
+    rays = tm25.RayFile(positions=np.zeros((n, 3), np.float32), directions=dirs,
+                        flux=radiant, wavelengths=wl, radiant=radiant)
+    data = bytearray(tm25.format_tm25(rays))
+    # relabel: radiant flux and wavelengths only (no luminous column): drop it
+    flags = np.frombuffer(bytes(data[tm25.FLAGS_AT:tm25.FLAGS_AT + 32]), "<i4").copy()
+    flags[4] = 0
+    data[tm25.FLAGS_AT:tm25.FLAGS_AT + 32] = flags.tobytes()
+    body = np.frombuffer(bytes(data[tm25.TEXT_END + 4:]), "<f4").reshape(n, 9)[:, :8]
+    (tmp_path / "w.TM25RAY").write_bytes(bytes(data[:tm25.TEXT_END + 4]) + body.tobytes())
+    scene = read_stage(_stage(tmp_path, "./w.TM25RAY"))
+    v = np.interp(wl, spectra.WAVELENGTHS, spectra.observer()[:, 1])
+    assert scene.emitters[0].flux == pytest.approx(683.0 * float((v * 1e-3).sum()), rel=1e-5)

@@ -137,6 +137,19 @@ def light_spectrum(prim: Usd.Prim, light: UsdLux.LightAPI, time: Usd.TimeCode) -
     return tuple(base * shape if shape is not None else base)
 
 
+def ray_file_luminous_flux(path: str) -> float | None:
+    """The luminous flux (lm) of a radiometric TM-25 file whose rays carry wavelengths:
+    683 lm/W times V(lambda) times each ray's radiant flux; None without wavelengths."""
+    from ..tm25 import read_tm25
+
+    f = read_tm25(path)
+    if f.wavelengths is None or f.radiant is None:
+        return None
+    v = np.interp(f.wavelengths.astype(np.float64), spectra.WAVELENGTHS,
+                  spectra.observer()[:, 1], left=0.0, right=0.0)
+    return float(683.0 * (v * f.radiant.astype(np.float64)).sum())
+
+
 def ray_file_colour(path: str) -> tuple[tuple, bool]:
     """The spectrum of a TM-25 file whose rays carry wavelengths (their radiant flux per
     nanometre) and True, or ((), False) for a file without them."""

@@ -11,7 +11,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
-from .colour import light_spectrum, ray_file_colour
+from .colour import light_spectrum, ray_file_colour, ray_file_luminous_flux
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
 from .. import tm25
@@ -105,6 +105,8 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
     if rays is not None:
         stated, ray_extent = tm25.summary(rays)
         if authored_flux is None:
+            if stated is None:  # radiometric: luminous where the rays give wavelengths
+                stated = ray_file_luminous_flux(rays)
             if stated is None:
                 raise StageError("the ray file carries radiant flux only: author "
                                  "lumitrace:luminousFlux (lm)", path, schema.RAY_FILE)
