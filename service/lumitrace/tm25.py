@@ -76,11 +76,12 @@ def _text(raw: bytes) -> str:
     return s.split("\0", 1)[0]
 
 
-def summary(path: str | os.PathLike) -> tuple[float | None, np.ndarray]:
-    """What a light emitting a ray file needs to know of it: the luminous flux (lm) it
-    states (its header's, else the sum of its rays'; None for a radiometric-only file) and
-    the half extents (3,) of its start points about the origin (mm)."""
-    f = read_tm25(path)
+def summary(source: "str | os.PathLike | RayFile") -> tuple[float | None, np.ndarray]:
+    """What a light emitting a ray file (a path, or the file read) needs to know of it: the
+    luminous flux (lm) it states (its header's, else the sum of its rays'; None for a
+    radiometric-only file) and the half extents (3,) of its start points about the origin
+    (mm)."""
+    f = source if isinstance(source, RayFile) else read_tm25(source)
     extent = np.abs(f.positions).max(axis=0).astype(np.float64) if len(f) else np.zeros(3)
     if not f.photometric:
         return None, extent

@@ -129,6 +129,22 @@ def _add_counts(target, counts, sign: int) -> None:
         target -= counts
 
 
+def _add_tristimulus(out: np.ndarray, t: "EmitterTally", counts: np.ndarray, at, w: float,
+                     first: int, half: int | None) -> None:
+    """Add an emitter's Y (``counts`` at ``at``, photon flux ``w``) and its X and Z to
+    ``out`` (3, n): its spectral tallies ``t.xz[first]``, ``t.xz[first + 1]`` where it has
+    them, else its light's X/Y and Z/Y times its counts."""
+    from ..scene.spectra import FIXED_POINT
+
+    out[1, at] += counts * w
+    for row, k in ((0, 0), (2, 1)):
+        if t.xz is None:
+            out[row, at] += counts * (w * t.ratios[k])
+        else:
+            q, qidx = _half(t.xz[first + k], half)
+            out[row, slice(None) if qidx is None else qidx] += q * (w / FIXED_POINT)
+
+
 def _half(counts, half: int | None) -> tuple[np.ndarray, np.ndarray | None]:
     """(values, texel indices or None for dense) of the counts of a half, or both."""
     if isinstance(counts, SparseCounts):
@@ -331,29 +347,18 @@ class Accumulator:
     def tristimulus_flux(self, half: int | None = None) -> np.ndarray:
         """CIE X, Y, Z of the flux (lm for Y) that left through each texel, (3, 6R, R);
         ``half`` as in :meth:`texel_flux`. Y is :meth:`texel_flux`."""
-        from ..scene.spectra import FIXED_POINT
-
         out = np.zeros((3, self.shape[0] * self.shape[1]))
         for t in self.emitters:
             if not t.photons:
                 continue
             w = t.photon_flux if half is None else 2.0 * t.photon_flux
             v, idx = _half(t.counts, half)
-            at = slice(None) if idx is None else idx
-            out[1, at] += v * w
-            for row in (0, 2):
-                if t.xz is None:
-                    out[row, at] += v * (w * t.ratios[row // 2])
-                else:
-                    q, qidx = _half(t.xz[row // 2], half)
-                    out[row, slice(None) if qidx is None else qidx] += q * (w / FIXED_POINT)
+            _add_tristimulus(out, t, v, slice(None) if idx is None else idx, w, 0, half)
         return out.reshape(3, *self.shape)
 
     def cell_tristimulus(self, half: int | None = None) -> np.ndarray:
         """CIE X, Y, Z of the flux (lm for Y) counted in each C-gamma cell of the
         goniophotometer, (3, N_CELLS); ``half`` as in :meth:`emitter_cells`."""
-        from ..scene.spectra import FIXED_POINT
-
         out = np.zeros((3, N_CELLS))
         for t in self.emitters:
             if not t.photons:
@@ -364,13 +369,7 @@ class Accumulator:
                 v, idx = v[:N_CELLS], np.arange(N_CELLS)
             else:
                 v, idx = v[idx < N_CELLS], idx[idx < N_CELLS]
-            out[1, idx] += v * w
-            for row in (0, 2):
-                if t.xz is None:
-                    out[row, idx] += v * (w * t.ratios[row // 2])
-                else:
-                    q, qidx = _half(t.xz[2 + row // 2], half)
-                    out[row, slice(None) if qidx is None else qidx] += q * (w / FIXED_POINT)
+            _add_tristimulus(out, t, v, idx, w, 2, half)
         return out
 
     def emitter_cells(self, half: int | None = None):

@@ -94,10 +94,7 @@ class ColourOverAngle:
                 "colour_uniformity_noise": self.noise}
 
     def table(self) -> dict:
-        """The table of colour over angle as JSON-ready lists."""
-        r = lambda a: np.round(np.where(np.isfinite(a), a, np.nan), 6).tolist()  # noqa: E731
-        clean = lambda a: [[None if v != v else v for v in row] for row in r(a)]  # noqa: E731
-        flat = lambda a: [None if v != v else v for v in r(a)]  # noqa: E731
+        """The table of colour over angle as JSON-ready lists (undefined values null)."""
         return {
             "definition": "cells are C sectors by gamma zones (centres given); xyz is the "
                           "mean X, Y, Z intensity (cd) of a cell, u'v' CIE 1976, cct and "
@@ -108,19 +105,22 @@ class ColourOverAngle:
             "units": {"c": "deg", "gamma": "deg", "X": "cd", "Y": "cd", "Z": "cd",
                       "cct": "K"},
             "c": self.c.tolist(), "gamma": self.gamma.tolist(),
-            "X": clean(self.xyz[0]), "Y": clean(self.xyz[1]), "Z": clean(self.xyz[2]),
-            "u'": clean(self.uv[0]), "v'": clean(self.uv[1]), "sigma": clean(self.sigma),
-            "cct": clean(self.cct), "duv": clean(self.duv),
-            "allRound": {"Y": flat(self.ring_xyz[1]), "u'": flat(self.ring_uv[0]),
-                         "v'": flat(self.ring_uv[1]), "sigma": flat(self.ring_sigma),
-                         "cct": flat(self.ring_cct), "duv": flat(self.ring_duv)},
-            "beam": {"meanUV": flat(np.array(self.mean_uv)),
-                     "uniformityDuv": flat(np.array([self.uniformity]))[0],
-                     "noise": flat(np.array([self.noise]))[0], "cells": self.beam_cells},
-            "total": {"uv": flat(np.array(self.total["uv"])),
-                      "cct_K": flat(np.array([self.total["cct_K"]]))[0],
-                      "duv": flat(np.array([self.total["duv"]]))[0]},
+            "X": _json(self.xyz[0]), "Y": _json(self.xyz[1]), "Z": _json(self.xyz[2]),
+            "u'": _json(self.uv[0]), "v'": _json(self.uv[1]), "sigma": _json(self.sigma),
+            "cct": _json(self.cct), "duv": _json(self.duv),
+            "allRound": {"Y": _json(self.ring_xyz[1]), "u'": _json(self.ring_uv[0]),
+                         "v'": _json(self.ring_uv[1]), "sigma": _json(self.ring_sigma),
+                         "cct": _json(self.ring_cct), "duv": _json(self.ring_duv)},
+            "beam": {"meanUV": _json(self.mean_uv), "uniformityDuv": _json(self.uniformity),
+                     "noise": _json(self.noise), "cells": self.beam_cells},
+            "total": {k: _json(v) for k, v in self.total.items()},
         }
+
+
+def _json(values):
+    """Numbers (any shape) rounded to 6 decimals as JSON-ready lists, NaN as None."""
+    a = np.round(np.asarray(values, np.float64), 6)
+    return np.where(np.isfinite(a), a, None).tolist()
 
 
 def _cell_groups(c_step: float, gamma_step: float) -> tuple[np.ndarray, int, int]:

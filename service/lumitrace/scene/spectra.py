@@ -52,6 +52,20 @@ def d65() -> np.ndarray:
     return np.ascontiguousarray(colour.SDS_ILLUMINANTS["D65"].copy().align(_shape()).values)
 
 
+def photopic(wavelengths) -> np.ndarray:
+    """V(lambda) (= ybar) at any wavelengths (nm), 0 outside the grid."""
+    return np.interp(np.asarray(wavelengths, np.float64), WAVELENGTHS, observer()[:, 1],
+                     left=0.0, right=0.0)
+
+
+def grid_indices(wavelengths) -> tuple[np.ndarray, np.ndarray]:
+    """The grid sample (nearest nanometre) of each wavelength (nm) and whether it is on the
+    grid at all (380-780 nm)."""
+    nm = np.rint(np.asarray(wavelengths, np.float64)).astype(np.int64) - int(WAVELENGTHS[0])
+    inside = (nm >= 0) & (nm < WAVELENGTHS.size)
+    return np.where(inside, nm, 0), inside
+
+
 def tristimulus(spd) -> np.ndarray:
     """CIE XYZ (3,) of a spectrum on the grid, as the 1 nm sum the tracer estimates."""
     return np.asarray(spd, np.float64) @ observer()

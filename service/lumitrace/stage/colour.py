@@ -137,34 +137,19 @@ def light_spectrum(prim: Usd.Prim, light: UsdLux.LightAPI, time: Usd.TimeCode) -
     return tuple(base * shape if shape is not None else base)
 
 
-def ray_file_luminous_flux(path: str) -> float | None:
-    """The luminous flux (lm) of a radiometric TM-25 file whose rays carry wavelengths:
-    683 lm/W times V(lambda) times each ray's radiant flux; None without wavelengths."""
-    from ..tm25 import read_tm25
-
-    f = read_tm25(path)
-    if f.wavelengths is None or f.radiant is None:
-        return None
-    v = np.interp(f.wavelengths.astype(np.float64), spectra.WAVELENGTHS,
-                  spectra.observer()[:, 1], left=0.0, right=0.0)
-    return float(683.0 * (v * f.radiant.astype(np.float64)).sum())
-
-
-def ray_file_colour(path: str) -> tuple[tuple, bool]:
-    """The spectrum of a TM-25 file whose rays carry wavelengths (their radiant flux per
-    nanometre) and True, or ((), False) for a file without them."""
-    from ..tm25 import read_tm25
-
-    f = read_tm25(path)
+def ray_file_colour(f, path: str) -> tuple[tuple, float | None]:
+    """The spectrum of a TM-25 file ``f`` (read from ``path``) whose rays carry wavelengths
+    (their radiant flux per nanometre) and its luminous flux (683 lm/W V(lambda) times its
+    rays' radiant flux); ((), None) for a file without wavelengths."""
     if f.wavelengths is None:
-        return (), False
-    nm = np.rint(f.wavelengths.astype(np.float64)).astype(np.int64) - int(spectra.WAVELENGTHS[0])
-    inside = (nm >= 0) & (nm < spectra.WAVELENGTHS.size)
-    spd = np.bincount(nm[inside], weights=f.radiant[inside].astype(np.float64),
-                      minlength=spectra.WAVELENGTHS.size)
+        return (), None
+    radiant = f.radiant.astype(np.float64)
+    nm, inside = spectra.grid_indices(f.wavelengths)
+    spd = np.bincount(nm[inside], weights=radiant[inside], minlength=spectra.WAVELENGTHS.size)
     if not (spd @ spectra.observer()[:, 1]) > 0.0:
         raise StageError("its rays have no power where the eye sees (380-780 nm)", path)
-    return tuple(spd / spd.max()), True
+    return tuple(spd / spd.max()), float(683.0 * (spectra.photopic(f.wavelengths)
+                                                  * radiant).sum())
 
 
 def surface_spectra(prims: list[Usd.Prim], time: Usd.TimeCode, scattering: str,

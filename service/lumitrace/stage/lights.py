@@ -11,7 +11,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
-from .colour import light_spectrum, ray_file_colour, ray_file_luminous_flux
+from .colour import light_spectrum, ray_file_colour
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
 from .. import tm25
@@ -94,19 +94,22 @@ def read_light(prim: Usd.Prim, kind: str, frame: Frame, xf: UsdGeom.XformCache,
         cone_angle, cone_softness, focus, ies = unshaped_cone_angle(kind), 0.0, 0.0, None
 
     spectrum = light_spectrum(prim, light, time)
-    ray_bands = False
-    if rays is not None and not spectrum:  # rays with wavelengths of their own: their colours
-        spectrum, ray_bands = ray_file_colour(rays)
+    ray_bands, ray_lumens = False, None
+    if rays is not None:
+        ray_set = tm25.read_tm25(rays)
+        file_spectrum, ray_lumens = ray_file_colour(ray_set, rays)
+        if file_spectrum and not spectrum:  # rays with wavelengths of their own: theirs
+            spectrum, ray_bands = file_spectrum, True
     flux_attr = prim.GetAttribute(schema.LUMINOUS_FLUX)
     authored_flux = None
     if flux_attr and flux_attr.HasAuthoredValue():
         authored_flux = validate.check_luminous_flux(flux_attr.Get(time), path,
                                                      schema.LUMINOUS_FLUX)
     if rays is not None:
-        stated, ray_extent = tm25.summary(rays)
+        stated, ray_extent = tm25.summary(ray_set)
         if authored_flux is None:
             if stated is None:  # radiometric: luminous where the rays give wavelengths
-                stated = ray_file_luminous_flux(rays)
+                stated = ray_lumens
             if stated is None:
                 raise StageError("the ray file carries radiant flux only: author "
                                  "lumitrace:luminousFlux (lm)", path, schema.RAY_FILE)

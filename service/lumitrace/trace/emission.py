@@ -35,51 +35,40 @@ _NO_RAYS = (np.array([0.0, 1.0]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
 def _ray_tables(e: Emitter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A ray-file light's flux CDF over its rays and their start points (local units) and
     unit directions (re-read when the file changes)."""
+    return _rays_of(e)[:3]
+
+
+def ray_bands(e: Emitter) -> np.ndarray:
+    """The tracing band of each ray of a light whose ray file gives per-ray wavelengths
+    (-1 outside 380-780 nm, where the ray carries no luminous flux)."""
+    return _rays_of(e)[3]
+
+
+def _rays_of(e: Emitter) -> tuple:
     st = os.stat(e.rays)
     return _read_rays(e.rays, st.st_mtime_ns, st.st_size, float(e.ray_scale))
 
 
 @functools.lru_cache(maxsize=4)
 def _read_rays(path: str, _mtime_ns: int, _size: int, scale: float):
+    """(flux CDF, start points, unit directions, bands or None) of a ray file, read once."""
     f = read_tm25(path)
-    w = _luminous_weights(f)
+    w = f.flux.astype(np.float64)
+    bands = None
+    if f.wavelengths is not None:
+        from ..scene.spectra import BAND_OF, grid_indices, photopic
+
+        if not f.photometric:  # drawn by luminous flux: every photon carries the same
+            w = 683.0 * photopic(f.wavelengths) * f.radiant.astype(np.float64)
+        nm, inside = grid_indices(f.wavelengths)
+        bands = np.where(inside, BAND_OF[nm], -1)
     if not (len(f) and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0):
         raise LumitraceError("the ray file's rays carry no usable flux", path)
     cdf = np.concatenate([[0.0], np.cumsum(w)]) / w.sum()
     cdf[-1] = 1.0
     d = f.directions.astype(np.float64)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return cdf, np.ascontiguousarray(f.positions.astype(np.float64) * scale), d
-
-
-def _luminous_weights(f) -> np.ndarray:
-    """Each ray's share of the light for drawing photons: its luminous flux (of a file with
-    per-ray wavelengths and radiant flux only: 683 lm/W V(lambda) times it), so that every
-    photon carries the same luminous flux."""
-    if f.photometric or f.wavelengths is None:
-        return f.flux.astype(np.float64)
-    from ..scene.spectra import WAVELENGTHS, observer
-
-    v = np.interp(f.wavelengths, WAVELENGTHS, observer()[:, 1], left=0.0, right=0.0)
-    return 683.0 * v * f.radiant.astype(np.float64)
-
-
-def ray_bands(e: Emitter) -> np.ndarray:
-    """The tracing band of each ray of a light whose ray file gives per-ray wavelengths
-    (-1 outside 380-780 nm, where the ray carries no luminous flux)."""
-    st = os.stat(e.rays)
-    return _read_bands(e.rays, st.st_mtime_ns, st.st_size)
-
-
-@functools.lru_cache(maxsize=4)
-def _read_bands(path: str, _mtime_ns: int, _size: int) -> np.ndarray:
-    from ..scene.spectra import BAND_OF, WAVELENGTHS
-
-    wl = np.rint(read_tm25(path).wavelengths.astype(np.float64)).astype(np.int64)
-    inside = (wl >= WAVELENGTHS[0]) & (wl <= WAVELENGTHS[-1])
-    out = np.full(len(wl), -1, np.int64)
-    out[inside] = BAND_OF[wl[inside] - int(WAVELENGTHS[0])]
-    return out
+    return cdf, np.ascontiguousarray(f.positions.astype(np.float64) * scale), d, bands
 
 
 def photon_bands(e: Emitter, hashes: np.ndarray, args: tuple) -> np.ndarray:
