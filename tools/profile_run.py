@@ -62,12 +62,12 @@ def _patch():
     from lumitrace.photometry import distribution
     from lumitrace.publish import outputs, photometric
     from lumitrace.run import session, workers
-    from lumitrace.trace import kernels, prepared, tracer
+    from lumitrace.trace import compiled, prepared, tracer
 
     workers.trace_batch = _timed("tracer (Python around the kernels)", tracer.trace_batch)
     tracer.emit = _timed("emission", tracer.emit)
-    kernels.start = _timed("emission", kernels.start)
-    kernels.bounce = _timed("bounce kernel (scattering, binning)", kernels.bounce)
+    compiled.start = _timed("emission", compiled.start)
+    compiled.bounce = _timed("bounce kernel (scattering, binning)", compiled.bounce)
     tracer.counts_of = _timed("bounce kernel (scattering, binning)", tracer.counts_of)
     prepared.PreparedScene.intersect = _timed("intersection (Embree)",
                                               prepared.PreparedScene.intersect)

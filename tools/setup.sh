@@ -24,5 +24,6 @@ if [ "$1" = "--test" ]; then
 else
     .venv/bin/python -m pip install -q -e '.[plot]'
 fi
-# compile the photon kernels into their on-disk cache now, not in the first run
-.venv/bin/python -m lumitrace.trace.tracer
+# compile the photon kernels now, not in the first run: into numba's on-disk cache, and
+# ahead of time into an extension module that loads without numba (needs a C compiler)
+.venv/bin/python -m lumitrace.trace.aot

@@ -21,11 +21,11 @@ from ..errors import LumitraceError
 from ..scene import Emitter
 from ..tm25 import read_tm25
 from ..scene.shaping import is_one_sided, is_shaped, profile_table
-from . import kernels, rng
+from . import codes, compiled, rng
 from .profiles import profile_table as measured_table
 
-_SHAPES = {"disk": kernels.DISK, "rect": kernels.RECT, "sphere": kernels.SPHERE,
-           "cylinder": kernels.CYLINDER, "mesh": kernels.MESH}
+_SHAPES = {"disk": codes.DISK, "rect": codes.RECT, "sphere": codes.SPHERE,
+           "cylinder": codes.CYLINDER, "mesh": codes.MESH}
 _NO_TABLE = np.zeros(2)
 _NO_ROWS = np.zeros((1, 2))
 _NO_MESH = (np.array([0.0, 1.0]), np.zeros((1, 3, 3)), np.zeros((1, 3)))
@@ -110,7 +110,7 @@ def emission_args(e: Emitter) -> tuple:
     point = e.kind == "sphere" and (bool(e.treat_as_point) or e.radius == 0.0)
     mesh = _mesh_tables(e) if e.kind == "mesh" else _NO_MESH
     rays = _ray_tables(e) if e.rays is not None else _NO_RAYS
-    shape = kernels.RAYS if e.rays is not None else _SHAPES[e.kind]
+    shape = codes.RAYS if e.rays is not None else _SHAPES[e.kind]
     return (shape, size, point, shaped, theta, cdf, measured,
             m.c_cdf if m else _NO_TABLE, m.gamma_cdf if m else _NO_ROWS,
             m.cos_edges if m else _NO_TABLE, m.c_step if m else 1.0, *mesh,
@@ -133,7 +133,7 @@ def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,
     k = index.shape[0]
     p, d, n, h = out if out is not None else (np.empty((3, k)), np.empty((3, k)),
                                               np.empty((3, k)), np.empty(k, np.uint64))
-    kernels.emit_photons(*(args or emission_args(e)), np.uint64(key), index, p, d, n, h)
+    compiled.emit_photons(*(args or emission_args(e)), np.uint64(key), index, p, d, n, h)
     if normals:
         return p, d, n
     return p, d

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from ..scene import DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT
+from .codes import DISK, MESH, MIXED, PRISTINE, RAYS, RECT, SPHERE
 from .records import CUT
 from .rng import _INV32, _LOW32, _M1, _M2, _S32, _S33, GOLDEN
 
@@ -533,7 +534,6 @@ def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
 # surface, or the wavelength of the ray a ray-file light drew it from; no row needed).
 
 FIXED = 1 << 20  # = lumitrace.scene.spectra.FIXED_POINT
-PRISTINE, MIXED = -1, -2
 
 
 @numba.njit(**_INLINE)
@@ -778,9 +778,6 @@ def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
 
 
 # --- emission -------------------------------------------------------------------------------
-
-#: Emitter shapes as :func:`emit_photons` takes them.
-DISK, RECT, SPHERE, CYLINDER, MESH, RAYS = 0, 1, 2, 3, 4, 5
 
 
 @numba.njit(**_INLINE)

@@ -101,8 +101,8 @@ class PreparedScene:
             t = MaterialTable.from_materials(self.scene.materials, spectral=True)
         if spectral:
             colour = tuple(np.ascontiguousarray(a, np.float64) for a in t.spectra) + (
-                np.array([m.dispersive for m in self.scene.materials]),
-                np.array([m.neutral for m in self.scene.materials]))
+                np.array([m.dispersive for m in self.scene.materials], np.bool_),
+                np.array([m.neutral for m in self.scene.materials], np.bool_))
         else:
             colour = (np.zeros((1, 1)),) * 4 + (np.zeros(1, np.bool_),) * 2
         f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731

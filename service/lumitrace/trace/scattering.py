@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene import Material
-from . import kernels
+from . import compiled
 
 #: Marks an unpolarised photon in a polarisation array (NaN in the first component).
 UNPOLARISED = np.nan
@@ -77,7 +77,7 @@ def scatter(table: MaterialTable, mat: np.ndarray, d: np.ndarray, ng: np.ndarray
     out, pol_out = np.empty((3, n)), np.empty((3, n))
     alive = np.empty(n, dtype=bool)
     f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
-    kernels.scatter_many(np.asarray(table.kind, np.int64), f64(table.reflectance),
+    compiled.scatter_many(np.asarray(table.kind, np.int64), f64(table.reflectance),
                          f64(table.specular), f64(table.transmittance), f64(table.ior),
                          f64(table.alpha), np.asarray(mat, np.int64), f64(d), f64(ng),
                          *(f64(x) for x in u), f64(pol) if polarised else np.zeros((3, n)),

@@ -17,7 +17,8 @@ from ..film.accumulate import counts_of
 from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Emitter
-from . import kernels, rng
+from . import compiled, rng
+from .codes import PRISTINE
 from .emission import emit, photon_bands
 from .job import MAX_DEPTH, BatchJob
 from .prepared import PreparedScene, TracingFrame, prepare
@@ -67,7 +68,7 @@ class _Waves:
             self.tp = np.empty((self.size, BANDS))
             self.tband = np.empty(self.size, np.int64)
             self.escaped_xz = np.empty((2, self.size), np.int64)
-        self.tband[:n] = kernels.PRISTINE
+        self.tband[:n] = PRISTINE
         return self.tp, self.tband, self.escaped_xz
 
     @classmethod
@@ -125,14 +126,14 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                         out=tuple(a.reshape(-1)[:3 * n].reshape(3, n)
                                   for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[cur][:n],),
                         args=ps.emitter_args[job.emitter])
-    kernels.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
+    compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
                   w.o32, w.d32)
     w.pid[cur][:n] = w.rows[:n]
     # polarisation matters only where a dielectric can see it
     if ps.polarised:
         w.pol[cur][:n] = UNPOLARISED
     # emitted photons that cannot meet any geometry escape without Embree
-    reach = kernels.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
+    reach = compiled.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
                          *ps.reach_box) if ps.embree is not None else 0
     n_escaped = 0
     if spectral:  # unit throughput in every band, nothing coloured met yet
@@ -156,7 +157,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                 else np.full(n, np.inf, np.float32)
         tally.segments += n
         nxt = 1 - cur
-        n_next, n_escaped, cut, absorbed = kernels.bounce(
+        n_next, n_escaped, cut, absorbed = compiled.bounce(
             depth, job.max_depth, prim, tfar, w.o[cur], w.d[cur],
             w.pol[cur], w.base[cur][:n], w.pid[cur], w.o[nxt], w.d[nxt], w.pol[nxt],
             w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp,
@@ -192,19 +193,3 @@ def _colour_tallies(xz: np.ndarray, cells: np.ndarray, escaped_xz: np.ndarray) -
     flat = cell + N_CELLS * half
     return (xz[:2], xz[2:], counts_of(flat, N_CELLS, escaped_xz[0]),
             counts_of(flat, N_CELLS, escaped_xz[1]))
-
-
-def compile_kernels() -> None:
-    """Compile the photon kernels into numba's on-disk cache (install time: the first run
-    then starts without compiling) by tracing a few photons through a glass square."""
-    from ..scene import Material, Scene
-
-    tri = np.array([[[-1.0, -1.0, -0.5], [1.0, -1.0, -0.5], [1.0, 1.0, -0.5]]])
-    e = Emitter(path="/L", kind="disk", flux=1.0, to_world=np.eye(4), radius=0.1)
-    scene = Scene(tri, np.zeros(1, np.int32), np.zeros(1, np.int32),
-                  (Material("/M", "dielectric", ior=1.5),), ("/P",), (e,))
-    trace_batch(prepare(scene), BatchJob(0, 0, 16, 0, 2), records=True)
-
-
-if __name__ == "__main__":  # pragma: no cover - python -m lumitrace.trace.tracer
-    compile_kernels()

@@ -1,0 +1,138 @@
+"""The photon kernels as the tracer calls them: an ahead-of-time build of
+:mod:`lumitrace.trace.kernels` when one matches their source, else numba's JIT.
+
+Loading numba and LLVM costs a process about 1 CPU s and 150 MB before its first photon
+(every worker process pays it again). The build (:mod:`lumitrace.trace.aot`, run at
+install) compiles the same functions with the same compiler into an extension module
+kept in ``__pycache__`` beside them, named by a hash of their sources: loading it takes
+under a millisecond and needs neither. Its functions take exactly the argument types they
+were built for and, unlike the JIT, do not check them, so every call is checked here
+(about 0.3 us an argument); a call that does not fit, a missing or stale build, or
+``LUMITRACE_KERNELS=jit`` goes to the JIT instead: slower to start, never different.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.machinery
+import importlib.util
+import json
+import os
+import platform
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+#: The kernels the tracer calls, in the order the build exports them.
+ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many")
+#: The sources whose text the compiled code depends on (kernels.py's constants included).
+SOURCES = ("kernels.py", "codes.py", "rng.py", "records.py")
+MODULE = "kernels_aot"
+HERE = Path(__file__).resolve().parent
+#: Calls that went to the JIT although a build was loaded, by kernel (see :func:`backend`).
+fallbacks: Counter = Counter()
+
+_SCALARS = {"int64": (int, np.int64), "float64": (float, np.float64),
+            "bool": (bool, np.bool_), "uint64": (np.uint64,)}
+
+
+def source_key() -> str:
+    """A hash of the kernels' sources, the material codes they compare against, the
+    Python, numpy and machine they are built for: the build's name."""
+    from ..scene import model
+
+    h = hashlib.sha256()
+    for name in SOURCES:
+        h.update((HERE / name).read_bytes())
+    codes = sorted((k, v) for k, v in vars(model).items() if k.isupper() and isinstance(v, int))
+    h.update(repr((codes, np.__version__, platform.machine())).encode())
+    return h.hexdigest()[:16]
+
+
+def build_paths(directory: Path | None = None) -> tuple[Path, Path]:
+    """Where the build for the current sources lives: the extension module and its
+    argument types (JSON)."""
+    d = directory or HERE / "__pycache__"
+    stem = f"{MODULE}-{source_key()}"
+    return (d / (stem + importlib.machinery.EXTENSION_SUFFIXES[0]), d / (stem + ".json"))
+
+
+def _check(spec: list) -> tuple:
+    """One argument's check from its type as the build wrote it: ("array", dtype, ndim,
+    layout, writeable) or the name of a scalar type."""
+    if isinstance(spec, str):
+        return _SCALARS[spec]
+    _, dtype, ndim, layout, writeable = spec
+    return (np.dtype(dtype), ndim, layout, writeable)
+
+
+def _fits(checks: tuple, args: tuple) -> bool:
+    """Whether ``args`` are exactly the types a build's function was compiled for."""
+    if len(args) != len(checks):
+        return False
+    for a, c in zip(args, checks):
+        if len(c) == 4 and isinstance(c[0], np.dtype):
+            dtype, ndim, layout, writeable = c
+            if type(a) is not np.ndarray or a.ndim != ndim or a.dtype != dtype:
+                return False
+            f = a.flags
+            if not f.aligned or (writeable and not f.writeable) or \
+                    (layout == "C" and not f.c_contiguous) or \
+                    (layout == "F" and not f.f_contiguous):
+                return False
+        elif type(a) not in c:
+            return False
+    return True
+
+
+class Kernel:
+    """One entry point: the build's functions (with their argument checks) first, the
+    JIT for any call none of them fits."""
+
+    def __init__(self, name: str, built: list):
+        self.name = name
+        self.built = built  # [(function, checks)]
+        self._jit = None
+
+    def __call__(self, *args):
+        for fn, checks in self.built:
+            if _fits(checks, args):
+                return fn(*args)
+        if self.built:
+            fallbacks[self.name] += 1
+        if self._jit is None:
+            from . import kernels
+
+            self._jit = getattr(kernels, self.name)
+        return self._jit(*args)
+
+
+def _load() -> tuple[dict, str]:
+    """The entry points, from the build when there is a current one."""
+    built: dict = {name: [] for name in ENTRY_POINTS}
+    if os.environ.get("LUMITRACE_KERNELS", "").lower() == "jit":
+        return built, "jit"
+    try:
+        so, types = build_paths()
+        if not (so.exists() and types.exists()):
+            return built, "jit"
+        table = json.loads(types.read_text())
+        spec = importlib.util.spec_from_file_location(MODULE, so)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    except (OSError, ImportError, ValueError):
+        return built, "jit"
+    for name, exports in table.items():
+        if name in built:
+            built[name] = [(getattr(module, export), tuple(_check(s) for s in args))
+                           for export, args in exports]
+    return built, "aot"
+
+
+_built, _backend = _load()
+start, cull, bounce, emit_photons, scatter_many = (Kernel(n, _built[n]) for n in ENTRY_POINTS)
+
+
+def backend() -> str:
+    """"aot" when the kernels come from a current build, "jit" when from numba."""
+    return _backend
