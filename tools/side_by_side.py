@@ -78,7 +78,17 @@ def diffuse_cup():
     return stage
 
 
-BUILDERS = {"isotropic": ms.isotropic, "lambertian": ms.lambertian_disc,
+def point_source():
+    """The isotropic source as a point (UsdLux ``treatAsPoint``), as the peer's scene has
+    it: the reference stage's 1 mm sphere also samples a point on its surface."""
+    from pxr import UsdLux
+
+    stage = ms.isotropic()
+    UsdLux.SphereLight(stage.GetPrimAtPath("/Luminaire/Source")).CreateTreatAsPointAttr(True)
+    return stage
+
+
+BUILDERS = {"isotropic": point_source, "lambertian": ms.lambertian_disc,
             "mirror_cup": ms.mirror_cup, "diffuse_cup": diffuse_cup}
 
 

@@ -370,16 +370,16 @@ def _gonio_cell(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma):
     c = math.degrees(_atan2_fast(py, px))
     if c < 0.0:
         c += 360.0
-    gs, cs = gamma * g_scale, c * c_scale
-    fg, fc = gs - math.floor(gs), cs - math.floor(cs)
-    near = (fg < _EDGE_MARGIN or fg > 1.0 - _EDGE_MARGIN or fc < _EDGE_MARGIN
-            or fc > 1.0 - _EDGE_MARGIN)
+    gs, cs = gamma * g_scale, c * c_scale  # both >= 0: int() is floor()
     g = int(gs)
-    for e in extra_edges:
-        if abs(gamma - e) * g_scale < _EDGE_MARGIN:
-            near = True
-        if gamma >= e:
-            g += 1
+    fg, fc = gs - g, cs - int(cs)
+    # bitwise ors and an indexed loop, no branches: directions are random
+    near = (fg < _EDGE_MARGIN) | (fg > 1.0 - _EDGE_MARGIN) | (fc < _EDGE_MARGIN) | \
+        (fc > 1.0 - _EDGE_MARGIN)
+    for k in range(extra_edges.shape[0]):
+        e = extra_edges[k]
+        near |= abs(gamma - e) * g_scale < _EDGE_MARGIN
+        g += gamma >= e
     if near:
         return _gonio_cell_exact(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma)
     return min(int(cs), n_c - 1) * n_gamma + min(g, n_gamma - 1)
