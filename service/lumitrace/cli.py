@@ -485,6 +485,8 @@ def cmd_bench(args) -> int:
         print(f"triangles            {report['triangles']:,}")
         print(f"photons              {report['photons']:,}")
         print(f"workers              {report['threads']} {report['workers']}")
+        print("kernels              " + ("built ahead of time" if report["kernels"] == "aot"
+                                         else "numba's JIT"))
         print(f"tracer               {report['segments_per_second']:,.0f} segments/s "
               f"({report['photons_per_second']:,.0f} photons/s)")
         print(f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays")

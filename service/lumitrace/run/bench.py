@@ -15,6 +15,7 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 from ..schema import SCHEMA_DIR
+from ..trace import compiled
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, prepare
 from ..trace.tracer import trace_batch
@@ -76,7 +77,8 @@ def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
     t_raw = sum(r[3] for r in results) / threads
     ps = prepare(scene)
     return {"stage": str(path), "triangles": ps.triangle_count, "threads": threads,
-            "workers": workers, "photons": photons, "segments": segments,
+            "workers": workers, "kernels": compiled.backend(), "photons": photons,
+            "segments": segments,
             "trace_seconds": t_trace, "raw_seconds": t_raw,
             "photons_per_second": photons / t_trace, "segments_per_second": segments / t_trace,
             "raw_rays_per_second": segments / t_raw, "ratio": t_raw / t_trace}
