@@ -333,6 +333,10 @@ def cmd_trace(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
     from .run.session import run
+    from .trace.compiled import note
+
+    if note() and not args.quiet:
+        print(f"note: {note()}", file=sys.stderr)
 
     bar, update = _progress_bar(settings.budget(), args.time,
                                 not (args.no_progress or args.json or args.quiet))

@@ -159,3 +159,36 @@ def test_the_builds_types_are_one_signature_per_kernel():
     table = json.loads(types.read_text())
     assert sorted(table) == sorted(compiled.ENTRY_POINTS)
     assert all(len(v) == 1 for v in table.values())  # call sites pass canonical types
+
+
+def test_a_missing_stale_or_broken_build_leaves_the_jit_and_says_why(tmp_path, monkeypatch):
+    real = compiled.build_paths
+    monkeypatch.setattr(compiled, "build_paths", lambda directory=None: real(tmp_path))
+    monkeypatch.delenv("LUMITRACE_KERNELS", raising=False)
+    so, types = real(tmp_path)
+    built, state = compiled._load()
+    assert state == "missing" and not any(built.values())
+    (tmp_path / (compiled.MODULE + "-0123456789abcdef.json")).write_text("{}")
+    assert compiled._load()[1] == "stale"  # another source's build
+    so.write_bytes(b"not a shared object")
+    types.write_text(json.dumps({"start": [["start_0", ["int64"]]]}))
+    built, state = compiled._load()
+    assert state == "unloadable" and not any(built.values())
+    monkeypatch.setenv("LUMITRACE_KERNELS", "jit")
+    assert compiled._load()[1] == "asked"
+
+
+def test_an_edit_of_the_kernels_leaves_the_build_and_says_so(tmp_path):
+    if compiled.backend() != "aot":
+        pytest.skip("no ahead-of-time build of the kernels here (built by tools/setup.sh)")
+    so, types = compiled.build_paths()
+    folder = tmp_path / "trace"
+    shutil.copytree(compiled.HERE, folder, ignore=shutil.ignore_patterns("*.pyc"))
+    with open(folder / "kernels.py", "a") as f:
+        f.write("\n# an edit\n")
+    code = ("import sys, lumitrace.trace as t; t.__path__.insert(0, sys.argv[1]); "
+            "from lumitrace.trace import compiled; print(compiled.backend(), compiled.note())")
+    out = subprocess.run([sys.executable, "-c", code, str(folder)], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("jit the photon kernels' ahead-of-time build is out of date")

@@ -108,31 +108,44 @@ class Kernel:
 
 
 def _load() -> tuple[dict, str]:
-    """The entry points, from the build when there is a current one."""
+    """The entry points, from the build when there is a current one, and why not if not:
+    "built", "asked" (``LUMITRACE_KERNELS=jit``), "missing", "stale" (a build of other
+    sources is there) or "unloadable"."""
     built: dict = {name: [] for name in ENTRY_POINTS}
     if os.environ.get("LUMITRACE_KERNELS", "").lower() == "jit":
-        return built, "jit"
+        return built, "asked"
     try:
         so, types = build_paths()
         if not (so.exists() and types.exists()):
-            return built, "jit"
+            return built, "stale" if any(so.parent.glob(MODULE + "-*")) else "missing"
         table = json.loads(types.read_text())
         spec = importlib.util.spec_from_file_location(MODULE, so)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-    except (OSError, ImportError, ValueError):
-        return built, "jit"
-    for name, exports in table.items():
-        if name in built:
-            built[name] = [(getattr(module, export), tuple(_check(s) for s in args))
-                           for export, args in exports]
-    return built, "aot"
+        for name, exports in table.items():
+            if name in built:
+                built[name] = [(getattr(module, export), tuple(_check(s) for s in args))
+                               for export, args in exports]
+    except (OSError, ImportError, ValueError, KeyError, AttributeError):
+        return {name: [] for name in ENTRY_POINTS}, "unloadable"
+    return built, "built"
 
 
-_built, _backend = _load()
+_built, _state = _load()
 start, cull, bounce, emit_photons, scatter_many = (Kernel(n, _built[n]) for n in ENTRY_POINTS)
 
 
 def backend() -> str:
     """"aot" when the kernels come from a current build, "jit" when from numba."""
-    return _backend
+    return "aot" if _state == "built" else "jit"
+
+
+def note() -> str | None:
+    """What a user should hear about the kernels, if anything: a build that is there but
+    out of date or unreadable (no build at all is the set-up's to say, once)."""
+    if _state not in ("stale", "unloadable"):
+        return None
+    what = "out of date" if _state == "stale" else "unreadable"
+    return (f"the photon kernels' ahead-of-time build is {what} (`python -m "
+            "lumitrace.trace.aot` rebuilds it): numba compiles them instead, which costs "
+            "about a second at start")
