@@ -181,7 +181,6 @@ def test_a_missing_stale_or_broken_build_leaves_the_jit_and_says_why(tmp_path, m
 def test_an_edit_of_the_kernels_leaves_the_build_and_says_so(tmp_path):
     if compiled.backend() != "aot":
         pytest.skip("no ahead-of-time build of the kernels here (built by tools/setup.sh)")
-    so, types = compiled.build_paths()
     folder = tmp_path / "trace"
     shutil.copytree(compiled.HERE, folder, ignore=shutil.ignore_patterns("*.pyc"))
     with open(folder / "kernels.py", "a") as f:
