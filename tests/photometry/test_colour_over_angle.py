@@ -11,7 +11,7 @@ import OpenImageIO as oiio
 import pytest
 from pxr import Sdf, Usd
 
-from lumitrace.photometry.colour import cct_duv, colour_over_angle, uv_prime
+from lumitrace.photometry.colour import _ohno2013, cct_duv, colour_over_angle, uv_prime
 from lumitrace.run.session import TraceSettings, run
 from lumitrace.scene import spectra
 from helpers.paths import ROOT
@@ -50,6 +50,29 @@ def test_uv_and_cct_agree_with_colour_science():
     green = uv_prime(np.asarray(colour.wavelength_to_XYZ(530)))
     cct, duv = cct_duv(green[:, None])
     assert np.isnan(cct[0]) and duv[0] > 0.05
+
+
+def test_cct_and_duv_are_colour_sciences_ohno_2013_to_the_bit():
+    import warnings
+
+    import colour
+
+    rng = np.random.default_rng(4)
+    uv = np.stack([rng.uniform(0.12, 0.40, 400), rng.uniform(0.22, 0.38, 400)])
+    planckian = np.array([colour.temperature.CCT_to_uv(np.array([t, d]), method="Ohno 2013")
+                          for t, d in [(1500, 0.0), (2700, 0.001), (6500, -0.003),
+                                       (25000, 0.01), (90000, 0.0)]]).T
+    uv = np.concatenate([uv, planckian], axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # its table-bound notes on far-off points
+        want = np.asarray(colour.uv_to_CCT(uv.T, method="Ohno 2013"))
+    assert np.array_equal(_ohno2013(uv.T), want)  # the same table, the same arithmetic
+    cct, duv = cct_duv(np.stack([uv[0], uv[1] * 1.5]))  # from u'v', as the table has it
+    far = np.abs(want[:, 1]) > 0.05
+    assert far.sum() > 50 and (~far).sum() > 100  # on, near and far off the locus
+    # a last-bit change of v can move a near tie of table rows: 1e-7 of Duv at most
+    assert duv == pytest.approx(want[:, 1], abs=1e-7)
+    assert cct[~far] == pytest.approx(want[~far, 0], rel=1e-5) and np.isnan(cct[far]).all()
 
 
 def test_a_luminaire_without_colour_writes_none(tmp_path):

@@ -12,6 +12,7 @@ the cells' noise, which is stated beside it.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,17 +43,62 @@ MAX_DUV = 0.05
 
 def cct_duv(uvp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Correlated colour temperature (K) and Duv of chromaticities u'v' (2, ...) (Ohno
-    2013, colour-science); NaN where undefined (CCT also beyond :data:`MAX_DUV`)."""
-    import colour
-
+    2013, as colour-science computes it); NaN where undefined (CCT also beyond
+    :data:`MAX_DUV`)."""
     shape = uvp.shape[1:]
     uv = np.stack([uvp[0], uvp[1] * (2.0 / 3.0)], axis=-1).reshape(-1, 2)
     out = np.full((len(uv), 2), np.nan)
     ok = np.isfinite(uv).all(axis=1)
     if ok.any():
-        out[ok] = np.asarray(colour.uv_to_CCT(uv[ok], method="Ohno 2013")).reshape(-1, 2)
+        out[ok] = _ohno2013(uv[ok])
     out[~(np.abs(out[:, 1]) <= MAX_DUV), 0] = np.nan
     return out[:, 0].reshape(shape), out[:, 1].reshape(shape)
+
+
+@functools.lru_cache(maxsize=1)
+def _planckian_table() -> np.ndarray:
+    """colour-science's Planckian table for Ohno's method, rows (T K, u, v): its defaults
+    (CIE 1931 2 deg observer, 1000 to 100000 K in steps of about 0.1%), made once."""
+    from colour.colorimetry import handle_spectral_arguments
+    from colour.temperature import ohno2013
+
+    cmfs, _ = handle_spectral_arguments(None)
+    return ohno2013.planckian_table(cmfs, ohno2013.CCT_MINIMAL_OHNO2013,
+                                    ohno2013.CCT_MAXIMAL_OHNO2013,
+                                    ohno2013.CCT_DEFAULT_SPACING_OHNO2013)
+
+
+def _ohno2013(uv: np.ndarray) -> np.ndarray:
+    """(CCT K, Duv) (N, 2) of CIE 1960 ``uv`` (N, 2): Ohno (2013) on colour-science's table
+    and with its formulas, for all points at once (colour-science loops over points in
+    Python: 0.3 ms a point, a third of a second for a colour table)."""
+    table = _planckian_table()
+    tu, tv = np.ascontiguousarray(table[:, 1]), np.ascontiguousarray(table[:, 2])
+    nearest = np.empty(len(uv), np.int64)
+    for s in range(0, len(uv), 64):  # (64, rows) distances at a time
+        du = uv[s:s + 64, 0, None] - tu
+        dv = uv[s:s + 64, 1, None] - tv
+        nearest[s:s + 64] = np.argmin(np.sqrt(du * du + dv * dv), axis=1)
+    rows = table[np.clip(nearest, 1, len(table) - 2)[:, None] + np.arange(-1, 2)]
+    d = uv[:, None, :] - rows[..., 1:]
+    dip, di, din = np.sqrt((d * d).sum(axis=-1)).T
+    (tp, ti, tn), (up, _, un), (vp, _, vn) = rows[..., 0].T, rows[..., 1].T, rows[..., 2].T
+    # triangular solution
+    length = np.hypot(un - up, vn - vp)
+    x = (dip ** 2 - din ** 2 + length ** 2) / (2 * length)
+    t_t = tp + (tn - tp) * (x / length)
+    sign = np.sign(uv[:, 1] - (vp + (vn - vp) * (x / length)))
+    duv_t = (dip ** 2 - x ** 2) ** 0.5 * sign
+    # parabolic solution, where the point is 0.002 or more off the locus
+    big = (tn - ti) * (tp - tn) * (ti - tp)
+    a = (tp * (din - di) + ti * (dip - din) + tn * (di - dip)) * big ** -1
+    b = -(tp ** 2 * (din - di) + ti ** 2 * (dip - din) + tn ** 2 * (di - dip)) * big ** -1
+    c = -(dip * (tn - ti) * ti * tn + di * (tp - tn) * tp * tn
+          + din * (ti - tp) * tp * ti) * big ** -1
+    t_p = -b / (2 * a)
+    duv_p = (a * t_p ** 2 + b * t_p + c) * sign
+    far = np.abs(duv_t) >= 0.002
+    return np.stack([np.where(far, t_p, t_t), np.where(far, duv_p, duv_t)], axis=-1)
 
 
 @dataclass(frozen=True)
