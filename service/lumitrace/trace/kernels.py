@@ -207,11 +207,15 @@ def scatter_one(kind, refl, spec, trans, ior, alpha, dx, dy, dz, nx, ny, nz,
     """One photon arriving along ``d`` at a surface of scattering model ``kind`` with unit
     geometric normal ``n`` (front = counter-clockwise): (survives, new direction, new
     polarisation). ``p`` is its polarisation (x NaN: unpolarised), used when ``polarised``.
-    Analog: a photon survives with the probability of the material's albedo."""
+    Analog: a photon survives with the probability of the material's albedo; one that
+    cannot survive (at most that albedo) is not given a direction."""
+    nan = math.nan
+    if (u0 >= refl and kind == DIFFUSE) or (u0 >= refl + trans and kind == TRANSLUCENT) \
+            or (u0 >= spec and kind == GLOSSY):  # (Smith's G1 is at most 1)
+        return False, dx, dy, dz, nan, 0.0, 0.0
     cos_d = _dot(dx, dy, dz, nx, ny, nz)
     front = cos_d < 0.0
     fx, fy, fz = (nx, ny, nz) if front else (-nx, -ny, -nz)  # normal on the photon's side
-    nan = math.nan
     if kind == DIFFUSE:
         ox, oy, oz = _cosine_about(fx, fy, fz, u1, u2)
         return u0 < refl, ox, oy, oz, nan, 0.0, 0.0
