@@ -490,7 +490,9 @@ def cmd_bench(args) -> int:
         print(f"photons              {report['photons']:,}")
         print(f"workers              {report['threads']} {report['workers']}")
         print("kernels              " + ("built ahead of time" if report["kernels"] == "aot"
-                                         else "numba's JIT"))
+                                         else "numba's JIT") + ", Embree " +
+              ("through its C API, a geometry per part" if report["embree"] == "parts"
+               else "through embreex"))
         print(f"tracer               {report['segments_per_second']:,.0f} segments/s "
               f"({report['photons_per_second']:,.0f} photons/s)")
         print(f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays")

@@ -16,19 +16,26 @@ from pathlib import Path
 
 from ..schema import SCHEMA_DIR
 from ..trace import compiled
+from ..trace.embree import PartScene
 from ..trace.job import BatchJob
-from ..trace.prepared import PreparedScene, prepare
+from ..trace.prepared import PreparedScene, embree_scene, prepare
 from ..trace.tracer import trace_batch
 
 DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
 _worker_scene: PreparedScene | None = None
+_worker_embreex = None
 
 
 def _init(stage: str) -> None:
-    global _worker_scene
+    global _worker_scene, _worker_embreex
+    import numpy as np
+
     from ..stage.reader import read_stage
 
-    _worker_scene = prepare(read_stage(stage))
+    ps = _worker_scene = prepare(read_stage(stage))
+    tri = (np.asarray(ps.scene.triangles, np.float64) - ps.center) / ps.scale
+    _worker_embreex = embree_scene(np.ascontiguousarray(tri, dtype=np.float32), (),
+                                   parts=False)  # the reference: bare embreex
 
 
 def _job(job: BatchJob) -> tuple[int, int, float, float]:
@@ -40,7 +47,7 @@ def _job(job: BatchJob) -> tuple[int, int, float, float]:
     rays = trace_batch(ps, job, record_rays=True).rays  # the same rays, kept (not timed)
     t2 = time.perf_counter()
     for o, d in rays:
-        ps.intersect(o, d)
+        _worker_embreex.run(o, d, output=1)
     t3 = time.perf_counter()
     return job.count, tally.segments, t1 - t0, t3 - t2
 
@@ -77,7 +84,9 @@ def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
     t_raw = sum(r[3] for r in results) / threads
     ps = prepare(scene)
     return {"stage": str(path), "triangles": ps.triangle_count, "threads": threads,
-            "workers": workers, "kernels": compiled.backend(), "photons": photons,
+            "workers": workers, "kernels": compiled.backend(),
+            "embree": "parts" if isinstance(ps.embree, PartScene) else "embreex",
+            "photons": photons,
             "segments": segments,
             "trace_seconds": t_trace, "raw_seconds": t_raw,
             "photons_per_second": photons / t_trace, "segments_per_second": segments / t_trace,

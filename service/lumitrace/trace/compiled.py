@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 #: The kernels the tracer calls, in the order the build exports them.
-ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many")
+ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect")
 #: The sources whose text the compiled code depends on (kernels.py's constants included).
 SOURCES = ("kernels.py", "codes.py", "rng.py", "records.py")
 MODULE = "kernels_aot"
@@ -132,7 +132,8 @@ def _load() -> tuple[dict, str]:
 
 
 _built, _state = _load()
-start, cull, bounce, emit_photons, scatter_many = (Kernel(n, _built[n]) for n in ENTRY_POINTS)
+start, cull, bounce, emit_photons, scatter_many, intersect = (Kernel(n, _built[n])
+                                                              for n in ENTRY_POINTS)
 
 
 def backend() -> str:

@@ -19,6 +19,9 @@ import math
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
 
 from ..scene import DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT
 from .codes import DISK, MESH, MIXED, PRISTINE, RAYS, RECT, SPHERE
@@ -951,3 +954,43 @@ def cull(n, o, d, base, pid, o32, d32, lo, hi):
             pid[i], pid[k] = pid[k], pid[i]
         k += 1
     return k
+
+
+# --- intersection ---------------------------------------------------------------------------
+
+@intrinsic
+def _call_void3(typingctx, fn, a, b, c):
+    """Call the C function at address ``fn`` with three pointer arguments (addresses), no
+    result: Embree's ``rtcIntersect1(scene, rayhit, args)``, whose address is known only
+    at run time."""
+    sig = types.void(types.uint64, types.uint64, types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        f = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [ptr] * 3).as_pointer())
+        builder.call(f, [builder.inttoptr(a, ptr) for a in args[1:]])
+        return context.get_dummy_value()
+    return sig, codegen
+
+
+@numba.njit(**_JIT)
+def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
+    """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
+    geometry per part; triangle j of geometry g is ``order[offsets[g] + j]``): triangle
+    ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``: ``rtcIntersect1``."""
+    buf = np.empty(40, np.uint32)  # an RTCRayHit, 16-byte aligned within
+    k = ((16 - buf.ctypes.data % 16) % 16) // 4
+    f = buf[k:].view(np.float32)
+    u = buf[k:]
+    addr = numba.uint64(buf.ctypes.data + 4 * k)
+    for i in range(o32.shape[0]):
+        f[0], f[1], f[2], f[3] = o32[i, 0], o32[i, 1], o32[i, 2], 0.0  # origin, tnear
+        f[4], f[5], f[6], f[7] = d32[i, 0], d32[i, 1], d32[i, 2], 0.0  # direction, time
+        f[8] = np.inf
+        u[9], u[10], u[11] = 0xFFFFFFFF, 0, 0  # mask, id, flags
+        u[18], u[19] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
+        _call_void3(fn, scene, addr, numba.uint64(0))
+        if u[18] == 0xFFFFFFFF:
+            prim[i], tfar[i] = -1, np.inf
+        else:
+            prim[i], tfar[i] = order[offsets[u[18]] + u[17]], f[8]

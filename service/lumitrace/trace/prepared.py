@@ -18,6 +18,7 @@ from ..scene import DIELECTRIC, Scene
 from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
 from .vectors import cross, dot
+from .embree import PartScene, library
 from .emission import emission_args
 from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
@@ -159,12 +160,30 @@ class PreparedScene:
                 np.asarray(g.hi, np.float64), np.asarray(g.n, np.int64),
                 *(np.ascontiguousarray(m) for m in _axis_masks(tuple(g.n))))
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> dict:
-        """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``tfar``."""
+    def intersect(self, origins: np.ndarray, directions: np.ndarray,
+                  prim: np.ndarray | None = None, tfar: np.ndarray | None = None) -> dict:
+        """Embree closest hits for float32 rays (N,3): ``primID`` (-1 = miss), ``tfar``
+        (written into ``prim`` and ``tfar`` when given and the scene is a PartScene)."""
         if self.embree is None:
             n = origins.shape[0]
             return {"primID": np.full(n, -1, np.int32), "tfar": np.full(n, np.inf, np.float32)}
+        if isinstance(self.embree, PartScene):
+            return self.embree.run(origins, directions, prim, tfar)
         return self.embree.run(origins, directions, output=1)
+
+
+def embree_scene(triangles: np.ndarray, part_index, parts: bool = True):
+    """The Embree scene of float32 triangles (T, 3, 3): one geometry per part through
+    Embree's C API (:class:`~lumitrace.trace.embree.PartScene`) where its library is found
+    and ``parts``, else embreex's one geometry. Both give the same hits."""
+    if parts and library() is not None:
+        return PartScene(triangles, np.asarray(part_index, np.int64))
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    embree = rtcore_scene.EmbreeScene(robust=True)
+    TriangleMesh(embree, triangles)
+    return embree
 
 
 def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
@@ -183,11 +202,7 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
     table = None
     kind = np.zeros(tri.shape[0], np.int8)
     if tri.shape[0]:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        embree = rtcore_scene.EmbreeScene(robust=True)
-        TriangleMesh(embree, np.ascontiguousarray(tri, dtype=np.float32))
+        embree = embree_scene(np.ascontiguousarray(tri, dtype=np.float32), scene.part_index)
         table = MaterialTable.from_materials(scene.materials,
                                              spectral=scene.colour == "spectral")
         kind = np.take(table.kind, np.asarray(scene.material_index))

@@ -43,7 +43,7 @@ _local = threading.local()
 class _Waves:
     """A thread's wave buffers, reused from batch to batch: freshly mapped temporaries
     cost page faults on every bounce. Two sets of (o, d, pol, hash, row), swapped each
-    bounce, the float32 rays for Embree, and room for the escapes' bins."""
+    bounce, the float32 rays for Embree and its hits, and room for the escapes' bins."""
 
     def __init__(self, n: int):
         self.size = n
@@ -55,6 +55,8 @@ class _Waves:
         self.o32 = np.empty((n, 3), np.float32)
         self.d32 = np.empty((n, 3), np.float32)
         self.escaped = np.empty(2 * n, np.int64)
+        self.prim = np.empty(n, np.int32)  # Embree's hits
+        self.tfar = np.empty(n, np.float32)
         self.rows = np.arange(n, dtype=np.int64)
         self.tp = self.tband = self.escaped_xz = None
 
@@ -148,7 +150,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         if record_rays:
             tally.rays.append((o32.copy(), d32.copy()))
         if reach:
-            hit = ps.intersect(o32, d32)
+            hit = ps.intersect(o32, d32, w.prim, w.tfar)
             prim, tfar = hit["primID"], hit["tfar"]
         if reach < n:
             prim = np.concatenate([prim, np.full(n - reach, -1, np.int32)]) if reach \

@@ -1,0 +1,143 @@
+"""Embree 4 through its C API, from the library the embreex wheel ships: one geometry per
+part, intersected by a compiled kernel, and a part's geometry replaced in place.
+
+embreex builds one geometry of all triangles, rebuilt whole after any edit, and returns six
+freshly allocated arrays per call. Here each part is its own geometry, so an edit detaches
+and attaches only the edited part's, the scene is committed once, and hits are written
+into the tracer's own buffers. The scene has embreex's robust flag, and hits are the same
+triangle at the same float32 distance as embreex's (tested), so maps do not change.
+Without the library (another wheel layout, or ``LUMITRACE_EMBREE=embreex``) the tracer
+uses embreex.
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import glob
+import os
+import threading
+
+import numpy as np
+
+#: Embree 4 enum values (rtcore_common.h, rtcore_buffer.h, rtcore_scene.h).
+_TRIANGLE, _INDEX, _VERTEX, _UINT3, _FLOAT3, _ROBUST = 0, 0, 1, 0x5003, 0x9003, 1 << 2
+_P = ctypes.c_size_t  # pointers, passed as addresses
+_API = {"rtcNewDevice": (_P, [ctypes.c_char_p]), "rtcNewScene": (_P, [_P]),
+        "rtcSetSceneFlags": (None, [_P, ctypes.c_int]),
+        "rtcNewGeometry": (_P, [_P, ctypes.c_int]),
+        "rtcSetSharedGeometryBuffer": (None, [_P, ctypes.c_int, ctypes.c_uint, ctypes.c_int,
+                                              _P, _P, _P, _P]),
+        "rtcCommitGeometry": (None, [_P]), "rtcReleaseGeometry": (None, [_P]),
+        "rtcAttachGeometryByID": (None, [_P, _P, ctypes.c_uint]),
+        "rtcDetachGeometry": (None, [_P, ctypes.c_uint]), "rtcCommitScene": (None, [_P]),
+        "rtcReleaseScene": (None, [_P]), "rtcGetDeviceError": (ctypes.c_int, [_P]),
+        "rtcIntersect1": (None, [_P, _P, _P])}
+_lock = threading.Lock()
+
+
+@functools.lru_cache(maxsize=1)
+def library() -> ctypes.CDLL | None:
+    """Embree 4's shared library as the embreex wheel ships it, its API declared; None
+    when it is not found or not wanted."""
+    if os.environ.get("LUMITRACE_EMBREE", "").lower() == "embreex":
+        return None
+    try:
+        import embreex
+    except ImportError:
+        return None
+    here = os.path.dirname(embreex.__file__)
+    names = (glob.glob(os.path.join(here, os.pardir, "embreex.libs", "libembree4*"))
+             + glob.glob(os.path.join(here, ".dylibs", "libembree4*"))
+             + glob.glob(os.path.join(here, "*embree4*.dll")))
+    for name in names:
+        try:
+            lib = ctypes.CDLL(name)
+            for fn, (res, args) in _API.items():
+                getattr(lib, fn).restype, getattr(lib, fn).argtypes = res, args
+            return lib
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+@functools.lru_cache(maxsize=1)
+def _device() -> int:
+    return library().rtcNewDevice(None)
+
+
+class PartScene:
+    """The triangles (T, 3, 3) float32 of a prepared scene as an Embree scene with one
+    geometry per part (``part_index`` (T,)), hits numbered as the triangles are."""
+
+    def __init__(self, triangles: np.ndarray, part_index: np.ndarray):
+        from .compiled import intersect
+
+        self._lib, self._intersect = library(), intersect
+        self._fn = ctypes.cast(self._lib.rtcIntersect1, ctypes.c_void_p).value
+        part = np.asarray(part_index, np.int64) if len(part_index) else \
+            np.zeros(len(triangles), np.int64)
+        self.order = np.argsort(part, kind="stable").astype(np.int64)
+        n_parts = int(part.max()) + 1 if len(part) else 0
+        self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
+        self._buffers: dict[int, tuple] = {}  # the geometries' shared buffers, kept alive
+        self.scene = self._lib.rtcNewScene(_device())
+        self._lib.rtcSetSceneFlags(self.scene, _ROBUST)
+        tri = np.asarray(triangles, np.float32)[self.order]
+        bounds = np.append(self.offsets, len(tri))
+        for g in range(n_parts):
+            if bounds[g + 1] > bounds[g]:
+                self._attach(g, tri[bounds[g]:bounds[g + 1]])
+        self._commit()
+
+    def _attach(self, g: int, tri: np.ndarray) -> None:
+        """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g``."""
+        lib = self._lib
+        v = np.zeros((3 * len(tri) + 1, 4), np.float32)  # 16-byte rows, one spare
+        v[:-1, :3] = tri.reshape(-1, 3)
+        idx = np.arange(3 * len(tri), dtype=np.uint32).reshape(-1, 3)
+        geom = lib.rtcNewGeometry(_device(), _TRIANGLE)
+        lib.rtcSetSharedGeometryBuffer(geom, _VERTEX, 0, _FLOAT3, v.ctypes.data, 0, 16,
+                                       3 * len(tri))
+        lib.rtcSetSharedGeometryBuffer(geom, _INDEX, 0, _UINT3, idx.ctypes.data, 0, 12,
+                                       len(tri))
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometryByID(self.scene, geom, g)
+        lib.rtcReleaseGeometry(geom)  # the scene holds it
+        self._buffers[g] = (v, idx)
+
+    def _commit(self) -> None:
+        with _lock:
+            self._lib.rtcCommitScene(self.scene)
+            err = self._lib.rtcGetDeviceError(_device())
+        if err:
+            raise RuntimeError(f"Embree error {err} while building the scene")
+
+    def replace(self, part: int, triangles: np.ndarray) -> None:
+        """Give part ``part`` new triangles (as many as before, float32 (t, 3, 3)), in
+        place: only its geometry is rebuilt, the scene committed once."""
+        lo, hi = self.offsets[part], (self.offsets[part + 1] if part + 1 < len(self.offsets)
+                                      else len(self.order))
+        if len(triangles) != hi - lo:
+            raise ValueError(f"part {part} has {hi - lo} triangles, not {len(triangles)}")
+        if part in self._buffers:
+            self._lib.rtcDetachGeometry(self.scene, part)
+            del self._buffers[part]
+        if len(triangles):
+            self._attach(part, np.asarray(triangles, np.float32))
+        self._commit()
+
+    def run(self, origins: np.ndarray, directions: np.ndarray, prim: np.ndarray | None = None,
+            tfar: np.ndarray | None = None) -> dict:
+        """Closest hits of float32 rays (N, 3): ``primID`` (int32, -1 = none) and ``tfar``
+        (float32, inf = none), into ``prim`` and ``tfar`` when given."""
+        n = len(origins)
+        prim = np.empty(n, np.int32) if prim is None else prim[:n]
+        tfar = np.empty(n, np.float32) if tfar is None else tfar[:n]
+        self._intersect(np.uint64(self._fn), np.uint64(self.scene), origins, directions,
+                        self.offsets, self.order, prim, tfar)
+        return {"primID": prim, "tfar": tfar}
+
+    def __del__(self):
+        lib = getattr(self, "_lib", None)
+        if lib is not None and getattr(self, "scene", None):
+            lib.rtcReleaseScene(self.scene)
