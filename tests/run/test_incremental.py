@@ -90,13 +90,14 @@ EDITS = st.lists(st.tuples(st.sampled_from(["material", "move", "points", "activ
 def test_incremental_retrace_equals_a_fresh_trace(edits):
     with tempfile.TemporaryDirectory() as tmp:
         path, scene, frame, r, stage = _traced_luminaire(Path(tmp) / "lum.usda")
+        ps = prepare(scene, frame)
         for kind, part, x in edits:
             _edit(stage, kind, part, x)
             stage.GetRootLayer().Save()
             new = read_stage(path)
             sel = select(r.records, r.scene, new, frame)
             assert sel.restart is None, sel.restart
-            ps = prepare(new, frame)
+            ps = prepare(new, frame, previous=ps)  # only the edited parts' Embree geometry
             retrace(r, new, sel, lambda work: [trace_batch(ps, j, photons=ids, records=True)
                                                for j, ids in work], 4096)
             fresh = run(new, SETTINGS, frame=frame)
@@ -217,7 +218,8 @@ def test_incremental_retrace_of_a_spectral_scene_equals_a_fresh_trace(edits):
         assert scene.colour == "spectral"
         frame = TracingFrame.of(scene)
         r = Refinement(scene, SETTINGS, records_cap=1 << 30)
-        _refine(r, prepare(scene, frame))
+        ps = prepare(scene, frame)
+        _refine(r, ps)
         for kind, part, x in edits:
             if kind == "colour":
                 _ramp(stage.GetPrimAtPath(PARTS[2] if part == PARTS[1] else part), x)
@@ -233,7 +235,7 @@ def test_incremental_retrace_of_a_spectral_scene_equals_a_fresh_trace(edits):
             if sel.restart is not None:  # the coloured part went: no longer spectral
                 assert new.colour != "spectral"
                 return
-            ps = prepare(new, frame)
+            ps = prepare(new, frame, previous=ps)
             retrace(r, new, sel, lambda work: [trace_batch(ps, j, photons=ids, records=True)
                                                for j, ids in work], 4096)
             fresh = run(new, SETTINGS, frame=frame)

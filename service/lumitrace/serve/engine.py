@@ -215,19 +215,26 @@ class Engine:
         """Retrace the photons the edit can change; the rest stay (see
         :mod:`lumitrace.run.incremental`)."""
         r = self.refinement
-        ps = prepare(rev.scene, self.frame)
+        # no batch runs now: the edited parts' Embree geometries are rebuilt in place
+        ps = prepare(rev.scene, self.frame, previous=self._prepared)
 
         def trace(work):
             return self._pool.map(lambda item: trace_batch(ps, item[0], photons=item[1],
                                                            records=True), work)
         with self._cv:
-            done = retrace(r, rev.scene, selection, trace, self.settings.batch_size)
+            try:
+                done = retrace(r, rev.scene, selection, trace, self.settings.batch_size)
+            except BaseException:
+                if ps.embree is self._prepared.embree:  # the old revision's scene is gone
+                    self._prepared = prepare(self.revision.scene, self.frame)
+                raise
             self._prepared = ps
             self.revision = rev
             self.done = False
             self._written_full = False
         self.events.publish("retrace", revision=rev.number, photons=done.photons,
-                            of=done.of, seconds=done.seconds)
+                            of=done.of, seconds=done.seconds,
+                            rebuilt_parts=_rebuilt(ps, rev.scene))
         if r.records_dropped:
             self.events.publish("warning", revision=rev.number,
                                 message="photon records dropped above their memory cap: "
@@ -322,3 +329,10 @@ class Engine:
                             relative_error=record["relative_error"], pictures=pictures,
                             input_hash=record["input_hash"], seconds=now - t0,
                             outputs=record.summary().get("outputs", {}))
+
+
+def _rebuilt(ps, scene) -> list[str] | None:
+    """The parts whose Embree geometry the last preparation rebuilt (None: embreex, which
+    rebuilds every part)."""
+    rebuilt = getattr(ps.embree, "rebuilt", None)
+    return None if rebuilt is None else [scene.parts[g] for g in rebuilt]

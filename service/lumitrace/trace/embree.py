@@ -1,9 +1,9 @@
 """Embree 4 through its C API, from the library the embreex wheel ships: one geometry per
-part, intersected by a compiled kernel, and a part's geometry replaced in place.
+part, intersected by a compiled kernel, and the geometries of edited parts rebuilt in place.
 
 embreex builds one geometry of all triangles, rebuilt whole after any edit, and returns six
 freshly allocated arrays per call. Here each part is its own geometry, so an edit detaches
-and attaches only the edited part's, the scene is committed once, and hits are written
+and attaches only the edited parts', the scene is committed once, and hits are written
 into the tracer's own buffers. The scene has embreex's robust flag, and hits are the same
 triangle at the same float32 distance as embreex's (tested), so maps do not change.
 Without the library (another wheel layout, or ``LUMITRACE_EMBREE=embreex``) the tracer
@@ -76,6 +76,8 @@ class PartScene:
         self._fn = ctypes.cast(self._lib.rtcIntersect1, ctypes.c_void_p).value
         part = np.asarray(part_index, np.int64) if len(part_index) else \
             np.zeros(len(triangles), np.int64)
+        self._part = part
+        self.rebuilt = list(range(int(part.max()) + 1 if len(part) else 0))  # last build
         self.order = np.argsort(part, kind="stable").astype(np.int64)
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
@@ -112,19 +114,26 @@ class PartScene:
         if err:
             raise RuntimeError(f"Embree error {err} while building the scene")
 
-    def replace(self, part: int, triangles: np.ndarray) -> None:
-        """Give part ``part`` new triangles (as many as before, float32 (t, 3, 3)), in
-        place: only its geometry is rebuilt, the scene committed once."""
-        lo, hi = self.offsets[part], (self.offsets[part + 1] if part + 1 < len(self.offsets)
-                                      else len(self.order))
-        if len(triangles) != hi - lo:
-            raise ValueError(f"part {part} has {hi - lo} triangles, not {len(triangles)}")
-        if part in self._buffers:
-            self._lib.rtcDetachGeometry(self.scene, part)
-            del self._buffers[part]
-        if len(triangles):
-            self._attach(part, np.asarray(triangles, np.float32))
-        self._commit()
+    def update(self, triangles: np.ndarray, part_index) -> bool:
+        """Take the scene's new triangles (T, 3, 3) float32 where the parts are laid out
+        as before (the same part of every triangle): rebuild the parts whose triangles
+        changed, commit once, and say True; False (nothing done) when the layout differs."""
+        part = np.asarray(part_index, np.int64) if len(part_index) else \
+            np.zeros(len(triangles), np.int64)
+        if not np.array_equal(part, self._part):
+            return False
+        tri = np.asarray(triangles, np.float32)[self.order]
+        bounds = np.append(self.offsets, len(tri))
+        changed = [g for g in range(len(self.offsets)) if bounds[g + 1] > bounds[g] and
+                   not np.array_equal(self._buffers[g][0][:-1, :3],
+                                      tri[bounds[g]:bounds[g + 1]].reshape(-1, 3))]
+        for g in changed:
+            self._lib.rtcDetachGeometry(self.scene, g)
+            self._attach(g, tri[bounds[g]:bounds[g + 1]])
+        if changed:
+            self._commit()
+        self.rebuilt = changed
+        return True
 
     def run(self, origins: np.ndarray, directions: np.ndarray, prim: np.ndarray | None = None,
             tfar: np.ndarray | None = None) -> dict:

@@ -186,8 +186,14 @@ def embree_scene(triangles: np.ndarray, part_index, parts: bool = True):
     return embree
 
 
-def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
-    """Normalise the scene (in ``frame``, else its own) and build the Embree structure."""
+def prepare(scene: Scene, frame: TracingFrame | None = None,
+            previous: PreparedScene | None = None) -> PreparedScene:
+    """Normalise the scene (in ``frame``, else its own) and build the Embree structure.
+
+    With ``previous`` (the same luminaire in the same frame before an edit, no longer
+    traced) its Embree scene is updated in place where it can be: only the parts whose
+    triangles changed are rebuilt (see :meth:`~lumitrace.trace.embree.PartScene.update`).
+    """
     frame = frame or TracingFrame.of(scene)
     center = np.array(frame.center, dtype=np.float64)
     scale = float(frame.scale)
@@ -202,7 +208,12 @@ def prepare(scene: Scene, frame: TracingFrame | None = None) -> PreparedScene:
     table = None
     kind = np.zeros(tri.shape[0], np.int8)
     if tri.shape[0]:
-        embree = embree_scene(np.ascontiguousarray(tri, dtype=np.float32), scene.part_index)
+        tri32 = np.ascontiguousarray(tri, dtype=np.float32)
+        old = previous.embree if previous is not None else None
+        if not (isinstance(old, PartScene) and previous.center.tolist() == center.tolist()
+                and previous.scale == scale and old.update(tri32, scene.part_index)):
+            old = embree_scene(tri32, scene.part_index)
+        embree = old
         table = MaterialTable.from_materials(scene.materials,
                                              spectral=scene.colour == "spectral")
         kind = np.take(table.kind, np.asarray(scene.material_index))
