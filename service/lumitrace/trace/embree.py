@@ -77,7 +77,6 @@ class PartScene:
         part = np.asarray(part_index, np.int64) if len(part_index) else \
             np.zeros(len(triangles), np.int64)
         self._part = part
-        self.rebuilt = list(range(int(part.max()) + 1 if len(part) else 0))  # last build
         self.order = np.argsort(part, kind="stable").astype(np.int64)
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
@@ -90,6 +89,7 @@ class PartScene:
             if bounds[g + 1] > bounds[g]:
                 self._attach(g, tri[bounds[g]:bounds[g + 1]])
         self._commit()
+        self.rebuilt = sorted(self._buffers)  # the parts the last build or update built
 
     def _attach(self, g: int, tri: np.ndarray) -> None:
         """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g``."""
