@@ -247,6 +247,7 @@ def test_the_service_map_equals_a_fresh_trace_with_the_edits(stage, tmp_path):
         retraced = [e.data for e in _events(s, {"retrace"}, last_id=last)]
     # the housing's photons only, not all
     assert len(retraced) == 1 and 0 < retraced[0]["photons"] < retraced[0]["of"] == 40_000
+    assert retraced[0]["rebuilt_parts"] == []  # a material edit rebuilds no Embree geometry
     frame = ",".join(repr(v) for v in status["tracing_frame"])
     fresh = tmp_path / "fresh"
     fresh.mkdir()
