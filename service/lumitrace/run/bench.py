@@ -18,7 +18,7 @@ from ..schema import SCHEMA_DIR
 from ..trace import compiled
 from ..trace.embree import PartScene
 from ..trace.job import BatchJob
-from ..trace.prepared import PreparedScene, embree_scene, prepare
+from ..trace.prepared import PreparedScene, embree_scene, normalised, prepare
 from ..trace.tracer import trace_batch
 
 DEMO_STAGE = SCHEMA_DIR.parent / "stages" / "downlight.usda"
@@ -33,7 +33,7 @@ def _init(stage: str) -> None:
     from ..stage.reader import read_stage
 
     ps = _worker_scene = prepare(read_stage(stage))
-    tri = (np.asarray(ps.scene.triangles, np.float64) - ps.center) / ps.scale
+    tri = normalised(ps.scene, ps.center, ps.scale)
     _worker_embreex = embree_scene(np.ascontiguousarray(tri, dtype=np.float32), (),
                                    parts=False)  # the reference: bare embreex
 

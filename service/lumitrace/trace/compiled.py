@@ -71,7 +71,7 @@ def _fits(checks: tuple, args: tuple) -> bool:
     if len(args) != len(checks):
         return False
     for a, c in zip(args, checks):
-        if len(c) == 4 and isinstance(c[0], np.dtype):
+        if isinstance(c[0], np.dtype):  # an array's check (a scalar's is its types)
             dtype, ndim, layout, writeable = c
             if type(a) is not np.ndarray or a.ndim != ndim or a.dtype != dtype:
                 return False

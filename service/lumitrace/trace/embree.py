@@ -60,6 +60,11 @@ def library() -> ctypes.CDLL | None:
     return None
 
 
+def _parts(part_index, n: int) -> np.ndarray:
+    """The part of each of ``n`` triangles (all part 0 when none is given)."""
+    return np.asarray(part_index, np.int64) if len(part_index) else np.zeros(n, np.int64)
+
+
 @functools.lru_cache(maxsize=1)
 def _device() -> int:
     return library().rtcNewDevice(None)
@@ -74,22 +79,24 @@ class PartScene:
 
         self._lib, self._intersect = library(), intersect
         self._fn = ctypes.cast(self._lib.rtcIntersect1, ctypes.c_void_p).value
-        part = np.asarray(part_index, np.int64) if len(part_index) else \
-            np.zeros(len(triangles), np.int64)
-        self._part = part
+        self._part = part = _parts(part_index, len(triangles))
         self.order = np.argsort(part, kind="stable").astype(np.int64)
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
         self._buffers: dict[int, tuple] = {}  # the geometries' shared buffers, kept alive
         self.scene = self._lib.rtcNewScene(_device())
         self._lib.rtcSetSceneFlags(self.scene, _ROBUST)
-        tri = np.asarray(triangles, np.float32)[self.order]
-        bounds = np.append(self.offsets, len(tri))
-        for g in range(n_parts):
-            if bounds[g + 1] > bounds[g]:
-                self._attach(g, tri[bounds[g]:bounds[g + 1]])
+        for g, tri in self._by_part(triangles):
+            self._attach(g, tri)
         self._commit()
         self.rebuilt = sorted(self._buffers)  # the parts the last build or update built
+
+    def _by_part(self, triangles: np.ndarray):
+        """(part, its float32 triangles (t, 3, 3)) for every part that has triangles."""
+        tri = np.asarray(triangles, np.float32)[self.order]
+        bounds = np.append(self.offsets, len(tri))
+        return [(g, tri[bounds[g]:bounds[g + 1]]) for g in range(len(self.offsets))
+                if bounds[g + 1] > bounds[g]]
 
     def _attach(self, g: int, tri: np.ndarray) -> None:
         """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g``."""
@@ -118,21 +125,16 @@ class PartScene:
         """Take the scene's new triangles (T, 3, 3) float32 where the parts are laid out
         as before (the same part of every triangle): rebuild the parts whose triangles
         changed, commit once, and say True; False (nothing done) when the layout differs."""
-        part = np.asarray(part_index, np.int64) if len(part_index) else \
-            np.zeros(len(triangles), np.int64)
-        if not np.array_equal(part, self._part):
+        if not np.array_equal(_parts(part_index, len(triangles)), self._part):
             return False
-        tri = np.asarray(triangles, np.float32)[self.order]
-        bounds = np.append(self.offsets, len(tri))
-        changed = [g for g in range(len(self.offsets)) if bounds[g + 1] > bounds[g] and
-                   not np.array_equal(self._buffers[g][0][:-1, :3],
-                                      tri[bounds[g]:bounds[g + 1]].reshape(-1, 3))]
-        for g in changed:
+        changed = [(g, tri) for g, tri in self._by_part(triangles)
+                   if not np.array_equal(self._buffers[g][0][:-1, :3], tri.reshape(-1, 3))]
+        for g, tri in changed:
             self._lib.rtcDetachGeometry(self.scene, g)
-            self._attach(g, tri[bounds[g]:bounds[g + 1]])
+            self._attach(g, tri)
         if changed:
             self._commit()
-        self.rebuilt = changed
+        self.rebuilt = [g for g, _ in changed]
         return True
 
     def run(self, origins: np.ndarray, directions: np.ndarray, prim: np.ndarray | None = None,

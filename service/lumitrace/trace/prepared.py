@@ -172,12 +172,18 @@ class PreparedScene:
         return self.embree.run(origins, directions, output=1)
 
 
+def normalised(scene: Scene, center: np.ndarray, scale: float) -> np.ndarray:
+    """The scene's triangles (T, 3, 3) in the tracing frame (float64; Embree takes them
+    rounded to float32)."""
+    return (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
+
+
 def embree_scene(triangles: np.ndarray, part_index, parts: bool = True):
     """The Embree scene of float32 triangles (T, 3, 3): one geometry per part through
     Embree's C API (:class:`~lumitrace.trace.embree.PartScene`) where its library is found
     and ``parts``, else embreex's one geometry. Both give the same hits."""
     if parts and library() is not None:
-        return PartScene(triangles, np.asarray(part_index, np.int64))
+        return PartScene(triangles, part_index)
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
@@ -197,7 +203,7 @@ def prepare(scene: Scene, frame: TracingFrame | None = None,
     frame = frame or TracingFrame.of(scene)
     center = np.array(frame.center, dtype=np.float64)
     scale = float(frame.scale)
-    tri = (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
+    tri = normalised(scene, center, scale)
     v0 = np.ascontiguousarray(tri[:, 0].T)
     e1 = np.ascontiguousarray(tri[:, 1].T) - v0
     e2 = np.ascontiguousarray(tri[:, 2].T) - v0
@@ -209,11 +215,10 @@ def prepare(scene: Scene, frame: TracingFrame | None = None,
     kind = np.zeros(tri.shape[0], np.int8)
     if tri.shape[0]:
         tri32 = np.ascontiguousarray(tri, dtype=np.float32)
-        old = previous.embree if previous is not None else None
-        if not (isinstance(old, PartScene) and previous.center.tolist() == center.tolist()
-                and previous.scale == scale and old.update(tri32, scene.part_index)):
-            old = embree_scene(tri32, scene.part_index)
-        embree = old
+        embree = previous.embree if previous is not None else None
+        if not (isinstance(embree, PartScene) and previous.center.tolist() == center.tolist()
+                and previous.scale == scale and embree.update(tri32, scene.part_index)):
+            embree = embree_scene(tri32, scene.part_index)
         table = MaterialTable.from_materials(scene.materials,
                                              spectral=scene.colour == "spectral")
         kind = np.take(table.kind, np.asarray(scene.material_index))

@@ -129,14 +129,14 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                                   for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[cur][:n],),
                         args=ps.emitter_args[job.emitter])
     compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
-                  w.o32, w.d32)
+                   w.o32, w.d32)
     w.pid[cur][:n] = w.rows[:n]
     # polarisation matters only where a dielectric can see it
     if ps.polarised:
         w.pol[cur][:n] = UNPOLARISED
     # emitted photons that cannot meet any geometry escape without Embree
     reach = compiled.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
-                         *ps.reach_box) if ps.embree is not None else 0
+                          *ps.reach_box) if ps.embree is not None else 0
     n_escaped = 0
     if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
