@@ -4,11 +4,12 @@
 
 Each phase is timed by wrapping the functions that do it (thread CPU time, so the tracing
 threads are counted too): importing, stage reading, scene preparation, then per batch
-emission, intersection (Embree), the compiled bounce kernel (scattering, offsets,
-binning into cube-map texels, goniophotometer cells and exits) and the Python around
-them, then the map
-estimates (pull-push and its error), the photometry, the outputs (files, pictures). The
-stage is traced from a copy, so the repository is left as it was.
+emission, the photon paths and the Python around them, then the map estimates (pull-push
+and its error), the photometry, the outputs (files, pictures). A path's Embree hits are
+taken inside the compiled bounce kernel (scattering, offsets, binning into cube-map
+texels, goniophotometer cells and exits), so the split between the two is Embree's share
+of one batch's time, measured on its rays cast alone. The stage is traced from a copy,
+so the repository is left as it was.
 """
 from __future__ import annotations
 
@@ -67,10 +68,9 @@ def _patch():
     workers.trace_batch = _timed("tracer (Python around the kernels)", tracer.trace_batch)
     tracer.emit = _timed("emission", tracer.emit)
     compiled.start = _timed("emission", compiled.start)
-    compiled.bounce = _timed("bounce kernel (scattering, binning)", compiled.bounce)
-    tracer.counts_of = _timed("bounce kernel (scattering, binning)", tracer.counts_of)
-    prepared.PreparedScene.intersect = _timed("intersection (Embree)",
-                                              prepared.PreparedScene.intersect)
+    compiled.bounce = _timed(PATHS, compiled.bounce)
+    tracer.counts_of = _timed(PATHS, tracer.counts_of)
+    prepared.PreparedScene.intersect = _timed(PATHS, prepared.PreparedScene.intersect)
     session.estimate = _timed("map estimates (filter, errors)", session.estimate)
     outputs.photometry_of = _timed("photometry", distribution.photometry_of)
     photometric.polar_diagram = _timed("pictures", photometric.polar_diagram)
@@ -105,6 +105,7 @@ def profile(stage: Path, photons: int) -> dict:
         t4 = time.perf_counter()
         wall = {"import": IMPORT[0], "read": t1 - t, "prepare": t2 - t1, "trace": t3 - t2,
                 "outputs": t4 - t3}
+    _split_paths(ps)
     # outputs include photometry and pictures, timed on their own: take them out
     _cpu["outputs (files)"] -= _cpu["photometry"] + _cpu["pictures"]
     cpu = {"import": IMPORT[1], **_cpu}
@@ -115,8 +116,35 @@ def profile(stage: Path, photons: int) -> dict:
                 sum(v for k, v in _cpu.items() if k in TRACING), 1e-9)}
 
 
-TRACING = ("tracer (Python around the kernels)", "emission",
-           "bounce kernel (scattering, binning)", "intersection (Embree)")
+PATHS = "photon paths"
+EMBREE = "intersection (Embree)"
+BOUNCES = "bounce kernel (scattering, binning)"
+TRACING = ("tracer (Python around the kernels)", "emission", BOUNCES, EMBREE)
+
+
+def _split_paths(ps) -> None:
+    """Split the paths' time into Embree's and the compiled bounces': Embree is called
+    from inside the compiled paths, so its share is measured on one batch, whose rays
+    (kept by tracing it a bounce at a time) are cast again through Embree alone."""
+    from lumitrace.trace.job import BatchJob
+    from lumitrace.trace.tracer import trace_batch
+
+    spent = _cpu[PATHS]
+    share = 0.0
+    if ps.embree is not None:
+        job = BatchJob(0, 1 << 30, 1 << 16, 0, 64)
+        trace_batch(ps, job)
+        t = time.thread_time()
+        trace_batch(ps, job)
+        deep = time.thread_time() - t
+        rays = trace_batch(ps, job, record_rays=True).rays
+        t = time.thread_time()
+        for o, d in rays:
+            ps.intersect(o, d)
+        share = min((time.thread_time() - t) / deep, 1.0)
+    del _cpu[PATHS]  # (with this measurement's own)
+    _cpu[EMBREE] += share * spent
+    _cpu[BOUNCES] += (1.0 - share) * spent
 
 
 def main(argv=None) -> int:

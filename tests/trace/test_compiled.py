@@ -16,6 +16,8 @@ from lumitrace.trace.job import BatchJob
 from lumitrace.trace.prepared import prepare
 from lumitrace.trace.tracer import RAY_EPSILON, trace_batch
 
+from helpers.tallies import same_tally
+
 STAGES = Path(__file__).resolve().parents[2] / "stages"
 needs_build = pytest.mark.skipif(
     compiled.backend() != "aot",
@@ -25,23 +27,6 @@ needs_build = pytest.mark.skipif(
 def _jit_only(monkeypatch):
     for name in compiled.ENTRY_POINTS:
         monkeypatch.setattr(getattr(compiled, name), "built", [])
-
-
-def _same(a, b, where="tally"):
-    """Exact equality of two tallies, field by field, arrays bit for bit."""
-    if isinstance(a, np.ndarray):
-        assert isinstance(b, np.ndarray) and a.dtype == b.dtype, where
-        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), where
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b), where
-        for i, (x, y) in enumerate(zip(a, b)):
-            _same(x, y, f"{where}[{i}]")
-    elif hasattr(a, "__slots__") or hasattr(a, "__dict__"):
-        names = getattr(a, "__slots__", None) or vars(a)
-        for name in names:
-            _same(getattr(a, name), getattr(b, name), f"{where}.{name}")
-    else:
-        assert a == b, where
 
 
 @needs_build
@@ -58,8 +43,8 @@ def test_the_build_traces_the_jits_photons_bit_for_bit(stage, monkeypatch):
     assert not compiled.fallbacks  # every call fitted the build
     _jit_only(monkeypatch)
     for job, a, b in zip(jobs, built, plain):
-        _same(a, trace_batch(ps, job, records=True, exit_rays=True))
-        _same(b, trace_batch(ps, job))
+        same_tally(a, trace_batch(ps, job, records=True, exit_rays=True))
+        same_tally(b, trace_batch(ps, job))
     assert sum(t.escaped for t in built) > 1000 and sum(t.part_hits.sum() for t in built) > 1000
 
 

@@ -37,9 +37,9 @@ def warm_up() -> None:
     for material in (glass, paint):
         scene = Scene(tri, np.zeros(1, np.int32), np.zeros(1, np.int32), (material,),
                       ("/P",), (e,))
-        for records in (False, True):
+        for records in (False, True):  # whole paths; then a bounce at a time
             trace_batch(prepare(scene), BatchJob(0, 0, 16, 0, 2), records=records,
-                        exit_rays=records)
+                        exit_rays=records, record_rays=records)
     d = np.array([[0.0], [0.0], [-1.0]])
     scatter(MaterialTable.from_materials((glass,)), np.zeros(1, np.int64), d, -d,
             [np.full(1, 0.5)] * 4, pol=np.array([[1.0], [0.0], [0.0]]))

@@ -137,6 +137,12 @@ class PartScene:
         self.rebuilt = [g for g, _ in changed]
         return True
 
+    @property
+    def hit_args(self) -> tuple:
+        """``rtcIntersect1``'s address, the scene's, and the part layout (offsets, order), as
+        :func:`~lumitrace.trace.kernels.intersect` and a deep bounce take them."""
+        return np.uint64(self._fn), np.uint64(self.scene), self.offsets, self.order
+
     def run(self, origins: np.ndarray, directions: np.ndarray, prim: np.ndarray | None = None,
             tfar: np.ndarray | None = None) -> dict:
         """Closest hits of float32 rays (N, 3): ``primID`` (int32, -1 = none) and ``tfar``
@@ -144,8 +150,8 @@ class PartScene:
         n = len(origins)
         prim = np.empty(n, np.int32) if prim is None else prim[:n]
         tfar = np.empty(n, np.float32) if tfar is None else tfar[:n]
-        self._intersect(np.uint64(self._fn), np.uint64(self.scene), origins, directions,
-                        self.offsets, self.order, prim, tfar)
+        fn, scene, offsets, order = self.hit_args
+        self._intersect(fn, scene, origins, directions, offsets, order, prim, tfar)
         return {"primID": prim, "tfar": tfar}
 
     def __del__(self):

@@ -30,6 +30,7 @@ from .rng import _INV32, _LOW32, _M1, _M2, _S32, _S33, GOLDEN
 
 _JIT = dict(nogil=True, cache=True, error_model="numpy")
 _INLINE = _JIT  # small helpers: LLVM inlines them
+_ALWAYS = dict(_JIT, inline="always")  # large helpers on the hot path, inlined by numba
 
 # --- counter-based random numbers (bit-identical to :mod:`lumitrace.trace.rng`, whose
 # constants they are: fixed for good, as every stored map depends on them) --------------
@@ -101,7 +102,7 @@ def _cosine_local(u1, u2):
     return st * c, st * s, math.sqrt(max(0.0, 1.0 - u1))
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _cosine_about(nx, ny, nz, u1, u2):
     """A cosine-weighted direction about unit ``n`` (pdf cos / pi per sr)."""
     lx, ly, lz = _cosine_local(u1, u2)
@@ -176,7 +177,7 @@ def _smith_g1(cos_theta, alpha):
     return 2.0 / (1.0 + math.sqrt(1.0 + alpha * alpha * (1.0 - c2) / c2))
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _ggx_visible_normal(wx, wy, wz, alpha, u1, u2):
     """A GGX microfacet normal (local frame, z up) drawn from the normals visible from
     ``w`` (Heitz 2018, "Sampling the GGX distribution of visible normals")."""
@@ -204,7 +205,7 @@ def _ggx_visible_normal(wx, wy, wz, alpha, u1, u2):
     return ex / le, ey / le, ez / le
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_ALWAYS)
 def scatter_one(kind, refl, spec, trans, ior, alpha, dx, dy, dz, nx, ny, nz,
                 u0, u1, u2, u3, polarised, px, py, pz):
     """One photon arriving along ``d`` at a surface of scattering model ``kind`` with unit
@@ -293,7 +294,7 @@ def scatter_many(kind, refl, spec, trans, ior, alpha, material, d, n, u0, u1, u2
 
 # --- binning of escapes ---------------------------------------------------------------------
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _texel(x, y, z, res, layout):
     """Cube-map texel of direction (x, y, z), as :func:`lumitrace.film.cubemap.texel_index`
     (ImfEnvmap's face choice and pixel positions, nearest pixel); ``layout`` holds the rows
@@ -365,7 +366,7 @@ def _atan2_fast(y, x):
 _EDGE_MARGIN = 1e-4
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _gonio_cell(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma):
     """The goniophotometer's C-gamma cell of world direction (x, y, z): from fast angles
     where they are far from every cell edge, else from :func:`_gonio_cell_exact`, so the
@@ -433,7 +434,7 @@ def _box_exit(q, e, lo, hi):
     return axis, max(best, 0.0)
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _gonio_exit(qx, qy, qz, x, y, z, axes, lo, hi, side, n_cells):
     """The exit bin (offset by ``n_cells``) where the ray from world point ``q`` (m) along
     ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi`` in photometric axes),
@@ -633,7 +634,7 @@ def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, ne
     return alive, ox, oy, oz, qx, qy, qz
 
 
-# --- one bounce of a wave -------------------------------------------------------------------
+# --- one bounce of a wave, or whole paths ----------------------------------------------------
 
 @numba.njit(**_JIT)
 def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
@@ -643,7 +644,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
            part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
            side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
            rec_cells, rec_slabs, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits,
-           exit_pos, exit_dir, epsilon, backoff, near_hit):
+           exit_pos, exit_dir, epsilon, backoff, near_hit, deep, reach, fn, scene, offsets,
+           order):
     """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
     (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
 
@@ -657,117 +659,146 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     band a dispersive surface picked); see :func:`_spectral_hit`. An escape adds its fixed-point X and Z
     (``band_w`` (3, bands): the emitter's X, Y, Z per band) to ``xz`` (rows X, X, Z, Z of
     the two halves), to ``escaped_xz`` (2, escapes) and to its record.
-    Returns (survivors, escaped bins, cut, absorbed).
+
+    With ``deep`` each photon is followed here to its end instead (``prim`` and ``tfar``
+    unread), its state kept in registers and each ray cast through Embree as it goes
+    (``fn``, ``scene``, ``offsets``, ``order``: see :func:`intersect`; the first ``reach``
+    photons' first rays from ``o32``, ``d32``, the others' meet nothing). A photon draws
+    the same numbers either way, so the tallies are the same; no wave buffers stream
+    through memory between bounces. Returns (survivors, escaped bins, cut, absorbed,
+    segments).
     """
-    n_out, cut, absorbed = 0, 0, 0
+    n_out, cut, absorbed, segments = 0, 0, 0, 0
     n_parts = part_hits.shape[0]
+    ray = np.empty(40, np.uint32)  # deep: an RTCRayHit, 16-byte aligned within
+    k0 = ((16 - ray.ctypes.data % 16) % 16) // 4
+    rf = ray[k0:].view(np.float32)
+    ru = ray[k0:]
+    addr = numba.uint64(ray.ctypes.data + 4 * k0)
     for i in range(prim.shape[0]):
         ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         h = base[i]
         row = pid[i]
-        if records and rec_segments[row] < 65535:
-            rec_segments[row] += 1
-        tri = prim[i]
-        if tri < 0:  # escaped: binned, in the half its hash's lowest bit picks
-            half = int(h & _ONE)
-            tex = _texel(dx, dy, dz, res, layout)
-            counts[half, tex] += 1
-            if spectral:
-                qx_, qz_ = _fixed_xz(tp, i, tband[i], band_w)
-                xz[half, tex] += qx_
-                xz[2 + half, tex] += qz_
-                escaped_xz[0, n_escaped >> 1] = qx_
-                escaped_xz[1, n_escaped >> 1] = qz_
-                if records:
-                    rec_x[row] = qx_
-                    rec_z[row] = qz_
-            cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
-                               n_c, n_gamma)
-            wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
-            ex, t_out = _gonio_exit(wx, wy, wz, dx, dy, dz, axes, lo, hi, side, n_c * n_gamma)
-            if exits:  # the exit ray: where it leaves the luminaire's box (world m)
-                exit_pos[row, 0] = wx + t_out * dx
-                exit_pos[row, 1] = wy + t_out * dy
-                exit_pos[row, 2] = wz + t_out * dz
-                exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = dx, dy, dz
-            escaped[n_escaped] = cell + n_bins * half
-            escaped[n_escaped + 1] = ex + n_bins * half
-            n_escaped += 2
-            if records:
-                rec_texel[row] = tex
-                rec_cell[row] = cell
-                rec_exit[row] = ex - n_c * n_gamma
-                qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
-                _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
-                              gn, m0, m1, m2)
-            continue
-        if n_parts:
-            part_hits[part_index[tri]] += 1
-        # Embree's float32 tfar can put the hit a few ulps beyond the surface, behind an
-        # adjoining face near an edge: back up along the ray (never beyond the origin)
-        t = float(tfar[i])
-        t = t - min(backoff, 0.5 * t)
-        px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
-        nx, ny, nz = normals[tri, 0], normals[tri, 1], normals[tri, 2]
-        if records:
-            rec_parts[row] |= part_bit[tri]
-            _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, px, py, pz, glo, ghi, gn,
-                          m0, m1, m2)
-        if depth == last:
-            cut += 1
-            if records:
-                rec_texel[row] = CUT
-            continue
-        cos_in = _dot(dx, dy, dz, nx, ny, nz)
-        stay = False
-        if float(tfar[i]) * abs(cos_in) < near_hit:
-            # a hit at about the origin, on a face the float64 origin lies in front of while
-            # the ray moves away from it, is float32 rounding: the photon goes on unchanged
-            rx = ox - corners[tri, 0]
-            ry = oy - corners[tri, 1]
-            rz = oz - corners[tri, 2]
-            stay = _dot(rx, ry, rz, nx, ny, nz) * cos_in > 0.0
         qx = pol[i, 0] if polarised else math.nan
         qy = pol[i, 1] if polarised else 0.0
         qz = pol[i, 2] if polarised else 0.0
-        if stay:
-            alive = True
+        step = depth
+        j = i if deep else n_out  # where a survivor's spectral throughput goes
+        if not deep:
+            tri, t32 = np.int64(prim[i]), np.float64(tfar[i])
+        elif i < reach:
+            tri, t32 = _closest(fn, scene, addr, rf, ru, o32[i, 0], o32[i, 1], o32[i, 2],
+                                d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)
         else:
-            m = material_index[tri]
-            counter = (depth + 1) * 4
-            u0, u1 = _uniform_pair(h, counter)
-            u2, u3 = _uniform_pair(h, counter + 1)
-            if spectral:
-                alive, dx, dy, dz, qx, qy, qz = _spectral_hit(
-                    m, kind[m], alpha[m], s_refl, s_spec, s_trans, s_ior, dispersive,
-                    neutral, band_w, tp, tband, i, n_out, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
-                    polarised, qx, qy, qz)
+            tri, t32 = np.int64(-1), np.inf
+        while True:
+            segments += 1
+            if records and rec_segments[row] < 65535:
+                rec_segments[row] += 1
+            if tri < 0:  # escaped: binned, in the half its hash's lowest bit picks
+                half = int(h & _ONE)
+                tex = _texel(dx, dy, dz, res, layout)
+                counts[half, tex] += 1
+                if spectral:
+                    qx_, qz_ = _fixed_xz(tp, i, tband[i], band_w)
+                    xz[half, tex] += qx_
+                    xz[2 + half, tex] += qz_
+                    escaped_xz[0, n_escaped >> 1] = qx_
+                    escaped_xz[1, n_escaped >> 1] = qz_
+                    if records:
+                        rec_x[row] = qx_
+                        rec_z[row] = qz_
+                cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
+                                   n_c, n_gamma)
+                wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
+                ex, t_out = _gonio_exit(wx, wy, wz, dx, dy, dz, axes, lo, hi, side, n_c * n_gamma)
+                if exits:  # the exit ray: where it leaves the luminaire's box (world m)
+                    exit_pos[row, 0] = wx + t_out * dx
+                    exit_pos[row, 1] = wy + t_out * dy
+                    exit_pos[row, 2] = wz + t_out * dz
+                    exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = dx, dy, dz
+                escaped[n_escaped] = cell + n_bins * half
+                escaped[n_escaped + 1] = ex + n_bins * half
+                n_escaped += 2
+                if records:
+                    rec_texel[row] = tex
+                    rec_cell[row] = cell
+                    rec_exit[row] = ex - n_c * n_gamma
+                    qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
+                    _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
+                                  gn, m0, m1, m2)
+                break
+            if n_parts:
+                part_hits[part_index[tri]] += 1
+            # Embree's float32 tfar can put the hit a few ulps beyond the surface, behind an
+            # adjoining face near an edge: back up along the ray (never beyond the origin)
+            t = t32 - min(backoff, 0.5 * t32)
+            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+            nx, ny, nz = normals[tri, 0], normals[tri, 1], normals[tri, 2]
+            if records:
+                rec_parts[row] |= part_bit[tri]
+                _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, px, py, pz, glo, ghi, gn,
+                              m0, m1, m2)
+            if step == last:
+                cut += 1
+                if records:
+                    rec_texel[row] = CUT
+                break
+            cos_in = _dot(dx, dy, dz, nx, ny, nz)
+            stay = False
+            if t32 * abs(cos_in) < near_hit:
+                # a hit at about the origin, on a face the float64 origin lies in front of
+                # while the ray moves away from it, is float32 rounding: the photon goes on
+                # unchanged
+                rx = ox - corners[tri, 0]
+                ry = oy - corners[tri, 1]
+                rz = oz - corners[tri, 2]
+                stay = _dot(rx, ry, rz, nx, ny, nz) * cos_in > 0.0
+            if stay:
+                alive = True
             else:
-                alive, dx, dy, dz, qx, qy, qz = scatter_one(
-                    kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
-                    nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
-        if not alive:
-            absorbed += 1
-            continue
-        side_sign = _dot(dx, dy, dz, nx, ny, nz)
-        k = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
-        px, py, pz = px + k * nx, py + k * ny, pz + k * nz
-        o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
-        d2[n_out, 0], d2[n_out, 1], d2[n_out, 2] = dx, dy, dz
-        o32[n_out, 0], o32[n_out, 1], o32[n_out, 2] = px, py, pz
-        d32[n_out, 0], d32[n_out, 1], d32[n_out, 2] = dx, dy, dz
-        if polarised:
-            pol2[n_out, 0], pol2[n_out, 1], pol2[n_out, 2] = qx, qy, qz
-        base2[n_out] = h
-        pid2[n_out] = row
-        if spectral and stay:  # moved on unchanged: its throughput moves along
-            tband[n_out] = tband[i]
-            if tband[i] == MIXED:
-                for b in range(tp.shape[1]):
-                    tp[n_out, b] = tp[i, b]
-        n_out += 1
-    return n_out, n_escaped, cut, absorbed
+                m = material_index[tri]
+                counter = (step + 1) * 4
+                u0, u1 = _uniform_pair(h, counter)
+                u2, u3 = _uniform_pair(h, counter + 1)
+                if spectral:
+                    alive, dx, dy, dz, qx, qy, qz = _spectral_hit(
+                        m, kind[m], alpha[m], s_refl, s_spec, s_trans, s_ior, dispersive,
+                        neutral, band_w, tp, tband, i, j, h, dx, dy, dz, nx, ny, nz, u0, u1,
+                        u2, u3, polarised, qx, qy, qz)
+                else:
+                    alive, dx, dy, dz, qx, qy, qz = scatter_one(
+                        kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
+                        nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
+            if not alive:
+                absorbed += 1
+                break
+            side_sign = _dot(dx, dy, dz, nx, ny, nz)
+            k = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
+            px, py, pz = px + k * nx, py + k * ny, pz + k * nz
+            if deep:  # on, from here
+                ox, oy, oz = px, py, pz
+                step += 1
+                tri, t32 = _closest(fn, scene, addr, rf, ru, px, py, pz, dx, dy, dz, offsets,
+                                    order)
+                continue
+            o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
+            d2[n_out, 0], d2[n_out, 1], d2[n_out, 2] = dx, dy, dz
+            o32[n_out, 0], o32[n_out, 1], o32[n_out, 2] = px, py, pz
+            d32[n_out, 0], d32[n_out, 1], d32[n_out, 2] = dx, dy, dz
+            if polarised:
+                pol2[n_out, 0], pol2[n_out, 1], pol2[n_out, 2] = qx, qy, qz
+            base2[n_out] = h
+            pid2[n_out] = row
+            if spectral and stay:  # moved on unchanged: its throughput moves along
+                tband[n_out] = tband[i]
+                if tband[i] == MIXED:
+                    for b in range(tp.shape[1]):
+                        tp[n_out, b] = tp[i, b]
+            n_out += 1
+            break
+    return n_out, n_escaped, cut, absorbed, segments
 
 
 @numba.njit(**_JIT)
@@ -973,6 +1004,22 @@ def _call_void3(typingctx, fn, a, b, c):
     return sig, codegen
 
 
+@numba.njit(**_ALWAYS)
+def _closest(fn, scene, addr, f, u, ox, oy, oz, dx, dy, dz, offsets, order):
+    """Embree's closest hit of one ray (float32 on the way in) through the RTCRayHit at
+    ``addr`` (``f``, ``u``: its words as float32, uint32): the triangle (-1: none) and
+    its float32 distance (inf: none)."""
+    f[0], f[1], f[2], f[3] = ox, oy, oz, 0.0  # origin, tnear
+    f[4], f[5], f[6], f[7] = dx, dy, dz, 0.0  # direction, time
+    f[8] = np.inf
+    u[9], u[10], u[11] = 0xFFFFFFFF, 0, 0  # mask, id, flags
+    u[18], u[19] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
+    _call_void3(fn, scene, addr, numba.uint64(0))
+    if u[18] == 0xFFFFFFFF:
+        return np.int64(-1), np.inf
+    return np.int64(order[offsets[u[18]] + u[17]]), np.float64(f[8])
+
+
 @numba.njit(**_JIT)
 def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
@@ -984,13 +1031,5 @@ def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     u = buf[k:]
     addr = numba.uint64(buf.ctypes.data + 4 * k)
     for i in range(o32.shape[0]):
-        f[0], f[1], f[2], f[3] = o32[i, 0], o32[i, 1], o32[i, 2], 0.0  # origin, tnear
-        f[4], f[5], f[6], f[7] = d32[i, 0], d32[i, 1], d32[i, 2], 0.0  # direction, time
-        f[8] = np.inf
-        u[9], u[10], u[11] = 0xFFFFFFFF, 0, 0  # mask, id, flags
-        u[18], u[19] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
-        _call_void3(fn, scene, addr, numba.uint64(0))
-        if u[18] == 0xFFFFFFFF:
-            prim[i], tfar[i] = -1, np.inf
-        else:
-            prim[i], tfar[i] = order[offsets[u[18]] + u[17]], f[8]
+        prim[i], tfar[i] = _closest(fn, scene, addr, f, u, o32[i, 0], o32[i, 1], o32[i, 2],
+                                    d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)

@@ -23,6 +23,8 @@ from .emission import emission_args
 from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
+_NO_PARTS = np.zeros(0, np.int64)
+
 
 #: Margin (normalised units) around the triangles' bounds within which rays go to Embree.
 REACH_MARGIN = 1e-3
@@ -159,6 +161,16 @@ class PreparedScene:
         return (np.ascontiguousarray(bits, np.uint64), np.asarray(g.lo, np.float64),
                 np.asarray(g.hi, np.float64), np.asarray(g.n, np.int64),
                 *(np.ascontiguousarray(m) for m in _axis_masks(tuple(g.n))))
+
+    @property
+    def hit_args(self) -> tuple | None:
+        """Embree as a deep :func:`~lumitrace.trace.kernels.bounce` calls it (no
+        geometry: nothing to call), or None where only embreex's batches serve."""
+        if self.embree is None:
+            return np.uint64(0), np.uint64(0), _NO_PARTS, _NO_PARTS
+        if isinstance(self.embree, PartScene):
+            return self.embree.hit_args
+        return None
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray,
                   prim: np.ndarray | None = None, tfar: np.ndarray | None = None) -> dict:

@@ -86,6 +86,7 @@ _NO_XZ = np.zeros((4, 1), np.int64)
 _NO_TP = np.zeros((1, 1))
 _NO_BAND = np.zeros(1, np.int64)
 _NO_EXITS = np.zeros((0, 3))
+_NO_HITS = (np.uint64(0), np.uint64(0), np.zeros(0, np.int64), np.zeros(0, np.int64))
 #: The cube map's texel layout (:mod:`lumitrace.film.cubemap`) as the kernel takes it.
 _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cubemap._RX,
                          cubemap._RY])
@@ -115,7 +116,6 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     if n == 0:
         return tally
     w = _Waves.at_least(n)
-    k = ps.kernel_args
     spectral = ps.spectral
     rec = PhotonRecords.empty(n, colour=spectral) if records else None
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
@@ -137,7 +137,6 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     # emitted photons that cannot meet any geometry escape without Embree
     reach = compiled.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
                           *ps.reach_box) if ps.embree is not None else 0
-    n_escaped = 0
     if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
         tp, tband, escaped_xz = w.spectral(n)
@@ -145,6 +144,49 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             tband[:n] = photon_bands(e, w.base[cur][:n], ps.emitter_args[job.emitter])
     else:
         xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
+    hit = None if record_rays else ps.hit_args
+    if hit is not None:  # every path followed to its end in one compiled call
+        _, n_escaped, tally.cut, tally.absorbed, tally.segments = compiled.bounce(
+            0, job.max_depth, w.prim[:n], w.tfar[:n], *_state(w, cur, n),
+            *_state(w, cur, n), *_rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec,
+                                       exit_rays, exit_pos, exit_dir, 0), True, reach, *hit)
+    else:
+        n_escaped = _waves(ps, job, w, tally, n, reach, cur, record_rays, tp, tband, xz,
+                           escaped_xz, r, rec, exit_rays, exit_pos, exit_dir)
+    if n_escaped:
+        tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
+    if spectral:
+        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2],
+                                   escaped_xz[:, :n_escaped // 2])
+    if rec is not None:
+        tally.records = rec
+    if exit_rays:
+        out = ~np.isnan(exit_pos[:, 0])
+        tally.exit_rays = (exit_pos[out], exit_dir[out])
+    return tally
+
+
+def _state(w: _Waves, s: int, n: int) -> tuple:
+    """Buffer set ``s`` of the waves, as a bounce reads or writes it."""
+    return w.o[s], w.d[s], w.pol[s], w.base[s][:n], w.pid[s]
+
+
+def _rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec, exit_rays, exit_pos, exit_dir,
+          n_escaped) -> tuple:
+    """The arguments of :func:`~lumitrace.trace.kernels.bounce` after the photons' own:
+    the float32 rays, the scene, the tallies, the records, the exits and the offsets."""
+    return (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp, tband, xz,
+            escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped, n_escaped,
+            tally.part_hits, *ps.gonio_args, rec is not None, r.texel, r.cell, r.exit,
+            r.segments, r.parts, r.cells, r.slabs, r.x, r.z, *ps.grid_args, exit_rays,
+            exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
+
+
+def _waves(ps, job, w, tally, n, reach, cur, record_rays, tp, tband, xz, escaped_xz, r, rec,
+           exit_rays, exit_pos, exit_dir) -> int:
+    """Trace a batch a bounce at a time: Embree's batches between compiled bounces (for
+    embreex, and to keep every ray cast); returns the escaped bins written."""
+    n_escaped = 0
     for depth in range(job.max_depth + 1):
         o32, d32 = w.o32[:reach], w.d32[:reach]
         if record_rays:
@@ -157,35 +199,19 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
                 else np.full(n, -1, np.int32)
             tfar = np.concatenate([tfar, np.full(n - reach, np.inf, np.float32)]) if reach \
                 else np.full(n, np.inf, np.float32)
-        tally.segments += n
         nxt = 1 - cur
-        n_next, n_escaped, cut, absorbed = compiled.bounce(
-            depth, job.max_depth, prim, tfar, w.o[cur], w.d[cur],
-            w.pol[cur], w.base[cur][:n], w.pid[cur], w.o[nxt], w.d[nxt], w.pol[nxt],
-            w.base[nxt], w.pid[nxt], w.o32, w.d32, *k, ps.band_weights[job.emitter], tp,
-            tband, xz, escaped_xz, tally.counts, job.resolution,
-            _CUBE_LAYOUT, w.escaped, n_escaped, tally.part_hits, *ps.gonio_args,
-            rec is not None, r.texel, r.cell, r.exit, r.segments, r.parts, r.cells, r.slabs,
-            r.x, r.z,
-            *ps.grid_args,
-            exit_rays, exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
+        n_next, n_escaped, cut, absorbed, segments = compiled.bounce(
+            depth, job.max_depth, prim, tfar, *_state(w, cur, n), *_state(w, nxt, n),
+            *_rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec, exit_rays, exit_pos,
+                   exit_dir, n_escaped), False, 0, *_NO_HITS)
+        tally.segments += segments
         tally.cut += cut
         tally.absorbed += absorbed
         cur, n = nxt, n_next
         reach = n  # rays that leave a surface start within the geometry's bounds
         if n == 0:
             break
-    if n_escaped:
-        tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
-    if spectral:
-        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2],
-                                   escaped_xz[:, :n_escaped // 2])
-    if rec is not None:
-        tally.records = rec
-    if exit_rays:
-        out = ~np.isnan(exit_pos[:, 0])
-        tally.exit_rays = (exit_pos[out], exit_dir[out])
-    return tally
+    return n_escaped
 
 
 def _colour_tallies(xz: np.ndarray, cells: np.ndarray, escaped_xz: np.ndarray) -> tuple:

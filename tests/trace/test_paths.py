@@ -1,0 +1,57 @@
+"""Whole photon paths in one compiled call against a bounce at a time: a photon draws the
+same numbers either way, so every tally, record and exit ray is the same, bit for bit."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers.tallies import same_tally
+from lumitrace.stage.reader import read_stage
+from lumitrace.trace import embree
+from lumitrace.trace.job import BatchJob
+from lumitrace.trace.prepared import prepare
+from lumitrace.trace.tracer import trace_batch
+
+STAGES = Path(__file__).resolve().parents[2] / "stages"
+
+
+def _same_as_waves(ps, job, **kw):
+    """The deep trace of ``job``, checked against the same job a bounce at a time (as
+    the benchmark traces it, keeping every ray)."""
+    deep = trace_batch(ps, job, **kw)
+    waves = trace_batch(ps, job, record_rays=True, **kw)
+    assert deep.rays is None and len(waves.rays) >= 1
+    assert deep.segments >= sum(len(o) for o, _ in waves.rays)
+    waves.rays = None
+    same_tally(deep, waves)
+    return deep
+
+
+@pytest.mark.skipif(embree.library() is None, reason="Embree's C API is not found here")
+@pytest.mark.parametrize("stage", ["downlight.usda", "warm_downlight.usda", "louvre.usda",
+                                   "reference/fresnel_slab.usda",
+                                   "reference/integrating_sphere.usda",
+                                   "reference/mirror_cup.usda"])
+def test_whole_paths_tally_what_a_bounce_at_a_time_tallies(stage):
+    scene = read_stage(STAGES / stage)
+    ps = prepare(scene)
+    assert ps.hit_args is not None  # traced deep
+    for e in range(len(scene.emitters)):
+        job = BatchJob(e, 5000, 4000, 3, 16)
+        plain = _same_as_waves(ps, job)
+        full = _same_as_waves(ps, job, records=True, exit_rays=True)
+        assert full.segments == plain.segments and full.escaped == plain.escaped
+        assert plain.escaped > 1000 and plain.part_hits.sum() > 1000
+
+
+def test_a_scene_without_geometry_is_traced_deep_without_embree():
+    ps = prepare(read_stage(STAGES / "reference" / "isotropic.usda"))
+    assert ps.embree is None and ps.hit_args is not None
+    t = _same_as_waves(ps, BatchJob(0, 0, 3000, 1, 16), records=True, exit_rays=True)
+    assert t.escaped == t.photons == t.segments == 3000
+
+
+def test_photons_cut_by_the_depth_limit_are_counted_alike():
+    ps = prepare(read_stage(STAGES / "reference" / "integrating_sphere.usda"))
+    t = _same_as_waves(ps, BatchJob(0, 0, 3000, 1, 16, max_depth=2), records=True)
+    assert t.cut > 100 and t.cut + t.absorbed + t.escaped == t.photons
