@@ -1,12 +1,13 @@
-"""The compiled per-bounce photon work: scattering, offsets, binning and compaction in one
-pass over a wave of Embree hits, without the GIL.
+"""The compiled photon work: emission, scattering, offsets and binning, without the GIL.
 
 Between two Embree calls a photon needs a few hundred floating-point operations; done as
 numpy array passes that cost more than the intersection itself (temporaries, gathers,
-page faults). Here each photon of a wave is handled once, in a loop compiled by numba:
-an escape is binned into the cube map, the goniophotometer's cell and exit bin (and the
-photon's record, when kept); a hit is offset, scattered by its material's model and, if
-it survives, written compacted into the next wave's buffers, float32 rays included.
+page faults). Here photons are handled in loops compiled by numba that call Embree's
+``rtcIntersect1`` themselves: each photon is followed from its emission to its escape,
+absorption or cut with its state in registers. An escape is binned into the cube map, the
+goniophotometer's cell and exit bin (and the photon's record, when kept); a hit is offset
+and scattered by its material's model. The same loop can instead advance a wave of
+photons by one bounce, from Embree's hits of a batch of rays (for embreex).
 
 Everything jitted lives in this one module: numba's on-disk cache is keyed by the file
 of each entry point, so a helper in another file could change without its callers being

@@ -2,9 +2,11 @@
 
 A batch is a pure function ``(prepared scene, batch job) -> BatchTally``: photon i's path
 depends on nothing but the scene, the seed and i, so batches can run on any thread or
-machine and an edit can retrace exactly the photons it affects. All photons of a batch
-advance one bounce at a time; Embree's ``run`` releases the GIL, so two threads tracing
-two batches keep both cores busy.
+machine and an edit can retrace exactly the photons it affects. Each photon is followed
+to its end in one compiled call that releases the GIL and calls Embree ray by ray, so two
+threads tracing two batches keep both cores busy. Where only embreex is at hand (or every
+ray is kept, for the benchmark) a batch advances a bounce at a time, between embreex's
+batched calls; the photons and their tallies are the same either way.
 """
 from __future__ import annotations
 
