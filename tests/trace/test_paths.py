@@ -2,7 +2,6 @@
 same numbers either way, so every tally, record and exit ray is the same, bit for bit."""
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from helpers.tallies import same_tally
