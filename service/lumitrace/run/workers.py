@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import multiprocessing
 import signal
 import sys
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
-from typing import Callable, Iterable, Iterator
+from concurrent.futures.thread import ThreadPoolExecutor
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 from ..film.accumulate import compact
 from ..film.tally import BatchTally
@@ -23,6 +22,9 @@ from ..scene import Scene
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, prepare
 from ..trace.tracer import trace_batch
+
+if TYPE_CHECKING:
+    from concurrent.futures import ProcessPoolExecutor
 
 _worker_scene: PreparedScene | None = None
 
@@ -80,7 +82,10 @@ def choose(mode: str, threads: int, budget: int | None) -> str:
 def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int
                  ) -> Iterator[Callable[[Iterable[BatchJob]], Iterator[BatchTally]]]:
     """A function mapping jobs to their tallies, in job order, on ``threads`` workers."""
-    if mode == "processes":
+    if mode == "processes":  # (multiprocessing loaded only here: 15 ms at every start)
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
         ctx = multiprocessing.get_context("spawn")  # no fork: Embree keeps threads
         pool = ProcessPoolExecutor(max_workers=threads, mp_context=ctx,
                                    initializer=_init_worker, initargs=(scene, ps.frame))
