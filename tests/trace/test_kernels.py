@@ -93,8 +93,7 @@ def test_fast_cells_are_the_exact_cells_even_a_hair_from_an_edge():
     c = np.concatenate([c, r.uniform(0, 360, 4000)])
     d = np.stack([np.sin(np.radians(g)) * np.cos(np.radians(c)),
                   np.sin(np.radians(g)) * np.sin(np.radians(c)), -np.cos(np.radians(g))])
-    args = (np.eye(3), gm.EXTRA_EDGES, 1.0 / gm.C_STEP, 1.0 / gm.GAMMA_STEP, gm.N_C,
-            gm.N_GAMMA)
+    args = (gm.EXTRA_EDGES, 1.0 / gm.C_STEP, 1.0 / gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA)
     cell, _ = kernels.gonio_bins(np.zeros_like(d), np.ascontiguousarray(d), np.eye(3),
                                  np.full(3, -1.0), np.ones(3), gm.EXTRA_EDGES, gm.C_STEP,
                                  gm.GAMMA_STEP, gm.N_C, gm.N_GAMMA, gm.EXIT_SIDE)
@@ -182,3 +181,18 @@ def test_photons_that_cannot_meet_the_geometry_skip_embree_with_the_same_result(
     assert np.array_equal(dense(culled.cells), dense(every.cells))
     for a, b in zip(culled.records._arrays(), every.records._arrays()):
         assert np.array_equal(a, b)
+
+
+def test_the_turn_is_cos_and_sin_of_the_angle_to_1e15():
+    """The sampling's cos and sin of 2 pi u (polynomials, not libm): within 1e-15 over
+    random 32-bit uniforms and every 1/4096 turn, exact at the quarter turns, and a unit
+    vector to rounding."""
+    u = np.concatenate([np.random.default_rng(5).integers(0, 2**32, 50_000) * 2.0**-32,
+                        np.arange(4096) / 4096.0, [1.0 - 2.0**-32]])
+    cs = np.array([kernels._turn(v) for v in u])
+    a = 2.0 * np.pi * u
+    assert np.abs(cs[:, 0] - np.cos(a)).max() < 1e-15
+    assert np.abs(cs[:, 1] - np.sin(a)).max() < 1e-15
+    assert np.abs(np.hypot(cs[:, 0], cs[:, 1]) - 1.0).max() < 4e-16
+    assert [kernels._turn(q) for q in (0.0, 0.25, 0.5, 0.75)] == [
+        (1.0, 0.0), (-0.0, 1.0), (-1.0, -0.0), (0.0, -1.0)]
