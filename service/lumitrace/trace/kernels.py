@@ -74,7 +74,7 @@ _SIN = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(1, 8))
 _COS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(1, 9))
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _turn(u):
     """cos and sin of 2 pi ``u``, ``u`` in [0, 1), within 1e-15 by polynomials after an
     exact reduction: faster than libm's cos, and the same bits on every machine."""
@@ -116,7 +116,7 @@ def _to_world(lx, ly, lz, nx, ny, nz):
             lx * t[2] + ly * b[2] + lz * nz)
 
 
-@numba.njit(**_INLINE)
+@numba.njit(**_ALWAYS)
 def _cosine_local(u1, u2):
     """A cosine-weighted direction about +z (pdf cos / pi per sr)."""
     st = math.sqrt(u1)
