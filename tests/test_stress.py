@@ -4,8 +4,8 @@ the command line, and bounded fuzzing of the stage reader.
 
 Every case lives in ``tools/stress_cases.py`` and returns its measured outcome; ``tools/stress.py``
 runs the same cases with many more photons and a longer fuzz, and prints them as a table.
-The service (HTTP 4xx) and the scene-delta parser do not exist yet: their part of the issue
-is not tested here.
+Bad requests to the service (HTTP 4xx, the stage unchanged) and malformed scene deltas are
+tested with the service, in ``tests/serve/test_serve.py``.
 """
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ Usage::
     python tools/stress.py --only furnace,mirror --markdown    # some cases, as Markdown
 
 The exit status is 1 when a case fails. ``pytest tests/test_stress.py`` runs the same cases
-with few photons in CI. The service (HTTP 4xx) and the scene-delta parser do not exist yet,
-so their part of the issue is not run.
+with few photons in CI. Bad requests to the service and malformed scene deltas are tested
+with the service (``tests/serve/test_serve.py``).
 """
 from __future__ import annotations
 
