@@ -123,38 +123,43 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
     exit_dir = np.zeros((n, 3)) if exit_rays else _NO_EXITS
     r = rec if rec is not None else _NO_RECORDS
-    cur = 0
     # emitted into the second set of buffers (free until the first bounce), then moved
     # into the normalised frame as the first wave
     p, d, n_emit = emit(e, key, idx, normals=True,
                         out=tuple(a.reshape(-1)[:3 * n].reshape(3, n)
-                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[cur][:n],),
+                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[0][:n],),
                         args=ps.emitter_args[job.emitter])
-    compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[cur], w.d[cur],
-                   w.o32, w.d32)
-    w.pid[cur][:n] = w.rows[:n]
+    compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[0], w.d[0], w.o32,
+                   w.d32)
+    w.pid[0][:n] = w.rows[:n]
     # polarisation matters only where a dielectric can see it
     if ps.polarised:
-        w.pol[cur][:n] = UNPOLARISED
+        w.pol[0][:n] = UNPOLARISED
     # emitted photons that cannot meet any geometry escape without Embree
-    reach = compiled.cull(n, w.o[cur], w.d[cur], w.base[cur], w.pid[cur], w.o32, w.d32,
+    reach = compiled.cull(n, w.o[0], w.d[0], w.base[0], w.pid[0], w.o32, w.d32,
                           *ps.reach_box) if ps.embree is not None else 0
     if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
         tp, tband, escaped_xz = w.spectral(n)
         if e.ray_bands:  # or its ray's band (from its hash: wherever culling put it)
-            tband[:n] = photon_bands(e, w.base[cur][:n], ps.emitter_args[job.emitter])
+            tband[:n] = photon_bands(e, w.base[0][:n], ps.emitter_args[job.emitter])
     else:
         xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
+    # the bounce kernel's arguments around the photons' own and the escapes' count:
+    # float32 rays, scene, tallies, escapes; part hits, goniophotometer, records, exits,
+    # offsets
+    head = (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp, tband, xz,
+            escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped)
+    tail = (tally.part_hits, *ps.gonio_args, rec is not None, r.texel, r.cell, r.exit,
+            r.segments, r.parts, r.cells, r.slabs, r.x, r.z, *ps.grid_args, exit_rays,
+            exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
     hit = None if record_rays else ps.hit_args
     if hit is not None:  # every path followed to its end in one compiled call
         _, n_escaped, tally.cut, tally.absorbed, tally.segments = compiled.bounce(
-            0, job.max_depth, w.prim[:n], w.tfar[:n], *_state(w, cur, n),
-            *_state(w, cur, n), *_rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec,
-                                       exit_rays, exit_pos, exit_dir, 0), True, reach, *hit)
+            0, job.max_depth, w.prim[:n], w.tfar[:n], *_state(w, 0, n), *_state(w, 0, n),
+            *head, 0, *tail, True, reach, *hit)
     else:
-        n_escaped = _waves(ps, job, w, tally, n, reach, cur, record_rays, tp, tband, xz,
-                           escaped_xz, r, rec, exit_rays, exit_pos, exit_dir)
+        n_escaped = _waves(ps, job, w, tally, n, reach, head, tail)
     if n_escaped:
         tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
     if spectral:
@@ -173,25 +178,14 @@ def _state(w: _Waves, s: int, n: int) -> tuple:
     return w.o[s], w.d[s], w.pol[s], w.base[s][:n], w.pid[s]
 
 
-def _rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec, exit_rays, exit_pos, exit_dir,
-          n_escaped) -> tuple:
-    """The arguments of :func:`~lumitrace.trace.kernels.bounce` after the photons' own:
-    the float32 rays, the scene, the tallies, the records, the exits and the offsets."""
-    return (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp, tband, xz,
-            escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped, n_escaped,
-            tally.part_hits, *ps.gonio_args, rec is not None, r.texel, r.cell, r.exit,
-            r.segments, r.parts, r.cells, r.slabs, r.x, r.z, *ps.grid_args, exit_rays,
-            exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
-
-
-def _waves(ps, job, w, tally, n, reach, cur, record_rays, tp, tband, xz, escaped_xz, r, rec,
-           exit_rays, exit_pos, exit_dir) -> int:
+def _waves(ps: PreparedScene, job: BatchJob, w: _Waves, tally: BatchTally, n: int, reach: int,
+           head: tuple, tail: tuple) -> int:
     """Trace a batch a bounce at a time: Embree's batches between compiled bounces (for
     embreex, and to keep every ray cast); returns the escaped bins written."""
-    n_escaped = 0
+    n_escaped, cur = 0, 0
     for depth in range(job.max_depth + 1):
         o32, d32 = w.o32[:reach], w.d32[:reach]
-        if record_rays:
+        if tally.rays is not None:
             tally.rays.append((o32.copy(), d32.copy()))
         if reach:
             hit = ps.intersect(o32, d32, w.prim, w.tfar)
@@ -203,9 +197,8 @@ def _waves(ps, job, w, tally, n, reach, cur, record_rays, tp, tband, xz, escaped
                 else np.full(n, np.inf, np.float32)
         nxt = 1 - cur
         n_next, n_escaped, cut, absorbed, segments = compiled.bounce(
-            depth, job.max_depth, prim, tfar, *_state(w, cur, n), *_state(w, nxt, n),
-            *_rest(ps, job, w, tally, tp, tband, xz, escaped_xz, r, rec, exit_rays, exit_pos,
-                   exit_dir, n_escaped), False, 0, *_NO_HITS)
+            depth, job.max_depth, prim, tfar, *_state(w, cur, n), *_state(w, nxt, n), *head,
+            n_escaped, *tail, False, 0, *_NO_HITS)
         tally.segments += segments
         tally.cut += cut
         tally.absorbed += absorbed
