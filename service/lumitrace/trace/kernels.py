@@ -663,8 +663,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
            part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
            side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
            rec_cells, rec_slabs, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits,
-           exit_pos, exit_dir, epsilon, backoff, near_hit, deep, reach, fn, scene, offsets,
-           order):
+           exit_pos, exit_dir, epsilon, backoff, near_hit, deep, fn, scene, offsets, order,
+           reach_lo, reach_hi):
     """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
     (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
 
@@ -678,11 +678,12 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     an escape adds its fixed-point X and Z (``band_w``: the emitter's X, Y, Z per band) to
     ``xz`` (rows X, X, Z, Z of the two halves), ``escaped_xz`` (2, escapes) and its record.
 
-    With ``deep`` each photon is instead followed to its end, its state in registers, each
-    ray cast through Embree as it goes (``fn`` .. ``order``: see :func:`intersect`; the
-    first rays of the first ``reach`` photons from ``o32``, ``d32``, the others' meet
-    nothing); the same numbers are drawn, so the tallies are the same. Returns (survivors,
-    escaped bins, cut, absorbed, segments).
+    With ``deep`` each photon is instead followed to its end from its emission (``o``,
+    ``d``, ``pol``: the start points, directions and surface normals (3, N), world, moved
+    as :func:`start` moves them), its state in registers, each ray cast through Embree as it
+    goes (``fn`` .. ``order``: see :func:`intersect`; 0: no geometry) unless it misses the
+    box ``reach_lo``..``reach_hi``, as :func:`cull` has it; the same numbers are drawn, so
+    the tallies are the same. Returns (survivors, escaped bins, cut, absorbed, segments).
     """
     n_out, cut, absorbed, segments = 0, 0, 0, 0
     n_parts = part_hits.shape[0]
@@ -692,22 +693,26 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     ru = ray[k0:]
     addr = numba.uint64(ray.ctypes.data + 4 * k0)
     for i in range(prim.shape[0]):
-        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         h = base[i]
-        row = pid[i]
-        qx = pol[i, 0] if polarised else math.nan
-        qy = pol[i, 1] if polarised else 0.0
-        qz = pol[i, 2] if polarised else 0.0
         step = depth
-        j = i if deep else n_out  # where a survivor's spectral throughput goes
-        if not deep:
-            tri, t32 = np.int64(prim[i]), np.float64(tfar[i])
-        elif i < reach:
-            tri, t32 = _closest(fn, scene, addr, rf, ru, o32[i, 0], o32[i, 1], o32[i, 2],
-                                d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)
-        else:
+        if deep:  # emitted: unpolarised, in row i
+            ox, oy, oz = _started(o, pol, i, center, scale, epsilon)
+            dx, dy, dz = d[0, i], d[1, i], d[2, i]
+            qx, qy, qz = math.nan, (math.nan if polarised else 0.0), \
+                (math.nan if polarised else 0.0)
+            row = j = i  # (j: where a survivor's spectral throughput goes)
             tri, t32 = np.int64(-1), np.inf
+            if fn != 0 and _reaches((ox, oy, oz), (dx, dy, dz), reach_lo, reach_hi):
+                tri, t32 = _closest(fn, scene, addr, rf, ru, ox, oy, oz, dx, dy, dz, offsets,
+                                    order)
+        else:
+            ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+            dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+            qx = pol[i, 0] if polarised else math.nan
+            qy = pol[i, 1] if polarised else 0.0
+            qz = pol[i, 2] if polarised else 0.0
+            row, j = pid[i], n_out
+            tri, t32 = np.int64(prim[i]), np.float64(tfar[i])
         while True:
             segments += 1
             if records and rec_segments[row] < 65535:
@@ -817,17 +822,24 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     return n_out, n_escaped, cut, absorbed, segments
 
 
+@numba.njit(**_ALWAYS)
+def _started(p, n, i, center, scale, epsilon):
+    """Emitted photon ``i``'s origin (``p``, ``n``: start points and surface normals (3, N),
+    world) in the normalised frame, off the emitting surface."""
+    return ((p[0, i] - center[0]) / scale + epsilon * n[0, i],
+            (p[1, i] - center[1]) / scale + epsilon * n[1, i],
+            (p[2, i] - center[2]) / scale + epsilon * n[2, i])
+
+
 @numba.njit(**_JIT)
 def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
     """Emitted photons into the first wave: origins moved into the normalised frame and
     off the emitting surface along its normal ``n`` (3, N), float32 rays beside them."""
     for i in range(p.shape[1]):
+        x = _started(p, n, i, center, scale, epsilon)
         for k in range(3):
-            x = (p[k, i] - center[k]) / scale + epsilon * n[k, i]
-            o[i, k] = x
-            d_out[i, k] = d[k, i]
-            o32[i, k] = x
-            d32[i, k] = d[k, i]
+            o[i, k] = o32[i, k] = x[k]
+            d_out[i, k] = d32[i, k] = d[k, i]
 
 
 
@@ -972,6 +984,21 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
         n[0, i], n[1, i], n[2, i] = nx, ny, nz
 
 
+@numba.njit(**_ALWAYS)
+def _reaches(o, d, lo, hi):
+    """Whether the ray from ``o`` along ``d`` (3-tuples) meets the box ``lo``..``hi``."""
+    t0, t1 = 0.0, math.inf
+    for a in range(3):
+        if d[a] != 0.0:
+            u = (lo[a] - o[a]) / d[a]
+            v = (hi[a] - o[a]) / d[a]
+            t0 = max(t0, min(u, v))
+            t1 = min(t1, max(u, v))
+        elif o[a] < lo[a] or o[a] > hi[a]:
+            t1 = -1.0
+    return t1 >= t0
+
+
 @numba.njit(**_JIT)
 def cull(n, o, d, base, pid, o32, d32, lo, hi):
     """Put the first ``n`` rays (o, d: (N, 3), normalised frame) that can meet the box
@@ -980,16 +1007,7 @@ def cull(n, o, d, base, pid, o32, d32, lo, hi):
     misses the box escapes without Embree."""
     k = 0
     for i in range(n):
-        t0, t1 = 0.0, math.inf
-        for a in range(3):
-            if d[i, a] != 0.0:
-                u = (lo[a] - o[i, a]) / d[i, a]
-                v = (hi[a] - o[i, a]) / d[i, a]
-                t0 = max(t0, min(u, v))
-                t1 = min(t1, max(u, v))
-            elif o[i, a] < lo[a] or o[i, a] > hi[a]:
-                t1 = -1.0
-        if t1 < t0:
+        if not _reaches((o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]), lo, hi):
             continue
         if i != k:
             for a in range(3):

@@ -24,6 +24,7 @@ from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
 _NO_PARTS = np.zeros(0, np.int64)
+_NO_BOX = np.zeros(3)
 
 
 #: Margin (normalised units) around the triangles' bounds within which rays go to Embree.
@@ -164,12 +165,13 @@ class PreparedScene:
 
     @property
     def hit_args(self) -> tuple | None:
-        """Embree as a deep :func:`~lumitrace.trace.kernels.bounce` calls it (no
-        geometry: nothing to call), or None where only embreex's batches serve."""
+        """Embree as a deep :func:`~lumitrace.trace.kernels.bounce` calls it, and the box
+        a ray must meet to be cast (no geometry: nothing to call), or None where only
+        embreex's batches serve."""
         if self.embree is None:
-            return np.uint64(0), np.uint64(0), _NO_PARTS, _NO_PARTS
+            return np.uint64(0), np.uint64(0), _NO_PARTS, _NO_PARTS, _NO_BOX, _NO_BOX
         if isinstance(self.embree, PartScene):
-            return self.embree.hit_args
+            return (*self.embree.hit_args, *self.reach_box)
         return None
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray,

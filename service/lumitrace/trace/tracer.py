@@ -88,7 +88,8 @@ _NO_XZ = np.zeros((4, 1), np.int64)
 _NO_TP = np.zeros((1, 1))
 _NO_BAND = np.zeros(1, np.int64)
 _NO_EXITS = np.zeros((0, 3))
-_NO_HITS = (np.uint64(0), np.uint64(0), np.zeros(0, np.int64), np.zeros(0, np.int64))
+_NO_HITS = (np.uint64(0), np.uint64(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
+            np.zeros(3), np.zeros(3))
 #: The cube map's texel layout (:mod:`lumitrace.film.cubemap`) as the kernel takes it.
 _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cubemap._RX,
                          cubemap._RY])
@@ -123,21 +124,22 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
     exit_dir = np.zeros((n, 3)) if exit_rays else _NO_EXITS
     r = rec if rec is not None else _NO_RECORDS
-    # emitted into the second set of buffers (free until the first bounce), then moved
-    # into the normalised frame as the first wave
+    # emitted into the second set of buffers (free until the first bounce)
     p, d, n_emit = emit(e, key, idx, normals=True,
                         out=tuple(a.reshape(-1)[:3 * n].reshape(3, n)
                                   for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[0][:n],),
                         args=ps.emitter_args[job.emitter])
-    compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[0], w.d[0], w.o32,
-                   w.d32)
-    w.pid[0][:n] = w.rows[:n]
-    # polarisation matters only where a dielectric can see it
-    if ps.polarised:
-        w.pol[0][:n] = UNPOLARISED
-    # emitted photons that cannot meet any geometry escape without Embree
-    reach = compiled.cull(n, w.o[0], w.d[0], w.base[0], w.pid[0], w.o32, w.d32,
-                          *ps.reach_box) if ps.embree is not None else 0
+    hit = None if record_rays else ps.hit_args
+    if hit is None:  # moved into the normalised frame as the first wave
+        compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[0], w.d[0], w.o32,
+                       w.d32)
+        w.pid[0][:n] = w.rows[:n]
+        # polarisation matters only where a dielectric can see it
+        if ps.polarised:
+            w.pol[0][:n] = UNPOLARISED
+        # emitted photons that cannot meet any geometry escape without Embree
+        reach = compiled.cull(n, w.o[0], w.d[0], w.base[0], w.pid[0], w.o32, w.d32,
+                              *ps.reach_box) if ps.embree is not None else 0
     if spectral:  # unit throughput in every band, nothing coloured met yet
         xz = np.zeros((4, tally.counts.shape[1]), np.int64)
         tp, tband, escaped_xz = w.spectral(n)
@@ -153,11 +155,11 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     tail = (tally.part_hits, *ps.gonio_args, rec is not None, r.texel, r.cell, r.exit,
             r.segments, r.parts, r.cells, r.slabs, r.x, r.z, *ps.grid_args, exit_rays,
             exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
-    hit = None if record_rays else ps.hit_args
     if hit is not None:  # every path followed to its end in one compiled call
+        emitted = (p, d, n_emit, w.base[0][:n], w.pid[0])
         _, n_escaped, tally.cut, tally.absorbed, tally.segments = compiled.bounce(
-            0, job.max_depth, w.prim[:n], w.tfar[:n], *_state(w, 0, n), *_state(w, 0, n),
-            *head, 0, *tail, True, reach, *hit)
+            0, job.max_depth, w.prim[:n], w.tfar[:n], *emitted, *emitted, *head, 0, *tail,
+            True, *hit)
     else:
         n_escaped = _waves(ps, job, w, tally, n, reach, head, tail)
     if n_escaped:
@@ -198,7 +200,7 @@ def _waves(ps: PreparedScene, job: BatchJob, w: _Waves, tally: BatchTally, n: in
         nxt = 1 - cur
         n_next, n_escaped, cut, absorbed, segments = compiled.bounce(
             depth, job.max_depth, prim, tfar, *_state(w, cur, n), *_state(w, nxt, n), *head,
-            n_escaped, *tail, False, 0, *_NO_HITS)
+            n_escaped, *tail, False, *_NO_HITS)
         tally.segments += segments
         tally.cut += cut
         tally.absorbed += absorbed
