@@ -2,6 +2,7 @@
 same numbers either way, so every tally, record and exit ray is the same, bit for bit."""
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from helpers.tallies import same_tally
@@ -54,3 +55,36 @@ def test_photons_cut_by_the_depth_limit_are_counted_alike():
     ps = prepare(read_stage(STAGES / "reference" / "integrating_sphere.usda"))
     t = _same_as_waves(ps, BatchJob(0, 0, 3000, 1, 16, max_depth=2), records=True)
     assert t.cut > 100 and t.cut + t.absorbed + t.escaped == t.photons
+
+
+def test_a_ray_file_lights_photons_keep_their_bands_when_culled(tmp_path):
+    """Rays with wavelengths over a white floor that only some of them meet: the waves
+    reorder the photons the floor cannot catch, whole paths do not; each photon starts
+    in its own ray's band either way."""
+    from pxr import Sdf, UsdLux
+
+    from helpers.stages import add_mesh, new_stage, read
+    from lumitrace import tm25
+
+    n = 2000
+    r = np.random.default_rng(4)
+    dirs = r.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    wl = r.choice([450.0, 530.0, 610.0], n).astype(np.float32)
+    rays = tm25.RayFile(positions=np.zeros((n, 3), np.float32),
+                        directions=dirs.astype(np.float32),
+                        flux=np.full(n, 0.5, np.float32), wavelengths=wl,
+                        radiant=np.full(n, 1e-3, np.float32))
+    (tmp_path / "rgb.TM25RAY").write_bytes(tm25.format_tm25(rays))
+    stage = new_stage(tmp_path)
+    add_mesh(stage, "/Luminaire/Floor", points=[(-1, -1, -0.5), (1, -1, -0.5), (1, 1, -0.5),
+                                               (-1, 1, -0.5)])
+    light = UsdLux.SphereLight.Define(stage, "/Luminaire/Rays").GetPrim()
+    light.AddAppliedSchema("LumitraceEmitterAPI")
+    light.CreateAttribute("lumitrace:rayFile", Sdf.ValueTypeNames.Asset).Set(
+        Sdf.AssetPath("./rgb.TM25RAY"))
+    scene = read(stage)
+    assert scene.emitters[0].ray_bands and scene.colour == "spectral"
+    ps = prepare(scene)
+    t = _same_as_waves(ps, BatchJob(0, 0, 3000, 2, 8), records=True, exit_rays=True)
+    assert 500 < t.part_hits.sum() < 2500  # some meet the floor, some cannot
