@@ -19,10 +19,10 @@ def downlight():
     return read_stage(DOWNLIGHT)
 
 
-def _run(scene, **kw):
+def _run(scene, progress=None, **kw):
     settings = dict(photons=300_000, resolution=32, seed=7, threads=2)
     settings.update(kw)
-    return run(scene, TraceSettings(**settings))
+    return run(scene, TraceSettings(**settings), progress=progress)
 
 
 def test_same_seed_gives_a_bit_identical_map_for_any_thread_count(downlight):
@@ -99,11 +99,31 @@ def test_rounds_grow_while_estimating_would_dominate(downlight, monkeypatch):
     tenth of tracing a round; how the photons are split into rounds changes nothing."""
     from lumitrace.run import session
 
+    shown = []  # progress watched: every round is estimated
     monkeypatch.setattr(session, "ESTIMATE_SHARE", float("inf"))  # never grow
-    fixed = _run(downlight, photons=200_000, threads=1, batch_size=1 << 10)
+    fixed = _run(downlight, shown.append, photons=200_000, threads=1, batch_size=1 << 10)
     monkeypatch.undo()
-    grown = _run(downlight, photons=200_000, threads=1, batch_size=1 << 10)
+    grown = _run(downlight, shown.append, photons=200_000, threads=1, batch_size=1 << 10)
     # the estimate of a 32-texel map costs far more than tracing 2048 photons
     assert fixed.iterations >= 200_000 // 2048
     assert grown.iterations < 20  # doubling: about log2 of the photon count
     assert np.array_equal(fixed.accumulator.counts(), grown.accumulator.counts())
+
+
+def test_rounds_nobody_watches_are_not_estimated(downlight, monkeypatch):
+    """Without progress shown or a target error, the map is estimated once, at the end,
+    and that estimate is the one the last watched round gives."""
+    from lumitrace.run import session
+
+    calls = []
+    real = session.estimate
+    monkeypatch.setattr(session, "estimate", lambda *a: calls.append(1) or real(*a))
+    shown = []
+    watched = _run(downlight, shown.append, photons=200_000)
+    assert len(calls) == watched.iterations == len(shown) == 3
+    calls.clear()
+    quiet = _run(downlight, photons=200_000)
+    assert len(calls) == 1 and quiet.iterations == watched.iterations
+    assert np.array_equal(quiet.accumulator.counts(), watched.accumulator.counts())
+    assert quiet.estimate.error == shown[-1].relative_error
+    assert np.array_equal(quiet.estimate.filtered, watched.estimate.filtered)

@@ -173,10 +173,11 @@ class Refinement:
         return _round_jobs(self.done, self.targets, self.shares, self.round_photons,
                            self.settings)
 
-    def add_round(self, tallies) -> MapEstimate:
-        """Add a round's tallies; estimate the map and its error. The tallies are all traced
-        before any is added: adding while the tracing threads run makes every small step of
-        the many small additions of a many-emitter scene wait for the GIL."""
+    def add_round(self, tallies, estimated: bool = True) -> MapEstimate | None:
+        """Add a round's tallies; estimate the map and its error, unless not ``estimated``
+        (nobody looks at it before the end: :meth:`result` estimates then). The tallies are
+        all traced before any is added: adding while the tracing threads run makes every
+        small step of the many small additions of a many-emitter scene wait for the GIL."""
         t0 = time.perf_counter()
         tallies = list(tallies)
         t_trace = time.perf_counter() - t0
@@ -187,7 +188,8 @@ class Refinement:
                 self._keep_records(tally)
         self.iteration += 1
         t0 = time.perf_counter()
-        self.estimate = estimate(self.accumulator, self.settings.threshold)
+        self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
+            else None
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
@@ -258,16 +260,17 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     mode = workers.choose(settings.workers, threads, r.budget)
     with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:
         start = time.perf_counter()
+        # a round's map estimate serves the progress shown and the target error only
+        estimated = progress is not None or settings.target_error is not None
         while True:
             jobs = r.next_jobs()
             if not jobs:
                 break
-            est = r.add_round(trace_jobs(jobs))
+            est = r.add_round(trace_jobs(jobs), estimated)
             elapsed = time.perf_counter() - start
-            err = est.error
             if progress is not None:
-                progress(Progress(r.iteration, r.accumulator.photons, elapsed, err, r.budget,
-                                  est, r.accumulator.snapshot()))
+                progress(Progress(r.iteration, r.accumulator.photons, elapsed, est.error,
+                                  r.budget, est, r.accumulator.snapshot()))
             if settings.seconds is not None and elapsed >= settings.seconds:
                 break
             if r.reached_target():
