@@ -313,13 +313,15 @@ def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
 @pytest.mark.parametrize("delay", [0.05, 0.2, 0.4, 0.6])
 def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay):
     """SIGINT in the first moments (Python and USD loading their modules, which can swallow
-    a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs."""
+    a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs.
+    (Enough photons that tracing still runs at the last delay: the outputs' write, once
+    begun, is finished before a signal is taken.)"""
     # the delay counts from the interpreter being up (a signal during Python's own start-up,
     # before any of our code runs, is the interpreter's to handle)
     p = subprocess.Popen([sys.executable, "-c",
                           "import sys; print('up', flush=True); import lumitrace_launch; "
                           "sys.exit(lumitrace_launch.main())",
-                          "trace", str(disc), "--photons", "400000", "--no-progress"],
+                          "trace", str(disc), "--photons", "4000000", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline() == "up\n"
     time.sleep(delay)
