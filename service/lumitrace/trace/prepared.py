@@ -23,8 +23,9 @@ from .emission import emission_args
 from .records import CellGrid, _axis_masks, part_bits
 from .scattering import MaterialTable
 
-_NO_PARTS = np.zeros(0, np.int64)
-_NO_BOX = np.zeros(3)
+#: :attr:`PreparedScene.hit_args` of a scene without geometry: no Embree call, no box.
+NO_HITS = (np.uint64(0), np.uint64(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
+           np.zeros(3), np.zeros(3))
 
 
 #: Margin (normalised units) around the triangles' bounds within which rays go to Embree.
@@ -138,8 +139,7 @@ class PreparedScene:
     def reach_box(self) -> tuple[np.ndarray, np.ndarray]:
         """The bounds (normalised) of the triangles, widened well beyond float32 rounding:
         a ray that misses this box meets no triangle."""
-        tri = (np.asarray(self.scene.triangles, np.float64).reshape(-1, 3) - self.center) \
-            / self.scale
+        tri = normalised(self.scene, self.center, self.scale).reshape(-1, 3)
         margin = REACH_MARGIN * max(1.0, float(np.abs(tri).max()))
         return tri.min(axis=0) - margin, tri.max(axis=0) + margin
 
@@ -169,7 +169,7 @@ class PreparedScene:
         a ray must meet to be cast (no geometry: nothing to call), or None where only
         embreex's batches serve."""
         if self.embree is None:
-            return np.uint64(0), np.uint64(0), _NO_PARTS, _NO_PARTS, _NO_BOX, _NO_BOX
+            return NO_HITS
         if isinstance(self.embree, PartScene):
             return (*self.embree.hit_args, *self.reach_box)
         return None

@@ -23,7 +23,7 @@ from . import compiled, rng
 from .codes import PRISTINE
 from .emission import emit, photon_bands
 from .job import MAX_DEPTH, BatchJob
-from .prepared import PreparedScene, TracingFrame, prepare
+from .prepared import NO_HITS, PreparedScene, TracingFrame, prepare
 from .records import PhotonRecords
 from .scattering import UNPOLARISED
 
@@ -88,8 +88,6 @@ _NO_XZ = np.zeros((4, 1), np.int64)
 _NO_TP = np.zeros((1, 1))
 _NO_BAND = np.zeros(1, np.int64)
 _NO_EXITS = np.zeros((0, 3))
-_NO_HITS = (np.uint64(0), np.uint64(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
-            np.zeros(3), np.zeros(3))
 #: The cube map's texel layout (:mod:`lumitrace.film.cubemap`) as the kernel takes it.
 _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cubemap._RX,
                          cubemap._RY])
@@ -200,7 +198,7 @@ def _waves(ps: PreparedScene, job: BatchJob, w: _Waves, tally: BatchTally, n: in
         nxt = 1 - cur
         n_next, n_escaped, cut, absorbed, segments = compiled.bounce(
             depth, job.max_depth, prim, tfar, *_state(w, cur, n), *_state(w, nxt, n), *head,
-            n_escaped, *tail, False, *_NO_HITS)
+            n_escaped, *tail, False, *NO_HITS)
         tally.segments += segments
         tally.cut += cut
         tally.absorbed += absorbed
