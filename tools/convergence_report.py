@@ -40,7 +40,7 @@ def main() -> None:
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--out", type=Path, default=ROOT / "reports")
     p.add_argument("--reference-photons", type=int, default=60_000_000)
-    p.add_argument("--thresholds", default="0,128,512,2500")
+    p.add_argument("--thresholds", default="0,512,2500,10000")
     a = p.parse_args()
     thresholds = tuple(float(x) for x in a.thresholds.split(","))
     settings = ReportSettings(seconds=a.seconds, resolution=a.resolution, thresholds=thresholds,

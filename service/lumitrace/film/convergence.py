@@ -105,12 +105,16 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     signal2 = norm2(filtered, omega) - var_f2
     # no signal above the noise (no light escaped): the relative error is undefined
     rel = (lambda x2: float(np.sqrt(x2 / signal2))) if signal2 > 0 else (lambda x2: math.inf)
-    if signal2 > 0 and rel(total2) >= raw_err:
+    # the bias estimate is a difference of sums of squares over the texels, uncertain by
+    # about sqrt(2 / texels) of the raw noise: the filter must be better by that much
+    margin = math.sqrt(2.0 / flux.size)
+    if signal2 > 0 and rel(total2) >= raw_err * (1.0 - margin):
         # the filter's estimated bias costs more than the noise it takes out: step back to
         # the raw map (a preview must never be worse than the counts it comes from)
         return _raw_estimate(acc, raw, flux, threshold, raw_err, stepped_back=True)
     # per texel: the split-half variance, smoothed by the same filter
-    local_var = pull_push(diff * diff / 4.0 * omega, counts, threshold, omega)
+    local_var = pull_push(diff * diff / 4.0 * omega, counts, threshold, omega,
+                          sharpen=False)
     texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
     return MapEstimate(raw, filtered, threshold, raw_err, rel(total2), rel(var_f2),
                        np.where(filtered > 0, texel, np.inf))

@@ -76,7 +76,7 @@ class ReportSettings:
     photons: int | None = None
     seconds: float | None = 30.0
     resolution: int = 64
-    thresholds: tuple[float, ...] = (0.0, 128.0, 512.0, 2500.0)
+    thresholds: tuple[float, ...] = (0.0, 512.0, 2500.0, 10000.0)
     seed: int = 0
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
 

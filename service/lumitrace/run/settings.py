@@ -19,8 +19,9 @@ DEFAULT_PHOTONS = 2_000_000
 #: Cube-map face size in texels.
 DEFAULT_RESOLUTION = 64
 #: Photon count from which a texel trusts its own estimate whatever its neighbours say
-#: (pull-push threshold): 1 / 0.02**2, the count at which its own noise is 2%.
-DEFAULT_THRESHOLD = 2500.0
+#: (pull-push threshold): 1 / 0.01**2, the count at which its own noise is 1%. The
+#: sharpened filter keeps lobes' shape, so it can lean on neighbours this long.
+DEFAULT_THRESHOLD = 10000.0
 #: Error below which a result counts as converged when no target is given.
 DEFAULT_TARGET_ERROR = 0.02
 #: Photons per batch job.
