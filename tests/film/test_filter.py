@@ -92,6 +92,26 @@ def test_filtered_lambertian_disc_beats_raw_by_two_at_low_counts(disc_low):
     assert filt_err * 2 <= raw_err, (raw_err, filt_err)
 
 
+@pytest.mark.parametrize("name", ["lambertian_disc", "mirror_cup"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_sharpening_takes_out_the_blend_bias_on_curved_lobes(name, seed):
+    """Poisson counts of the closed form at 300k photons: the residual filtered again (twicing)
+    cuts the map's true error by a fifth or more against one pass (measured 0.70-0.78), and
+    the map stays non-negative with its flux."""
+    _, _, exp = trace(name, 10, res=RES, seed=1)
+    lam = expected_counts(exp, RES, 300_000)
+    ref = lam * 1000.0 / 300_000 / texel_solid_angles(RES)
+    counts = np.random.default_rng(seed).poisson(lam)
+    flux = counts * 1000.0 / 300_000
+    omega = texel_solid_angles(RES)
+    once = relative_rms(pull_push(flux, counts, 1e4, omega, sharpen=False), ref)
+    sharp_map = pull_push(flux, counts, 1e4, omega)
+    sharp = relative_rms(sharp_map, ref)
+    assert sharp <= 0.85 * once, (once, sharp)
+    assert sharp < 0.4 * relative_rms(flux / omega, ref)
+    assert sharp_map.min() >= 0 and (sharp_map * omega).sum() == pytest.approx(flux.sum(), rel=1e-12)
+
+
 @pytest.mark.parametrize("name,photons,threshold", [
     ("lambertian_disc", 100_000, 0.0), ("lambertian_disc", 100_000, 32.0),
     ("lambertian_disc", 100_000, 128.0), ("isotropic", 100_000, 32.0),
