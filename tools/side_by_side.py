@@ -151,7 +151,8 @@ class _MapCells:
         """Variance of the cell means of a raw map of texel fluxes ``flux`` (lm) from
         analog photons of ``photon_flux`` (lm) each (Poisson counts)."""
         s = np.bincount(self.cell, photon_flux * flux.ravel(), self.n)
-        return (s / np.maximum(self.weight, 1e-300) ** 2).reshape(-1, len(GAMMAS))
+        w = np.maximum(self.weight, 1e-300)  # a cell no texel centre falls in: 0, not 0 / 0
+        return (s / w / w).reshape(-1, len(GAMMAS))
 
 
 def closed_form_cells(expectation: dict, up_axis: str, sub: int = 24) -> np.ndarray:
