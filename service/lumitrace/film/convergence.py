@@ -90,9 +90,13 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     raw_err = raw_relative_error(acc)
     if threshold <= 0:
         return _raw_estimate(acc, raw, flux, threshold, raw_err)
-    filtered = pull_push(flux, counts, threshold, omega)
-    # each half holds half the photons: the same threshold in photons per estimate is half
-    halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold / 2.0, omega) for h in (0, 1)]
+    weights: list[np.ndarray] = []
+    filtered = pull_push(flux, counts, threshold, omega, weights=weights)
+    # each half filtered with the whole map's weights: the same linear filter, so the
+    # halves' difference measures its variance (halves weighted from their own counts trust
+    # noisier texels and overstate it, 2.3x on an isotropic source at 100k photons)
+    halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold, omega, weights=weights)
+              for h in (0, 1)]
     raw_halves = [acc.texel_flux(h) / omega for h in (0, 1)]
     diff = halves[0] - halves[1]
     var_f2 = norm2(diff, omega) / 4.0  # Var(f_a - f_b) = 2 Var(f_half) = 4 Var(f_all)

@@ -67,7 +67,8 @@ def _pyramid(res: int) -> tuple[_Level, ...]:
 
 def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
               solid_angles: np.ndarray | None = None, adaptive: bool = True,
-              extra: np.ndarray | None = None, sharpen: bool = True):
+              extra: np.ndarray | None = None, sharpen: bool = True,
+              weights: list[np.ndarray] | None = None):
     """Filtered intensity (cd), (6R, R), from texel fluxes (lm) and photon counts.
 
     ``threshold`` is the photon count from which a texel trusts its own estimate fully.
@@ -78,6 +79,9 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
     filtered with the weights the intensity's counts and noise give, so that a filtered
     colour is a weighted mean of raw colours nearby (no fringes at a beam's edge); then
     (intensity, extra filtered) is returned.
+    ``weights``, an empty list, receives the blend weights of every level; a list filled
+    so by an earlier call makes this one filter with them (the same linear filter, for
+    other photons of the same map: its split halves).
     """
     shape = flux.shape
     res = shape[1]
@@ -92,7 +96,7 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
     levels = _pyramid(res)
     n = _pull(counts.ravel().astype(np.float64), levels)
     w = _pull(omega.ravel(), levels)
-    weights: list[np.ndarray] = []
+    weights = [] if weights is None else weights
     out = _push(_pull(channels.reshape(len(channels), -1), levels), n, w, levels,
                 threshold, adaptive, weights)
     if sharpen:
