@@ -14,8 +14,9 @@ and peaks stay sharp while flat regions are smoothed.
 Sharpening: a blend of coarser levels flattens a curved lobe (a cosine falls too slowly
 near its peak and too fast near its foot). The residual, raw minus filtered, holds that
 bias plus noise; filtered again with the same weights and added back, it cancels the bias
-to the next order (Tukey's twicing): on a Lambertian disc the map's error at 300k photons
-falls by a third, so a texel can trust its neighbours for longer (default threshold 1e4).
+to the next order (Tukey's twicing): on a Lambertian disc at 300k photons the map's error
+falls by a quarter at the same threshold, and a texel can trust its neighbours for longer
+(the default threshold 1e4, not 2500, which with it takes off two fifths).
 Intensities (flux per solid angle), not fluxes, are blended, because texel solid angles
 differ across a face. The pixel positions of the ImfEnvmap layout reach the cube's edges,
 so bilinear lookups never cross a face and, with shared edge texels welded, the result is
