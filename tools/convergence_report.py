@@ -15,7 +15,7 @@ import os
 import shutil
 from pathlib import Path
 
-from lumitrace.report.convergence_report import ReportSettings, run_report
+from lumitrace.report.convergence_report import REPORT_THRESHOLDS, ReportSettings, run_report
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("isotropic", "lambertian_disc", "fresnel_slab", "paraboloid")
@@ -40,7 +40,7 @@ def main() -> None:
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--out", type=Path, default=ROOT / "reports")
     p.add_argument("--reference-photons", type=int, default=60_000_000)
-    p.add_argument("--thresholds", default="0,512,2500,10000")
+    p.add_argument("--thresholds", default=",".join(f"{t:g}" for t in REPORT_THRESHOLDS))
     a = p.parse_args()
     thresholds = tuple(float(x) for x in a.thresholds.split(","))
     settings = ReportSettings(seconds=a.seconds, resolution=a.resolution, thresholds=thresholds,

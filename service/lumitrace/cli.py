@@ -168,7 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     rstop.add_argument("--time", type=_positive_float, default=None, metavar="SECONDS",
                        help="trace for this long (default 30 s)")
     r.add_argument("--resolution", type=_positive_int, default=64)
-    r.add_argument("--thresholds", default="0,512,2500,10000",
+    r.add_argument("--thresholds", default=f"0,512,2500,{DEFAULT_THRESHOLD:g}",
                    help="comma-separated filter thresholds to compare; 0 is the raw map")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--threads", type=_positive_int, default=None)

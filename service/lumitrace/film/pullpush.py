@@ -98,12 +98,12 @@ def pull_push(flux: np.ndarray, counts: np.ndarray, threshold: float,
     n = _pull(counts.ravel().astype(np.float64), levels)
     w = _pull(omega.ravel(), levels)
     weights = [] if weights is None else weights
-    out = _push(_pull(channels.reshape(len(channels), -1), levels), n, w, levels,
+    out = _push(_pull(channels.reshape(len(channels), -1), levels), n, w, levels, res,
                 threshold, adaptive, weights)
     if sharpen:
         # the smoothing's bias, estimated by the same filter from what it left out
         residual = flux.ravel() - out[0] * omega.ravel()
-        fix = _push(_pull(residual[None], levels), n, w, levels, threshold, adaptive,
+        fix = _push(_pull(residual[None], levels), n, w, levels, res, threshold, adaptive,
                     weights)
         once = out[0].copy()
         out[0] = np.maximum(once + fix[0], 0.0)
@@ -130,14 +130,13 @@ def _pull(values: np.ndarray, levels: tuple[_Level, ...]) -> list[np.ndarray]:
 
 
 def _push(f: list[np.ndarray], n: list[np.ndarray], w: list[np.ndarray],
-          levels: tuple[_Level, ...], threshold: float, adaptive: bool,
+          levels: tuple[_Level, ...], res: int, threshold: float, adaptive: bool,
           weights: list[np.ndarray]) -> np.ndarray:
     """The finest level's blended intensities (k, texels) from the pulled fluxes ``f``,
-    counts ``n`` and solid angles ``w``: from the whole sphere down, every level's own
-    intensity blended with the coarser level's. The blend weights are computed and appended
-    to ``weights`` when it is empty, and taken from it otherwise."""
+    counts ``n`` and solid angles ``w`` of a map of face size ``res``: from the whole sphere
+    down, every level's own intensity blended with the coarser level's. The blend weights
+    are computed and appended to ``weights`` when it is empty, and taken from it otherwise."""
     replay = bool(weights)
-    res = int(round(np.sqrt(len(w[0]) / 6)))
     photons_per_lumen = float(n[0].sum()) / float(f[0][0].sum()) if not replay else 0.0
     coarse = np.repeat(f[-1].sum(axis=1, keepdims=True) / FOUR_PI, 6 * levels[-1].res ** 2,
                        axis=1)

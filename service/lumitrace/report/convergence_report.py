@@ -24,8 +24,14 @@ from ..film.cubemap import texel_directions, texel_solid_angles, sample_map
 from ..errors import LumitraceError
 from .metrics import psnr, ssim
 from ..run.session import Progress, TraceSettings, run
+from ..run.settings import DEFAULT_THRESHOLD
 
 ERROR_LEVELS = (0.05, 0.02)
+
+
+#: Filter thresholds a report compares by default: the raw map (0), two lighter filters
+#: and the default one.
+REPORT_THRESHOLDS = (0.0, 512.0, 2500.0, DEFAULT_THRESHOLD)
 
 
 @dataclass
@@ -76,7 +82,7 @@ class ReportSettings:
     photons: int | None = None
     seconds: float | None = 30.0
     resolution: int = 64
-    thresholds: tuple[float, ...] = (0.0, 512.0, 2500.0, 10000.0)
+    thresholds: tuple[float, ...] = REPORT_THRESHOLDS
     seed: int = 0
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
 
