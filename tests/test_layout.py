@@ -107,8 +107,9 @@ LONG_MODULES = {
     # numba's on-disk cache is keyed by the file of each compiled entry point: helpers in
     # another file could change without their callers being recompiled (every model, the
     # spectral photons, the binning with its fast angles, emission of every light kind,
-    # whole paths from the emitted photon with Embree's hits)
-    "trace/kernels.py": 1100,
+    # whole paths from the emitted photon with Embree's hits, the escapes binned in
+    # vectorised chunks)
+    "trace/kernels.py": 1160,
 }
 
 

@@ -107,6 +107,11 @@ def test_the_build_is_named_by_the_kernels_sources(tmp_path, monkeypatch):
     with open(tmp_path / "kernels.py", "a") as f:
         f.write("\n")
     assert compiled.source_key() != key
+    key = compiled.source_key()
+    monkeypatch.setattr(compiled, "cpu_key", lambda: "another CPU")  # built for another CPU
+    assert compiled.source_key() != key
+    monkeypatch.undo()
+    monkeypatch.setattr(compiled, "HERE", tmp_path)
     so, types = compiled.build_paths(tmp_path)
     assert so.name.startswith(compiled.MODULE + "-" + compiled.source_key())
     assert types.suffix == ".json" and so.parent == types.parent == tmp_path

@@ -154,6 +154,35 @@ def test_exit_bins_follow_their_faces():
     assert (col, row) == (int(0.4 * gm.EXIT_SIDE), int(0.5 * gm.EXIT_SIDE))
 
 
+def test_a_batchs_escapes_are_binned_as_each_direction_is():
+    """The tracer bins escapes in vectorised chunks: the counts of a batch (a few chunks
+    and a part one) are those of its escapes binned one by one, half by half."""
+    from lumitrace.film.accumulate import counts_of
+    from lumitrace.scene import Scene
+    from lumitrace.trace import tracer
+    from lumitrace.trace.job import BatchJob
+    from lumitrace.trace.prepared import prepare
+
+    e = Emitter(path="/L", kind="sphere", flux=1.0, to_world=np.eye(4), radius=0.01)
+    scene = Scene(np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32), (), (),
+                  (e,))
+    ps, job = prepare(scene), BatchJob(0, 100, 3 * kernels._CHUNK + 77, 9, 16)
+    t = tracer.trace_batch(ps, job, exit_rays=True)
+    pos, d = t.exit_rays
+    assert len(d) == job.count
+    half = (rng.photon_hash(rng.stream_key(job.seed, e.key),
+                            np.arange(job.first, job.stop)) & 1).astype(np.int64)
+    tex = kernels.texels(np.ascontiguousarray(d.T), job.resolution, _CUBE_LAYOUT)
+    assert np.array_equal(t.counts, counts_of(tex + half * t.counts.shape[1],
+                                              t.counts.shape[1]))
+    _, _, axes, lo, hi, *gonio, _ = ps.gonio_args
+    cell, ex = kernels.gonio_bins(np.ascontiguousarray(pos.T), np.ascontiguousarray(d.T), axes,
+                                  lo, hi, *gonio)
+    want = counts_of(np.concatenate([cell, ex]) + gm.N_BINS * np.tile(half, 2), gm.N_BINS)
+    dense = lambda c: c.dense() if hasattr(c, "dense") else c  # noqa: E731
+    assert np.array_equal(dense(t.cells), dense(want))
+
+
 def test_photons_that_cannot_meet_the_geometry_skip_embree_with_the_same_result(monkeypatch):
     """A light below a plate, facing away from it: no emitted photon can meet a triangle,
     none goes to Embree, and the tally is the one every photon cast through Embree gives."""

@@ -3,8 +3,10 @@
 Traces a few photons of small scenes that use every kernel (plain, spectral, with records
 and exit rays, with polarisation) through numba's JIT, so its on-disk cache is warm, then
 compiles each signature those calls used with numba's ``pycc`` into one extension module
-(see :mod:`lumitrace.trace.compiled`), for any x86-64 or other CPU of this architecture,
-with the JIT's options: the GIL released, numpy's floating-point error model. It needs a C
+(see :mod:`lumitrace.trace.compiled`) with the JIT's options: the GIL released, numpy's
+floating-point error model, and this machine's CPU and instruction set, which the escapes'
+binning needs to run on several at once. Neither allows fast-math or fused multiply-adds,
+so the numbers are the same on any CPU. It needs a C
 compiler to link; without one the kernels stay JIT-compiled, and the build says so.
 """
 from __future__ import annotations
@@ -62,6 +64,7 @@ def build(directory: Path | None = None, force: bool = False) -> Path:
     """Build the kernels for the current sources (unless built already) and return the
     extension module's path; older builds in the same folder are removed."""
     import numba.pycc.compiler as pycc_compiler
+    from numba.core import codegen
     from numba.pycc import CC
 
     from . import kernels
@@ -82,11 +85,14 @@ def build(directory: Path | None = None, force: bool = False) -> Path:
             self.error_model = "numpy"
 
     pycc_compiler.Flags = _Flags
+    # this CPU's model and features, as the JIT targets them (pycc's default is the
+    # architecture's baseline); the build's name says which CPU (compiled.cpu_key)
+    codegen.AOTCPUCodegen._customize_tm_features = codegen.CPUCodegen._get_host_cpu_features
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # pycc's pending-deprecation notice
         cc = CC(compiled.MODULE)
     cc.output_dir = str(so.parent)
-    cc.target_cpu = ""  # the architecture's baseline: any CPU of it runs the build
+    cc.target_cpu = "host"
     table: dict = {}
     for name in compiled.ENTRY_POINTS:
         dispatcher = getattr(kernels, name)

@@ -3,9 +3,10 @@
 
 Loading numba and LLVM costs a process about 1 CPU s and 150 MB before its first photon
 (every worker process pays it again). The build (:mod:`lumitrace.trace.aot`, run at
-install) compiles the same functions with the same compiler into an extension module
-kept in ``__pycache__`` beside them, named by a hash of their sources: loading it takes
-under a millisecond and needs neither. Its functions take exactly the argument types they
+install) compiles the same functions with the same compiler, for this machine's CPU as
+the JIT does, into an extension module kept in ``__pycache__`` beside them, named by a
+hash of their sources and of the CPU: loading it takes under a millisecond and needs
+neither. Its functions take exactly the argument types they
 were built for and, unlike the JIT, do not check them, so every call is checked here
 (about 0.3 us an argument); a call that does not fit, a missing or stale build, or
 ``LUMITRACE_KERNELS=jit`` goes to the JIT instead: slower to start, never different.
@@ -36,16 +37,36 @@ _SCALARS = {"int64": (int, np.int64), "float64": (float, np.float64),
             "bool": (bool, np.bool_), "uint64": (np.uint64,)}
 
 
+def cpu_key() -> str:
+    """The CPU a build is made for: its model and instruction-set flags where the system
+    lists them (Linux), else what the platform module says. A build made for another CPU
+    could use instructions this one lacks, so it is not loaded."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            lines: dict = {}
+            for line in f:
+                key = line.split(":", 1)[0].strip()
+                if key in ("model name", "flags", "Features") and key not in lines:
+                    lines[key] = line.strip()
+                if not line.strip() and lines:  # the first processor's block is enough
+                    break
+        if lines:
+            return repr(sorted(lines.items()))
+    except OSError:
+        pass
+    return repr((platform.machine(), platform.processor()))
+
+
 def source_key() -> str:
     """A hash of the kernels' sources, the material codes they compare against, the
-    Python, numpy and machine they are built for: the build's name."""
+    Python, numpy and CPU they are built for: the build's name."""
     from ..scene import model
 
     h = hashlib.sha256()
     for name in SOURCES:
         h.update((HERE / name).read_bytes())
     codes = sorted((k, v) for k, v in vars(model).items() if k.isupper() and isinstance(v, int))
-    h.update(repr((codes, np.__version__, platform.machine())).encode())
+    h.update(repr((codes, np.__version__, platform.machine(), cpu_key())).encode())
     return h.hexdigest()[:16]
 
 

@@ -316,34 +316,48 @@ def scatter_many(kind, refl, spec, trans, ior, alpha, material, d, n, u0, u1, u2
 
 # --- binning of escapes ---------------------------------------------------------------------
 
+# Escapes are binned in chunks (:func:`_bin_escapes`): a first loop computes every escape's
+# face and pixel, angles and exit with selects, no branches, so LLVM runs it on several
+# escapes at once; a second adds the counts. Binned one by one, the random directions'
+# mispredicted branches cost three times as much.
+
 @numba.njit(**_ALWAYS)
-def _texel(x, y, z, res, layout):
-    """Cube-map texel of direction (x, y, z), as :func:`lumitrace.film.cubemap.texel_index`
-    (ImfEnvmap's face choice and pixel positions, nearest pixel); ``layout`` holds the rows
-    c0, cx, cy, r0, rx, ry of its pixel placement per face."""
+def _texel_pixel(x, y, z, res):
+    """Cube-map face (0..5: +x, -x, +y, -y, +z, -z) of direction (x, y, z) and its nearest
+    pixel's two in-face positions, as :func:`lumitrace.film.cubemap.texel_index` has them
+    (ImfEnvmap's face choice and pixel positions)."""
     ax, ay, az = abs(x), abs(y), abs(z)
-    if ax >= ay and ax >= az:
-        major, a, b, face = x, y, z, 0
-    elif ay < az:
-        major, a, b, face = z, x, y, 4
-    else:
-        major, a, b, face = y, x, z, 2
-    if major <= 0.0:
-        face += 1
+    isx = (ax >= ay) & (ax >= az)
+    isz = (ay < az) & ~isx
+    major = x if isx else (z if isz else y)
+    a = y if isx else x
+    b = z if isx else (y if isz else z)
+    face = (0 if isx else (4 if isz else 2)) + (major <= 0.0)
     amax = abs(major)
+    zero = amax == 0.0
+    s = float(res - 1)
+    pa = (a / (1.0 if zero else amax) + 1.0) * (0.5 * s)
+    pb = (b / (1.0 if zero else amax) + 1.0) * (0.5 * s)
+    pa = 0.0 if (pa < 0.0) | zero else (s if pa > s else pa)
+    pb = 0.0 if (pb < 0.0) | zero else (s if pb > s else pb)
+    return 0 if zero else face, int(pa + 0.5), int(pb + 0.5)  # (>= 0.5: int() is floor())
+
+
+@numba.njit(**_INLINE)
+def _texel_index(face, ia, ib, res, layout):
+    """The texel of pixel (``ia``, ``ib``) of ``face``; ``layout`` holds the rows c0, cx,
+    cy, r0, rx, ry of :mod:`lumitrace.film.cubemap`'s pixel placement per face."""
     s = res - 1
-    if amax == 0.0:
-        face, pa, pb = 0, 0.0, 0.0
-    else:
-        pa = (a / amax + 1.0) * (0.5 * s)
-        pb = (b / amax + 1.0) * (0.5 * s)
-        pa = min(max(pa, 0.0), float(s))
-        pb = min(max(pb, 0.0), float(s))
-    ia = min(max(int(math.floor(pa + 0.5)), 0), res - 1)
-    ib = min(max(int(math.floor(pb + 0.5)), 0), res - 1)
     col = s * layout[0, face] + layout[1, face] * ia + layout[2, face] * ib
     row = face * res + s * layout[3, face] + layout[4, face] * ia + layout[5, face] * ib
     return row * res + col
+
+
+@numba.njit(**_ALWAYS)
+def _texel(x, y, z, res, layout):
+    """Cube-map texel of direction (x, y, z), as :func:`lumitrace.film.cubemap.texel_index`."""
+    face, ia, ib = _texel_pixel(x, y, z, res)
+    return _texel_index(face, ia, ib, res, layout)
 
 
 @numba.njit(**_JIT)
@@ -388,22 +402,39 @@ def _atan2_fast(y, x):
 _EDGE_MARGIN = 1e-4
 
 
+@numba.njit(**_INLINE)
+def _rows(axes):
+    """The photometric axes (3, 3) as a 9-tuple, row by row: held in registers, where
+    array reads in a loop that writes other arrays keep LLVM from vectorising it."""
+    return (axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 1], axes[1, 2],
+            axes[2, 0], axes[2, 1], axes[2, 2])
+
+
+@numba.njit(**_INLINE)
+def _apply9(m, x, y, z):
+    """(x, y, z) in the axes ``m`` (a 9-tuple from :func:`_rows`)."""
+    return (m[0] * x + m[1] * y + m[2] * z, m[3] * x + m[4] * y + m[5] * z,
+            m[6] * x + m[7] * y + m[8] * z)
+
+
 @numba.njit(**_ALWAYS)
-def _gonio_cell(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma):
-    """The goniophotometer's C-gamma cell of world direction (x, y, z): from fast angles
-    where they are far from every cell edge, else from :func:`_gonio_cell_exact`, so the
-    cell is always the exact one (libm's acos and atan2 cost half of an escape)."""
-    px = axes[0, 0] * x + axes[0, 1] * y + axes[0, 2] * z
-    py = axes[1, 0] * x + axes[1, 1] * y + axes[1, 2] * z
-    pz = axes[2, 0] * x + axes[2, 1] * y + axes[2, 2] * z
+def _gonio_angles(x, y, z, m):
+    """gamma and C (deg, C in [0, 360)) of world direction (x, y, z) in the photometric
+    axes ``m`` (:func:`_rows`), by the fast angles (within 2.2e-8 rad)."""
+    px, py, pz = _apply9(m, x, y, z)
     gamma = math.degrees(_acos_fast(min(max(-pz, -1.0), 1.0)))
     c = math.degrees(_atan2_fast(py, px))
-    if c < 0.0:
-        c += 360.0
+    return gamma, c + 360.0 if c < 0.0 else c
+
+
+@numba.njit(**_ALWAYS)
+def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma):
+    """The C-gamma cell of world direction (x, y, z) from its fast angles ``gamma``, ``c``
+    where they are far from every cell edge, else from :func:`_gonio_cell_exact`, so the
+    cell is always the exact one (libm's acos and atan2 cost half of an escape)."""
     gs, cs = gamma * g_scale, c * c_scale  # both >= 0: int() is floor()
     g = int(gs)
     fg, fc = gs - g, cs - int(cs)
-    # bitwise ors and an indexed loop, no branches: directions are random
     near = (fg < _EDGE_MARGIN) | (fg > 1.0 - _EDGE_MARGIN) | (fc < _EDGE_MARGIN) | \
         (fc > 1.0 - _EDGE_MARGIN)
     for k in range(extra_edges.shape[0]):
@@ -411,8 +442,16 @@ def _gonio_cell(x, y, z, axes, extra_edges, c_scale, g_scale, n_c, n_gamma):
         near |= abs(gamma - e) * g_scale < _EDGE_MARGIN
         g += gamma >= e
     if near:
+        px, py, pz = _apply9(m, x, y, z)
         return _gonio_cell_exact(px, py, pz, extra_edges, c_scale, g_scale, n_c, n_gamma)
     return min(int(cs), n_c - 1) * n_gamma + min(g, n_gamma - 1)
+
+
+@numba.njit(**_ALWAYS)
+def _gonio_cell(x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma):
+    """The goniophotometer's C-gamma cell of world direction (x, y, z)."""
+    gamma, c = _gonio_angles(x, y, z, m)
+    return _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma)
 
 
 @numba.njit(**_INLINE)
@@ -430,56 +469,98 @@ def _gonio_cell_exact(px, py, pz, extra_edges, c_scale, g_scale, n_c, n_gamma):
 
 
 @numba.njit(**_INLINE)
-def _slab_exit(q, e, lo, hi):
+def _far_side(q, e, lo, hi):
     """Distance from ``q`` along ``e`` to the far side of the slab ``lo``..``hi`` (inf
-    when parallel); selects rather than branches, as ray directions are random."""
-    b = hi if e > 0.0 else lo
-    t = (b - q) / e
-    return t if e != 0.0 else math.inf
-
-
-@numba.njit(**_INLINE)
-def _box_exit(q, e, lo, hi):
-    """The axis (0, 1, 2) across which the ray from ``q`` along ``e`` (3-tuples) leaves
-    the box ``lo``..``hi`` (first on ties) and the distance to it (0 if behind)."""
-    t0 = _slab_exit(q[0], e[0], lo[0], hi[0])
-    t1 = _slab_exit(q[1], e[1], lo[1], hi[1])
-    t2 = _slab_exit(q[2], e[2], lo[2], hi[2])
-    axis, best = 0, t0
-    if t1 < best:
-        axis, best = 1, t1
-    if t2 < best:
-        axis, best = 2, t2
-    return axis, max(best, 0.0)
+    when parallel), by selects rather than branches: ray directions are random."""
+    u = (lo - q) / e
+    v = (hi - q) / e
+    return math.inf if e == 0.0 else (v if v > u else u)
 
 
 @numba.njit(**_ALWAYS)
-def _gonio_exit(qx, qy, qz, x, y, z, axes, lo, hi, side, n_cells):
+def _gonio_exit(qx, qy, qz, x, y, z, m, lo, hi, side, n_cells):
     """The exit bin (offset by ``n_cells``) where the ray from world point ``q`` (m) along
-    ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi`` in photometric axes),
-    and the distance (m) to where it leaves it."""
-    q = (axes[0, 0] * qx + axes[0, 1] * qy + axes[0, 2] * qz,
-         axes[1, 0] * qx + axes[1, 1] * qy + axes[1, 2] * qz,
-         axes[2, 0] * qx + axes[2, 1] * qy + axes[2, 2] * qz)
-    e = (axes[0, 0] * x + axes[0, 1] * y + axes[0, 2] * z,
-         axes[1, 0] * x + axes[1, 1] * y + axes[1, 2] * z,
-         axes[2, 0] * x + axes[2, 1] * y + axes[2, 2] * z)
-    axis, t = _box_exit(q, e, lo, hi)
+    ``(x, y, z)`` leaves the goniophotometer's box (``lo``, ``hi``: 3-tuples in the
+    photometric axes ``m``, see :func:`_rows`), and the distance (m) to where it leaves it
+    (0 if behind)."""
+    q0, q1, q2 = _apply9(m, qx, qy, qz)
+    e0, e1, e2 = _apply9(m, x, y, z)
+    lo0, lo1, lo2 = lo
+    hi0, hi1, hi2 = hi
+    t0 = _far_side(q0, e0, lo0, hi0)
+    t1 = _far_side(q1, e1, lo1, hi1)
+    t2 = _far_side(q2, e2, lo2, hi2)
+    a1 = t1 < t0  # leaves across axis 1 (first on ties) ...
+    t = t1 if a1 else t0
+    a2 = t2 < t  # ... or axis 2
+    t = t2 if a2 else t
+    t = t if t > 0.0 else 0.0
     # in-face axes: C0 faces (axis 0) use (C90, up), C90 faces (C0, up), up faces (C0, C90)
-    # (picked as scalars: indexing a tuple by a variable costs more than the rest)
-    if axis == 0:
-        qa, ea, qb, eb, ua, va, face, up = q[1], e[1], q[2], e[2], 1, 2, 2, e[0] > 0.0
-    elif axis == 1:
-        qa, ea, qb, eb, ua, va, face, up = q[0], e[0], q[2], e[2], 0, 2, 4, e[1] > 0.0
-    else:
-        qa, ea, qb, eb, ua, va, face, up = q[0], e[0], q[1], e[1], 0, 1, 0, e[2] > 0.0
-    if up:
-        face += 1
-    uu = (min(max(qa + t * ea, lo[ua]), hi[ua]) - lo[ua]) / max(hi[ua] - lo[ua], 1e-12)
-    vv = (min(max(qb + t * eb, lo[va]), hi[va]) - lo[va]) / max(hi[va] - lo[va], 1e-12)
+    not0 = a1 | a2
+    qa, ea = (q0 if not0 else q1), (e0 if not0 else e1)
+    la, ha = (lo0 if not0 else lo1), (hi0 if not0 else hi1)
+    qb, eb = (q1 if a2 else q2), (e1 if a2 else e2)
+    lb, hb = (lo1 if a2 else lo2), (hi1 if a2 else hi2)
+    up = (e2 if a2 else (e1 if a1 else e0)) > 0.0
+    face = (0 if a2 else (4 if a1 else 2)) + up
+    pa, pb = qa + t * ea, qb + t * eb
+    pa = la if pa < la else (ha if pa > ha else pa)
+    pb = lb if pb < lb else (hb if pb > hb else pb)
+    ra, rb = ha - la, hb - lb
+    uu = (pa - la) / (ra if ra > 1e-12 else 1e-12)
+    vv = (pb - lb) / (rb if rb > 1e-12 else 1e-12)
     col = min(int(uu * side), side - 1)
     row = min(int(vv * side), side - 1)
     return n_cells + (face * side + row) * side + col, t
+
+
+#: Escapes binned together (:func:`_bin_escapes`): their rows stay in the L1 cache.
+_CHUNK = 256
+
+
+@numba.njit(**_JIT)
+def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, extra_edges,
+                 c_scale, g_scale, n_c, n_gamma, lo, hi, side, n_bins, escaped, spectral,
+                 escaped_xz, xz, records, rec_texel, rec_cell, rec_exit, exits, exit_pos,
+                 exit_dir):
+    """Bin ``m`` escapes, staged in ``staged`` (6, m: world start points (m), directions)
+    and ``sbin`` (2, m: batch rows, halves): count their texels in ``counts`` (and X, Z in
+    ``xz``), append their cells and exit bins to ``escaped`` from ``first``, fill their
+    records and exit rays; returns the escaped bins written. ``ang`` (3, m) and ``pix``
+    (4, m) are scratch (separate arrays, so the first loop vectorises)."""
+    n_cells = n_c * n_gamma
+    mm = _rows(axes)
+    lo3, hi3 = (lo[0], lo[1], lo[2]), (hi[0], hi[1], hi[2])
+    for k in range(m):  # selects only: several escapes at once
+        x, y, z = staged[3, k], staged[4, k], staged[5, k]
+        pix[0, k], pix[1, k], pix[2, k] = _texel_pixel(x, y, z, res)
+        ang[0, k], ang[1, k] = _gonio_angles(x, y, z, mm)
+        pix[3, k], ang[2, k] = _gonio_exit(staged[0, k], staged[1, k], staged[2, k], x, y, z,
+                                           mm, lo3, hi3, side, n_cells)
+    for k in range(m):
+        x, y, z = staged[3, k], staged[4, k], staged[5, k]
+        row, half, ex = sbin[0, k], sbin[1, k], pix[3, k]
+        tex = _texel_index(pix[0, k], pix[1, k], pix[2, k], res, layout)
+        counts[half, tex] += 1
+        cell = _gonio_cell_at(ang[0, k], ang[1, k], x, y, z, mm, extra_edges, c_scale,
+                              g_scale, n_c, n_gamma)
+        j = first + 2 * k
+        escaped[j] = cell + n_bins * half
+        escaped[j + 1] = ex + n_bins * half
+        if spectral:
+            xz[half, tex] += escaped_xz[0, j >> 1]
+            xz[2 + half, tex] += escaped_xz[1, j >> 1]
+        if records:
+            rec_texel[row] = tex
+            rec_cell[row] = cell
+            rec_exit[row] = ex - n_cells
+        if exits:  # the exit ray: where it leaves the luminaire's box (world m)
+            t = ang[2, k]
+            exit_pos[row, 0] = staged[0, k] + t * x
+            exit_pos[row, 1] = staged[1, k] + t * y
+            exit_pos[row, 2] = staged[2, k] + t * z
+            exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = x, y, z
+    return first + 2 * m
 
 
 @numba.njit(**_JIT)
@@ -489,11 +570,12 @@ def gonio_bins(p, d, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, si
     n = d.shape[1]
     cell = np.empty(n, np.int64)
     ex = np.empty(n, np.int64)
+    m, lo3, hi3 = _rows(axes), (lo[0], lo[1], lo[2]), (hi[0], hi[1], hi[2])
     for i in range(n):
-        cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], axes, extra_edges, 1.0 / c_step,
+        cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], m, extra_edges, 1.0 / c_step,
                               1.0 / g_step, n_c, n_gamma)
-        ex[i], _ = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], axes, lo,
-                            hi, side, n_c * n_gamma)
+        ex[i], _ = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], m, lo3,
+                               hi3, side, n_c * n_gamma)
     return cell, ex
 
 
@@ -538,7 +620,9 @@ def _mark_segment(rec_cells, rec_slabs, row, ax, ay, az, bx, by, bz, glo, ghi, g
 @numba.njit(**_INLINE)
 def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
     """Where the ray from o along d leaves the record grid's box."""
-    _, t = _box_exit((ox, oy, oz), (dx, dy, dz), glo, ghi)
+    t = min(_far_side(ox, dx, glo[0], ghi[0]), _far_side(oy, dy, glo[1], ghi[1]),
+            _far_side(oz, dz, glo[2], ghi[2]))
+    t = t if t > 0.0 else 0.0
     return ox + t * dx, oy + t * dy, oz + t * dz
 
 
@@ -692,6 +776,13 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     rf = ray[k0:].view(np.float32)
     ru = ray[k0:]
     addr = numba.uint64(ray.ctypes.data + 4 * k0)
+    staged = np.empty((6, _CHUNK))  # escapes staged for binning, and its scratch
+    sbin = np.empty((2, _CHUNK), np.int64)
+    binning = (staged, sbin, np.empty((3, _CHUNK)), np.empty((4, _CHUNK), np.int64))
+    bins = (res, layout, counts, axes, extra_edges, 1.0 / c_step, 1.0 / g_step, n_c,
+            n_gamma, lo, hi, side, n_bins, escaped, spectral, escaped_xz, xz, records,
+            rec_texel, rec_cell, rec_exit, exits, exit_pos, exit_dir)
+    ns = 0
     for i in range(prim.shape[0]):
         h = base[i]
         step = depth
@@ -717,35 +808,24 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             segments += 1
             if records and rec_segments[row] < 65535:
                 rec_segments[row] += 1
-            if tri < 0:  # escaped: binned, in the half its hash's lowest bit picks
-                half = int(h & _ONE)
-                tex = _texel(dx, dy, dz, res, layout)
-                counts[half, tex] += 1
+            if tri < 0:  # escaped: staged for binning, in the half its hash's lowest bit picks
+                staged[0, ns] = ox * scale + center[0]
+                staged[1, ns] = oy * scale + center[1]
+                staged[2, ns] = oz * scale + center[2]
+                staged[3, ns], staged[4, ns], staged[5, ns] = dx, dy, dz
+                sbin[0, ns], sbin[1, ns] = row, int(h & _ONE)
                 if spectral:
                     qx_, qz_ = _fixed_xz(tp, i, tband[i], band_w)
-                    xz[half, tex] += qx_
-                    xz[2 + half, tex] += qz_
-                    escaped_xz[0, n_escaped >> 1] = qx_
-                    escaped_xz[1, n_escaped >> 1] = qz_
+                    escaped_xz[0, (n_escaped >> 1) + ns] = qx_
+                    escaped_xz[1, (n_escaped >> 1) + ns] = qz_
                     if records:
                         rec_x[row] = qx_
                         rec_z[row] = qz_
-                cell = _gonio_cell(dx, dy, dz, axes, extra_edges, 1.0 / c_step, 1.0 / g_step,
-                                   n_c, n_gamma)
-                wx, wy, wz = ox * scale + center[0], oy * scale + center[1], oz * scale + center[2]
-                ex, t_out = _gonio_exit(wx, wy, wz, dx, dy, dz, axes, lo, hi, side, n_c * n_gamma)
-                if exits:  # the exit ray: where it leaves the luminaire's box (world m)
-                    exit_pos[row, 0] = wx + t_out * dx
-                    exit_pos[row, 1] = wy + t_out * dy
-                    exit_pos[row, 2] = wz + t_out * dz
-                    exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = dx, dy, dz
-                escaped[n_escaped] = cell + n_bins * half
-                escaped[n_escaped + 1] = ex + n_bins * half
-                n_escaped += 2
+                ns += 1
+                if ns == _CHUNK:
+                    n_escaped = _bin_escapes(ns, *binning, n_escaped, *bins)
+                    ns = 0
                 if records:
-                    rec_texel[row] = tex
-                    rec_cell[row] = cell
-                    rec_exit[row] = ex - n_c * n_gamma
                     qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
                     _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
                                   gn, m0, m1, m2)
@@ -819,6 +899,8 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                         tp[n_out, b] = tp[i, b]
             n_out += 1
             break
+    if ns:
+        n_escaped = _bin_escapes(ns, *binning, n_escaped, *bins)
     return n_out, n_escaped, cut, absorbed, segments
 
 
