@@ -427,6 +427,15 @@ def _gonio_angles(x, y, z, m):
     return gamma, c + 360.0 if c < 0.0 else c
 
 
+@numba.njit(**_INLINE)
+def _edges4(extra_edges):
+    """Up to four extra gamma edges (deg) as a 4-tuple, padded with inf: in registers, and
+    no array reference counted in the loop that uses them."""
+    n = extra_edges.shape[0]
+    return (extra_edges[0] if n > 0 else math.inf, extra_edges[1] if n > 1 else math.inf,
+            extra_edges[2] if n > 2 else math.inf, extra_edges[3] if n > 3 else math.inf)
+
+
 @numba.njit(**_ALWAYS)
 def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma):
     """The C-gamma cell of world direction (x, y, z) from its fast angles ``gamma``, ``c``
@@ -437,8 +446,7 @@ def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_g
     fg, fc = gs - g, cs - int(cs)
     near = (fg < _EDGE_MARGIN) | (fg > 1.0 - _EDGE_MARGIN) | (fc < _EDGE_MARGIN) | \
         (fc > 1.0 - _EDGE_MARGIN)
-    for k in range(extra_edges.shape[0]):
-        e = extra_edges[k]
+    for e in extra_edges:
         near |= abs(gamma - e) * g_scale < _EDGE_MARGIN
         g += gamma >= e
     if near:
@@ -530,6 +538,7 @@ def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, ex
     (4, m) are scratch (separate arrays, so the first loop vectorises)."""
     n_cells = n_c * n_gamma
     mm = _rows(axes)
+    edges = _edges4(extra_edges)
     lo3, hi3 = (lo[0], lo[1], lo[2]), (hi[0], hi[1], hi[2])
     for k in range(m):  # selects only: several escapes at once
         x, y, z = staged[3, k], staged[4, k], staged[5, k]
@@ -542,8 +551,8 @@ def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, ex
         row, half, ex = sbin[0, k], sbin[1, k], pix[3, k]
         tex = _texel_index(pix[0, k], pix[1, k], pix[2, k], res, layout)
         counts[half, tex] += 1
-        cell = _gonio_cell_at(ang[0, k], ang[1, k], x, y, z, mm, extra_edges, c_scale,
-                              g_scale, n_c, n_gamma)
+        cell = _gonio_cell_at(ang[0, k], ang[1, k], x, y, z, mm, edges, c_scale, g_scale,
+                              n_c, n_gamma)
         j = first + 2 * k
         escaped[j] = cell + n_bins * half
         escaped[j + 1] = ex + n_bins * half
@@ -571,8 +580,9 @@ def gonio_bins(p, d, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma, si
     cell = np.empty(n, np.int64)
     ex = np.empty(n, np.int64)
     m, lo3, hi3 = _rows(axes), (lo[0], lo[1], lo[2]), (hi[0], hi[1], hi[2])
+    edges = _edges4(extra_edges)
     for i in range(n):
-        cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], m, extra_edges, 1.0 / c_step,
+        cell[i] = _gonio_cell(d[0, i], d[1, i], d[2, i], m, edges, 1.0 / c_step,
                               1.0 / g_step, n_c, n_gamma)
         ex[i], _ = _gonio_exit(p[0, i], p[1, i], p[2, i], d[0, i], d[1, i], d[2, i], m, lo3,
                                hi3, side, n_c * n_gamma)
