@@ -82,10 +82,10 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
 
 def _solid_pyvista(path, pts, tri, up_axis, title) -> Path:
     import pyvista as pv
-    import vtk
+    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject  # (all of vtk: 0.5 s more)
 
-    vtk.vtkLogger.SetStderrVerbosity(vtk.vtkLogger.VERBOSITY_OFF)  # no X server: not news
-    vtk.vtkObject.GlobalWarningDisplayOff()
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)  # no X server: not news
+    vtkObject.GlobalWarningDisplayOff()
     pv.OFF_SCREEN = True
     grid = pv.StructuredGrid(pts[..., 0], pts[..., 1], pts[..., 2])
     plotter = pv.Plotter(off_screen=True, window_size=(900, 800))
