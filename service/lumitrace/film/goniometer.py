@@ -47,6 +47,9 @@ FACE_AXES = ((0, 1), (0, 1), (1, 2), (1, 2), (0, 2), (0, 2))
 #: gamma's cell is its raster cell plus the number of these at or below it. The tracer's
 #: kernel (:func:`lumitrace.trace.kernels.gonio_bins`) bins escaping photons so.
 EXTRA_EDGES = _OFF_RASTER
+# the kernels carry them in registers, as four at most (kernels._edges4)
+if len(EXTRA_EDGES) > 4:  # pragma: no cover - a change of the grid or the CIE zones
+    raise ImportError(f"{len(EXTRA_EDGES)} off-raster gamma edges; the kernels take 4")
 
 
 def escape_bins(cell: np.ndarray, exit_bin: np.ndarray, half: np.ndarray) -> np.ndarray:
