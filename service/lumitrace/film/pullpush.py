@@ -8,9 +8,13 @@ direction: ``I = w I_own + (1 - w) I_coarse`` with ``w = min(1, c / threshold)``
 confidence ``c`` is the larger of the texel's photon count and the count the coarser level
 predicts for it: a texel left empty where many photons were expected is dark, not unknown.
 Where the texels of a region differ from the coarser level by more than their photon noise
-explains (an edge, a narrow beam), the coarser level is biased there and the texels get the
-weight that minimises the expected squared error, ``bias^2 / (bias^2 + noise^2)``, so edges
-and peaks stay sharp while flat regions are smoothed.
+explains (an edge, a narrow beam, a cut-off angle), the coarser level is biased there and
+the texels get the weight that minimises the expected squared error,
+``bias^2 / (bias^2 + noise^2)``, so edges and peaks stay sharp while flat regions are
+smoothed. The test is a chi-square of the texels' counts under each coarse texel, and the
+bias their mean squared departure beyond noise: an edge through the group leaves its mean
+unchanged, and tested on the mean alone the white cup's cut-off at 26.6 deg was smeared
+(1.24x the photons to 2% on its C-gamma grid).
 Sharpening: a blend of coarser levels flattens a curved lobe (a cosine falls too slowly
 near its peak and too fast near its foot). The residual, raw minus filtered, holds that
 bias plus noise; filtered again with the same weights and added back, it cancels the bias
@@ -171,22 +175,27 @@ def _weight(below, flux, n, w, depth, levels, threshold, photons_per_lumen, adap
     if not adaptive or depth == len(levels) - 1:
         return weight
     # where the coarse level disagrees with the texels by more than their noise explains,
-    # it is biased there (an edge, a peak): trust the texels more
+    # it is biased there (an edge, a peak): trust the texels more. Tested and measured per
+    # group of texels under one coarse texel, texel by texel: an edge through a group
+    # leaves the group's mean where the coarse level predicts it, not its texels
     var_own = below * below / np.maximum(expected, 1.0)
     lv = levels[depth]
     size = 6 * lv.res * lv.res
     group = lambda x: np.bincount(lv.parent, weights=x, minlength=size)  # noqa: E731
     area = group(w)
-    own_g = np.divide(group(flux), area, out=np.zeros(size), where=area > 0)
-    pred_g = np.divide(group(below * w), area, out=np.zeros(size), where=area > 0)
-    lam_g = group(expected)
-    var_g = pred_g * pred_g / np.maximum(lam_g, 1.0)
-    dev2 = (own_g - pred_g) ** 2
-    # a group of texels whose photon count departs from the coarse prediction by more than
-    # Poisson noise allows (3 sigma, plus 3 photons for the skewed tails of small counts)
-    # shows where the prediction is biased
-    significant = np.abs(group(n) - lam_g) > 3.0 * np.sqrt(lam_g) + 3.0
-    bias2_g = np.where(significant, np.maximum(dev2 - var_g, 0.0), 0.0)
-    local = weld_seams(bias2_g.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
-    bias2 = np.maximum(sample_map(local, lv.directions, lv.taps), 0.0)
+    own = np.divide(flux, w, out=np.zeros_like(flux), where=w > 0)
+    excess = np.divide(group(w * ((own - below) ** 2 - var_own)), area, out=np.zeros(size),
+                       where=area > 0)
+    # significant: the photon counts' chi-square against the coarse prediction exceeds its
+    # mean (the group's texels) by five standard deviations, plus 3 for the skewed tails
+    # of small counts
+    m = group(np.ones_like(n))
+    chi2 = group((n - expected) ** 2 / np.maximum(expected, 1.0))
+    significant = chi2 > m + 5.0 * np.sqrt(2.0 * m) + 3.0
+    bias_g = np.sqrt(np.where(significant, np.maximum(excess, 0.0), 0.0))
+    # the bias's amplitude (cd) is what varies smoothly from group to group: it is
+    # interpolated to the texels and squared after (the square interpolated would hand a
+    # texel halfway to an unbiased group half the squared bias, not a quarter)
+    local = weld_seams(bias_g.reshape(6 * lv.res, lv.res), area.reshape(6 * lv.res, lv.res))
+    bias2 = np.maximum(sample_map(local, lv.directions, lv.taps), 0.0) ** 2
     return np.maximum(weight, bias2 / np.maximum(bias2 + var_own, 1e-300))
