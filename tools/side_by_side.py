@@ -1,7 +1,8 @@
 """Speed on four small luminaires, in the figures a photon tracer is compared by.
 
     python tools/side_by_side.py [--photons 10000000] [--repeats 3] [--max-photons 64000000]
-                                 [--scenes isotropic lambertian mirror_cup diffuse_cup] [--json]
+                                 [--scenes isotropic lambertian mirror_cup diffuse_cup]
+                                 [--peer auto|none|PATH] [--json]
 
 The four scenes are built as stages (in a temporary folder): an isotropic point source and
 a Lambertian disc in free space, and a Lambertian point source at the rim of an open
@@ -10,7 +11,8 @@ cylinder (radius 25 mm, 50 mm long) that is a 95% specular mirror or 85% white p
 Per scene:
 
 - throughput: ``lumitrace trace`` run as a user runs it (a subprocess, ``--photons``, no
-  pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second;
+  pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second,
+  and the same of the peer, run interleaved with it (one of each, in turn);
 - convergence: a run in this process that records, after every iteration, the relative RMS
   error ``sqrt(sum(Omega (I - I_ref)^2) / sum(Omega I_ref^2))`` over the cells of a
   C 15 deg x gamma 5 deg grid, of the raw estimate (the goniophotometer's counts: what
@@ -22,8 +24,12 @@ Per scene:
   run of 4x ``--max-photons`` photons with another seed, whose own variance (from its
   stated standard errors) is taken out of the squared error.
 
-``PEER_CPU_SECONDS`` are the process CPU seconds of a Rust photon tracer for luminaires
-on these four scenes at 10M photons on a machine of this kind (2 cores), for the ratios.
+The peer is eulumdat-goniosim, a Rust Monte Carlo photon tracer for luminaires (analytic
+cylinder, its own binning), tracing the same four scenes (``tools/peer``, built with cargo
+on first use). Its time to a level is our raw files' photons to that level over its photons
+per CPU second: both are analog estimators, equal in error at equal photons. Without cargo
+(``--peer none``) the ratios use ``PEER_CPU_SECONDS``, measured on another day on a machine
+of this kind, which can be half as fast again as the machine at hand: a stale reference.
 """
 from __future__ import annotations
 
@@ -35,6 +41,7 @@ import argparse
 import json
 import math
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -57,7 +64,8 @@ from lumitrace.report.references import expected_intensity, read_expectation  # 
 from lumitrace.run.session import TraceSettings, run  # noqa: E402
 from lumitrace.stage.reader import read_stage  # noqa: E402
 
-#: Process CPU seconds of the peer tracer at 10M photons (median of 3).
+#: Process CPU seconds of the peer tracer at 10M photons (median of 3), stored from an
+#: earlier run: the reference when the peer cannot be built.
 PEER_CPU_SECONDS = {"isotropic": 0.96, "lambertian": 1.2, "mirror_cup": 2.6,
                     "diffuse_cup": 3.2}
 C_STEP, GAMMA_STEP = 15.0, 5.0
@@ -99,22 +107,73 @@ def build(name: str, folder: Path) -> Path:
     return path
 
 
-def throughput(stage: Path, photons: int, repeats: int, out: Path) -> dict:
-    """Process CPU seconds of ``lumitrace trace`` (median of ``repeats``), as run by a user."""
-    cpu, wall = [], []
-    for k in range(repeats):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace", str(stage),
-                        "--photons", str(photons), "--no-pictures", "--quiet",
-                        "--no-sublayer", "--out", str(out), "--replace-results"],
-                       check=True, stdout=subprocess.DEVNULL)
-        wall.append(time.perf_counter() - t0)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
-    c = float(np.median(cpu))
-    return {"cpu_seconds": c, "wall_seconds": float(np.median(wall)),
-            "photons_per_cpu_second": photons / c}
+PEER_DIR = HERE / "peer"
+
+
+def peer_binary(choice: str) -> Path | None:
+    """The peer's executable: ``choice`` a path, ``none``, or ``auto`` (built with cargo in
+    ``tools/peer`` when missing; None without cargo)."""
+    if choice == "none":
+        return None
+    if choice != "auto":
+        return Path(choice)
+    exe = PEER_DIR / "target" / "release" / "peer-bench"
+    if not exe.exists():
+        if shutil.which("cargo") is None:
+            return None
+        print("building the peer (tools/peer) with cargo ...", file=sys.stderr, flush=True)
+        subprocess.run(["cargo", "build", "--release", "--quiet", "--manifest-path",
+                        str(PEER_DIR / "Cargo.toml")], check=True)
+    return exe
+
+
+def _cpu_of(cmd: list[str]) -> tuple[float, float]:
+    """Process CPU seconds (user + system) and wall seconds of one run of ``cmd``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, wall
+
+
+def throughput(stage: Path, name: str, photons: int, repeats: int, out: Path,
+               peer: Path | None) -> dict:
+    """Process CPU seconds of ``lumitrace trace`` (median of ``repeats``), as run by a user,
+    and of the peer on the same scene, interleaved; or the stored peer figure."""
+    ours = [sys.executable, "-m", "lumitrace.cli", "trace", str(stage), "--photons",
+            str(photons), "--no-pictures", "--quiet", "--no-sublayer", "--out", str(out),
+            "--replace-results"]
+    runs, peer_cpu = [], []
+    for _ in range(repeats):
+        if peer is not None:
+            peer_cpu.append(_cpu_of([str(peer), name, str(photons)])[0])
+        runs.append(_cpu_of(ours))
+    c = float(np.median([r[0] for r in runs]))
+    if peer_cpu:
+        p, source = float(np.median(peer_cpu)), "measured in this run"
+    else:
+        p, source = PEER_CPU_SECONDS[name] * photons / 10_000_000, "stored"
+    return {"cpu_seconds": c, "wall_seconds": float(np.median([r[1] for r in runs])),
+            "photons_per_cpu_second": photons / c, "peer_cpu_seconds": p,
+            "peer_photons_per_cpu_second": photons / p, "ratio_to_peer": p / c,
+            "peer": source}
+
+
+def time_to_levels(t: dict) -> dict:
+    """CPU seconds to each level: ours with the filtered map and with the raw files at our
+    photons per CPU second, the peer's (raw) at its own, and ours (filtered) over the
+    peer's."""
+    out = {}
+    for lv in LEVELS:
+        raw, filt = (t[f"{k}_{lv:g}"]["photons"] for k in ("raw", "filtered"))
+        row = {"ours_filtered": filt and filt / t["photons_per_cpu_second"],
+               "ours_raw": raw and raw / t["photons_per_cpu_second"],
+               "peer": raw and raw / t["peer_photons_per_cpu_second"]}
+        row["filtered_over_peer"] = (row["ours_filtered"] / row["peer"]
+                                     if filt and raw else None)
+        out[f"{lv:g}"] = row
+    return out
 
 
 def _raw_grid(acc) -> tuple[np.ndarray, np.ndarray]:
@@ -245,22 +304,24 @@ def main(argv=None) -> int:
     ap.add_argument("--max-photons", type=int, default=64_000_000)
     ap.add_argument("--resolution", type=int, default=32)
     ap.add_argument("--scenes", nargs="+", default=list(BUILDERS), choices=list(BUILDERS))
+    ap.add_argument("--peer", default="auto",
+                    help="the peer's executable, 'auto' (build tools/peer with cargo) or 'none'")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     from lumitrace.trace.aot import warm_up
 
     warm_up()  # kernels loaded once, before any convergence run is timed
+    peer = peer_binary(args.peer)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for name in args.scenes:
             stage = build(name, folder)
-            t = throughput(stage, args.photons, args.repeats, folder / f"out_{name}")
-            peer = PEER_CPU_SECONDS[name] * args.photons / 10_000_000
-            t["peer_photons_per_cpu_second"] = args.photons / peer
-            t["ratio_to_peer"] = t["photons_per_cpu_second"] / t["peer_photons_per_cpu_second"]
+            t = throughput(stage, name, args.photons, args.repeats, folder / f"out_{name}",
+                           peer)
             t.update(convergence(stage, args.max_photons, args.resolution))
+            t["cpu_seconds_to"] = time_to_levels(t)
             rows[name] = t
             if not args.json:
                 _print(name, t)
@@ -278,12 +339,16 @@ def _fmt(x, unit):
 def _print(name: str, t: dict) -> None:
     print(f"\n{name}: {t['photons_per_cpu_second'] / 1e6:.2f}M photons per CPU s "
           f"({t['cpu_seconds']:.2f} CPU s, {t['wall_seconds']:.2f} s wall); peer "
-          f"{t['peer_photons_per_cpu_second'] / 1e6:.2f}M, ratio {t['ratio_to_peer']:.2f}; "
-          f"reference: {t['reference']}")
+          f"{t['peer_photons_per_cpu_second'] / 1e6:.2f}M ({t['peer']}), ratio "
+          f"{t['ratio_to_peer']:.2f}; reference: {t['reference']}")
     for key in ("raw", "filtered"):
         cells = [f"{lv:.0%}: {_fmt(t[f'{key}_{lv:g}']['photons'], 'photons')} photons, "
                  f"{_fmt(t[f'{key}_{lv:g}']['seconds'], 'seconds')}" for lv in LEVELS]
         print(f"  {key:8s} " + "; ".join(cells))
+    for lv, row in t["cpu_seconds_to"].items():
+        if row["filtered_over_peer"] is not None:
+            print(f"  CPU s to {float(lv):.0%}: ours (filtered map) {row['ours_filtered']:.2f}, "
+                  f"peer {row['peer']:.2f}: {row['filtered_over_peer']:.2f} of the peer's")
     sys.stdout.flush()
 
 

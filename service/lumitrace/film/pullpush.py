@@ -14,7 +14,8 @@ the texels get the weight that minimises the expected squared error,
 smoothed. The test is a chi-square of the texels' counts under each coarse texel, and the
 bias their mean squared departure beyond noise: an edge through the group leaves its mean
 unchanged, and tested on the mean alone the white cup's cut-off at 26.6 deg was smeared
-(1.24x the photons to 2% on its C-gamma grid).
+(its map needed 1.3x the photons to reach 2% on the C 15 x gamma 5 deg grid, mean of 8
+seeds; the Lambertian disc 1.17x, the mirror cup 1.11x).
 Sharpening: a blend of coarser levels flattens a curved lobe (a cosine falls too slowly
 near its peak and too fast near its foot). The residual, raw minus filtered, holds that
 bias plus noise; filtered again with the same weights and added back, it cancels the bias
