@@ -6,9 +6,10 @@ distance, relative to the distribution's own size, so dark texels do not dominat
 
 Without a reference it is estimated from the photons themselves. Raw maps: every texel's
 count is binomial, so its variance is known. Filtered maps: the photons are split into two
-pseudo-random halves (by the photon hash), each half is filtered on its own, and their
-difference measures the filtered map's variance; its bias is what remains of the distance between one half's
-filtered map and the other half's raw map (independent of it) once both noises are taken out.
+pseudo-random halves (by the photon hash), each half is filtered on its own (with the weights
+its own photons give, at half the threshold), and their difference measures the filtered
+map's variance; its bias is what remains of the distance between one half's filtered map
+and the other half's raw map (independent of it) once both noises are taken out.
 """
 from __future__ import annotations
 
@@ -90,19 +91,22 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     raw_err = raw_relative_error(acc)
     if threshold <= 0:
         return _raw_estimate(acc, raw, flux, threshold, raw_err)
-    weights: list[np.ndarray] = []
-    filtered = pull_push(flux, counts, threshold, omega, weights=weights)
-    # each half filtered with the whole map's weights: the same linear filter, so the
-    # halves' difference measures its variance (halves weighted from their own counts trust
-    # noisier texels and overstate it, 2.3x on an isotropic source at 100k photons)
-    halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold, omega, weights=weights)
+    filtered = pull_push(flux, counts, threshold, omega)
+    # each half filtered on its own, with the weights its own photons give at half the
+    # threshold (so that it leans on its neighbours as far as the whole map does): the filter
+    # adapts to its photons (a texel that departs from its neighbours is trusted), and that
+    # choice is part of its noise. Halves filtered with the whole map's weights miss it:
+    # on the demo at 100k photons they put the map's error at 3.1% where it was 5.2% (this
+    # way 6.0%; mean of 6 seeds)
+    halves = [pull_push(acc.texel_flux(h), acc.counts(h), threshold / 2.0, omega)
               for h in (0, 1)]
     raw_halves = [acc.texel_flux(h) / omega for h in (0, 1)]
     diff = halves[0] - halves[1]
-    var_f2 = norm2(diff, omega) / 4.0  # Var(f_a - f_b) = 2 Var(f_half) = 4 Var(f_all)
+    # Var(f_a - f_b) = 2 Var(f_half); the whole map, from twice the photons, half of that
+    var_f2 = norm2(diff, omega) / 4.0
     # bias: a half's filtered map against the other half's raw map, which is independent
-    # of it: E|f_a - r_b|^2 = |bias|^2 + Var(f_half) + Var(r_half), halves' variances twice
-    # the whole's
+    # of it: E|f_a - r_b|^2 = |bias_half|^2 + Var(f_half) + Var(r_half), halves' variances
+    # twice the whole's
     cross = 0.5 * sum(norm2(halves[i] - raw_halves[1 - i], omega) for i in (0, 1))
     bias2 = max(0.0, cross - 2.0 * noise_raw2 - 2.0 * var_f2)
     total2 = var_f2 + bias2
