@@ -7,6 +7,7 @@ import pytest
 from lumitrace.film.convergence import estimate, relative_rms
 from lumitrace.film.cubemap import canonical_texels, texel_directions, texel_solid_angles
 from lumitrace.film.pullpush import pull_push
+from lumitrace.film.texel_quadrature import texel_integrals
 from helpers.reference import expected_counts, trace
 
 RES = 32
@@ -142,3 +143,29 @@ def test_estimated_error_is_not_optimistic_where_the_filter_adapts():
         ratios.append(e.error / relative_rms(e.filtered, ref))
     assert 0.9 <= np.mean(ratios) <= 1.4, ratios
     assert min(ratios) >= 0.75, ratios
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_cut_off_angle_stays_as_sharp_as_the_counts_show_it(seed):
+    """A beam of 300 cd with a cut-off at 26.6 deg from the nadir over 60 cd elsewhere (the
+    white cup's direct light), Poisson counts of 1M photons: within 5 deg of the cut-off
+    the filtered map is no worse than the raw one (tested on each group's mean alone, the
+    edge ran through groups unseen and the ring's error was 1.4x the raw map's), and over
+    the sphere it is better by 2.5x or more (measured 2.7-2.8x)."""
+    omega = texel_solid_angles(RES)
+    integ = texel_integrals(lambda d: np.where(-d[:, 2] > np.cos(np.radians(26.6)), 300.0,
+                                               60.0), RES)
+    truth, photons = integ / omega, 1_000_000
+    counts = np.random.default_rng(seed).poisson(photons * integ / integ.sum())
+    flux = counts * integ.sum() / photons
+    out = pull_push(flux, counts, 1e4, omega)
+    gamma = np.degrees(np.arccos(np.clip(-texel_directions(RES)[..., 2], -1.0, 1.0)))
+    ring = np.abs(gamma - 26.6) < 5.0
+
+    def error(image, where):
+        return np.sqrt((omega * (image - truth) ** 2)[where].sum()
+                       / (omega * truth ** 2)[where].sum())
+
+    everywhere = np.ones_like(ring)
+    assert error(out, ring) <= 1.1 * error(flux / omega, ring)
+    assert error(out, everywhere) <= error(flux / omega, everywhere) / 2.5
