@@ -213,7 +213,7 @@ def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
     if not sys.stderr.isatty():
         def log(p):
             print(f"iteration {p.iteration}: {p.photons:,} photons, {p.seconds:.1f} s, "
-                  f"error {_pct(p.relative_error)}", file=sys.stderr, flush=True)
+                  f"error {_pct(p.relative_error)}{_at_most(p)}", file=sys.stderr, flush=True)
         return None, log
     from tqdm import tqdm
 
@@ -232,9 +232,16 @@ def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
             bar.update(min(p.seconds, seconds) - bar.n)
         else:
             bar.update(p.photons - bar.n)
-        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err {_pct(p.relative_error)}")
+        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err "
+                            f"{_pct(p.relative_error)}{_at_most(p)}")
 
     return bar, update
+
+
+def _at_most(p) -> str:
+    """`` (at most B%)`` after an iteration's estimated error, when its bound differs."""
+    bound = p.estimate.error_bound if p.estimate is not None else None
+    return "" if bound is None or bound == p.relative_error else f" (at most {_pct(bound)})"
 
 
 def _pct(value: float | None) -> str:
@@ -266,8 +273,9 @@ def _summary_text(r, stage) -> str:
     lines += [
         f"  peak intensity  {_pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
         f"C {r.peak_c:g}, gamma {r.peak_gamma:g} deg (standard errors after +-)",
-        f"  map error       {_pct(r.relative_error)} estimated RMS over the sphere "
-        f"(raw map {_pct(r.raw_relative_error)}){', converged' if r.converged else ''}"
+        f"  map error       {_pct(r.relative_error)} estimated RMS over the sphere, at most "
+        f"{_pct(r.relative_error_bound)} (raw map {_pct(r.raw_relative_error)})"
+        f"{', converged' if r.converged else ''}"
         + ("" if r.escaped_lm else "   (no light escapes the luminaire)"),
         f"  files' error    {_pct(r.photometry_error)} relative RMS standard error of the "
         "IES/LDT values",
@@ -352,14 +360,14 @@ def cmd_trace(args) -> int:
                            pictures=not args.no_pictures)
     summary = record.summary()
     target = args.target_error
-    missed = target is not None and not (record["relative_error"] is not None
-                                         and record["relative_error"] <= target)
+    bound = record["relative_error_bound"]
+    missed = target is not None and not (bound is not None and bound <= target)
     summary["target_reached"] = None if target is None else not missed
     summary["warnings"] = list(scene.warnings) + _SHOWN
     text = json.dumps(summary) if args.json else "" if args.quiet else \
         _summary_text(record, args.stage)
     if missed and not (args.json or args.quiet):
-        text += (f"\nnot converged: {_pct(record['relative_error'])} > {target:.2%} "
+        text += (f"\nnot converged: {_pct(bound)} > {target:.2%} "
                  f"(exit status {NOT_CONVERGED_EXIT})")
     try:
         if text:

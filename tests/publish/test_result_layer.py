@@ -38,6 +38,7 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "iterations": 12,
         "elapsedSeconds": 3.25,
         "relativeError": 0.0125,
+        "relativeErrorBound": 0.0175,
         "luminousFlux": 987.5,
         "lightOutputRatio": 0.9875,
         "threshold": 4.0,

@@ -66,11 +66,22 @@ class MapEstimate:
     texel_error: np.ndarray
     #: the filter was estimated to make the map worse, so ``filtered`` is the raw map
     stepped_back: bool = False
+    #: ``filtered_error`` with its bias term raised by that term's own standard deviation
+    filtered_error_bound: float | None = None
 
     @property
     def error(self) -> float:
         """The estimated error of the map written as ``Y`` (filtered, or raw at threshold 0)."""
         return self.filtered_error if self.threshold > 0 else self.raw_error
+
+    @property
+    def error_bound(self) -> float:
+        """An upper estimate of :attr:`error`, what convergence is judged on: the filtered
+        map's bias is estimated against a raw map far noisier than it, so the estimate is
+        uncertain by that noise's spread; the raw map's binomial estimate is not."""
+        if self.threshold > 0 and self.filtered_error_bound is not None:
+            return self.filtered_error_bound
+        return self.error
 
 
 def _raw_estimate(acc: Accumulator, raw: np.ndarray, flux: np.ndarray, threshold: float,
@@ -110,6 +121,11 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     cross = 0.5 * sum(norm2(halves[i] - raw_halves[1 - i], omega) for i in (0, 1))
     bias2 = max(0.0, cross - 2.0 * noise_raw2 - 2.0 * var_f2)
     total2 = var_f2 + bias2
+    # the raw halves' noise, subtracted above by its expectation, varies from run to run by
+    # sqrt(sum (Omega Var(r_half))^2) (Gaussian texels; the two cross terms averaged): near
+    # 2% as large as the bias itself, so the bound adds it in full. A bias estimated below
+    # zero is not resolved, and is bounded by that spread alone
+    spread2 = float(np.sqrt((np.square(2.0 * acc.flux_variance() / omega)).sum()))
     signal2 = norm2(filtered, omega) - var_f2
     # no signal above the noise (no light escaped): the relative error is undefined
     rel = (lambda x2: float(np.sqrt(x2 / signal2))) if signal2 > 0 else (lambda x2: math.inf)
@@ -125,7 +141,8 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
                           sharpen=False)
     texel = np.sqrt(np.maximum(local_var, 0.0)) / np.maximum(filtered, 1e-300)
     return MapEstimate(raw, filtered, threshold, raw_err, rel(total2), rel(var_f2),
-                       np.where(filtered > 0, texel, np.inf))
+                       np.where(filtered > 0, texel, np.inf),
+                       filtered_error_bound=rel(total2 + spread2))
 
 
 def colour_maps(acc: Accumulator, est: MapEstimate) -> dict[str, np.ndarray]:

@@ -91,8 +91,8 @@ def check_stage(stage_path: str | Path) -> Check:
     scene = read_stage(stage_path)
     stage = Usd.Stage.Open(str(stage_path))
     prim = stage.GetPrimAtPath(scene.luminaire_path)
-    names = ("sceneHash", "converged", "relativeError", "photons", "photometryError",
-             "iesFile")
+    names = ("sceneHash", "converged", "relativeError", "relativeErrorBound", "photons",
+             "photometryError", "iesFile")
     values = {}
     for name in names:
         attr = prim.GetAttribute(RESULT_PREFIX + name)
@@ -117,8 +117,9 @@ def check_stage(stage_path: str | Path) -> Check:
         return Check("stale", "the stage changed since its results were traced: trace it "
                      "again", STALE, values)
     if not values["converged"]:
-        err = values["relativeError"]
+        err = values["relativeErrorBound"]
+        err = values["relativeError"] if err is None else err  # results from before the bound
         return Check("not converged", "the results are current but did not reach their "
-                     f"target error (relative error {'undefined' if err is None else f'{err:.2%}'})",
-                     NOT_CONVERGED, values)
+                     f"target error (relative error at most "
+                     f"{'undefined' if err is None else f'{err:.2%}'})", NOT_CONVERGED, values)
     return Check("current", "the results are current and converged", CURRENT, values)

@@ -112,6 +112,7 @@ def trace_figures(result: TraceResult) -> dict[str, Any]:
         "cut_lm": f["cut"],
         "light_output_ratio": f["escaped"] / f["emitted"] if f["emitted"] else 0.0,
         "relative_error": result.relative_error,
+        "relative_error_bound": result.estimate.error_bound,
         "raw_relative_error": result.estimate.raw_error,
         "filtered_relative_error": result.estimate.filtered_error,
         "converged": result.converged, "target_error": s.target_error,

@@ -78,7 +78,8 @@ class TraceResult:
 
     @property
     def converged(self) -> bool:
-        return self.relative_error <= self.settings.convergence_target
+        """Whether the map's error bound (not its point estimate) is within the target."""
+        return self.estimate.error_bound <= self.settings.convergence_target
 
 
 def allocate(fluxes: list[float], photons: int) -> list[int]:
@@ -211,12 +212,12 @@ class Refinement:
         return self.estimate
 
     def reached_target(self) -> bool:
-        """Whether the estimated error is at or below the target error (the settings'),
-        once :data:`MIN_PHOTONS_FOR_TARGET` photons are traced."""
+        """Whether the estimated error's bound is at or below the target error (the
+        settings'), once :data:`MIN_PHOTONS_FOR_TARGET` photons are traced."""
         t = self.settings.target_error
         return (t is not None and self.estimate is not None
                 and self.accumulator.photons >= MIN_PHOTONS_FOR_TARGET
-                and self.estimate.error <= t)
+                and self.estimate.error_bound <= t)
 
     def no_escape(self) -> bool:
         """True once a session without a photon budget has traced
