@@ -14,8 +14,8 @@ the texels get the weight that minimises the expected squared error,
 smoothed. The test is a chi-square of the texels' counts under each coarse texel, and the
 bias their mean squared departure beyond noise: an edge through the group leaves its mean
 unchanged, and tested on the mean alone the white cup's cut-off at 26.6 deg was smeared
-(its map needed 1.3x the photons to reach 2% on the C 15 x gamma 5 deg grid, mean of 8
-seeds; the Lambertian disc 1.17x, the mirror cup 1.11x).
+(its map needed 1.36x the photons to reach 2% on the C 15 x gamma 5 deg grid, mean of 8
+seeds; the Lambertian disc 1.13x, the mirror cup 1.11x).
 Sharpening: a blend of coarser levels flattens a curved lobe (a cosine falls too slowly
 near its peak and too fast near its foot). The residual, raw minus filtered, holds that
 bias plus noise; filtered again with the same weights and added back, it cancels the bias
@@ -190,8 +190,8 @@ def _weight(below, flux, n, w, depth, levels, threshold, photons_per_lumen, adap
     # significant: the photon counts' chi-square against the coarse prediction exceeds its
     # mean (the group's texels) by six standard deviations, plus 6 for the heavy tails of
     # small counts. A false alarm hands a group its raw noise: on an isotropic source at
-    # 100k photons one such group doubles the map's error, and at five plus 3 four seeds
-    # in eight had one
+    # 100k photons one such group doubles or triples the map's error, and at five sigma
+    # plus 3 five seeds in eight had one (at six plus 6, one)
     m = group(np.ones_like(n))
     chi2 = group((n - expected) ** 2 / np.maximum(expected, 1.0))
     significant = chi2 > m + 6.0 * np.sqrt(2.0 * m) + 6.0
