@@ -29,7 +29,7 @@ cylinder, its own binning), tracing the same four scenes (``tools/peer``, built 
 on first use). Its time to a level is our raw files' photons to that level over its photons
 per CPU second: both are analog estimators, equal in error at equal photons. Without cargo
 (``--peer none``) the ratios use ``PEER_CPU_SECONDS``, measured on another day on a machine
-of this kind, which can be half as fast again as the machine at hand: a stale reference.
+of this kind that ran the peer 1.4-1.8x faster than a later one did: a stale reference.
 """
 from __future__ import annotations
 
