@@ -42,7 +42,6 @@ def test_an_unmet_target_error_exits_3_and_says_so(disc):
     assert json.loads(run.stdout.strip().splitlines()[-1])["target_reached"] is True
 
 
-
 def test_a_target_the_estimate_meets_but_its_bound_does_not_is_not_reached(disc):
     """Convergence is judged on the error's bound (the bias term's spread added), not on
     the point estimate, which near the target is as often below the true error as above."""
@@ -56,6 +55,7 @@ def test_a_target_the_estimate_meets_but_its_bound_does_not_is_not_reached(disc)
     summary = json.loads(run.stdout.strip().splitlines()[-1])
     assert summary["relative_error"] == error and summary["relative_error_bound"] == bound
     assert summary["target_reached"] is False and summary["converged"] is False
+
 
 def test_check_gates_on_current_converged_results(disc):
     run = _lumitrace("check", disc, cwd=disc.parent)

@@ -79,7 +79,7 @@ class TraceResult:
     @property
     def converged(self) -> bool:
         """Whether the map's error bound (not its point estimate) is within the target."""
-        return self.estimate.error_bound <= self.settings.convergence_target
+        return self.estimate.meets(self.settings.convergence_target)
 
 
 def allocate(fluxes: list[float], photons: int) -> list[int]:
@@ -217,7 +217,7 @@ class Refinement:
         t = self.settings.target_error
         return (t is not None and self.estimate is not None
                 and self.accumulator.photons >= MIN_PHOTONS_FOR_TARGET
-                and self.estimate.error_bound <= t)
+                and self.estimate.meets(t))
 
     def no_escape(self) -> bool:
         """True once a session without a photon budget has traced

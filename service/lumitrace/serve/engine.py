@@ -117,7 +117,7 @@ class Engine:
                 "iterations": r.iteration if r else 0,
                 "relative_error": defined(est.error) if est else None,
                 "relative_error_bound": defined(est.error_bound) if est else None,
-                "converged": bool(est and est.error_bound <= self.settings.convergence_target),
+                "converged": bool(est and est.meets(self.settings.convergence_target)),
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
                 "written_photons": self.written.get("photons"),
@@ -287,8 +287,7 @@ class Engine:
                             photons=self.refinement.accumulator.photons,
                             relative_error=defined(est.error) if est else None,
                             relative_error_bound=defined(est.error_bound) if est else None,
-                            converged=bool(est and est.error_bound
-                                           <= self.settings.convergence_target))
+                            converged=bool(est and est.meets(self.settings.convergence_target)))
         unreached = self.refinement.accumulator.unreached_parts()
         if unreached:
             self.events.publish("warning", revision=self.revision.number,
