@@ -15,6 +15,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdUtils
 
 from ..schema import MATERIAL_RANGES
 from ..stage.diagnostics import tf_message
+from .assets import AssetRefused, check_asset, layer_problems, stage_variables
 from .protocol import DeltaError, Problem
 
 
@@ -59,6 +60,7 @@ class _Context:
         self.stage = stage
         self.edits = edits
         self.stage_dir = stage_dir
+        self.variables = stage_variables(stage)
 
     def prim(self, path: str) -> Usd.Prim:
         prim = self.stage.GetPrimAtPath(path)
@@ -68,21 +70,18 @@ class _Context:
 
     def asset(self, value: str, where: str) -> str:
         """An asset path that resolves inside the stage's folder, as written."""
-        check_asset_path(value, self.stage_dir, where)
+        check_asset_path(value, self.stage_dir, where, self.variables)
         return value
 
 
-def check_asset_path(value: str, stage_dir: Path, where: str = "") -> None:
-    """Refuse an asset path that is a URL or resolves outside ``stage_dir``."""
-    if not isinstance(value, str) or not value:
-        raise _Bad("an asset path must be a non-empty string", where)
-    if "://" in value or value.startswith(("@", "\\\\")):
-        raise _Bad(f"asset path {value!r} must be a file path inside the stage's folder",
-                   where)
-    target = Path(value) if os.path.isabs(value) else stage_dir / value
-    resolved = target.resolve()
-    if resolved != stage_dir and stage_dir not in resolved.parents:
-        raise _Bad(f"asset path {value!r} leaves the stage's folder", where)
+def check_asset_path(value: str, stage_dir: Path, where: str = "",
+                     variables: dict | None = None) -> None:
+    """Refuse an asset path that is a URL or resolves outside ``stage_dir`` (see
+    :mod:`lumitrace.delta.assets`)."""
+    try:
+        check_asset(value, stage_dir, variables or {})
+    except AssetRefused as refused:
+        raise _Bad(refused.why, where) from None
 
 
 # ------------------------------------------------------------------------------------------
@@ -328,17 +327,9 @@ def _op_layer(ctx: _Context, d: dict) -> None:
         raise _Bad(f"not a valid USDA layer: {tf_message(exc)}") from None
     if not ok:
         raise _Bad("not a valid USDA layer")
-    bad: list[str] = []
-
-    def check(path: str) -> str:
-        try:
-            check_asset_path(path, ctx.stage_dir)
-        except _Bad as b:
-            bad.append(b.why)
-        return path
-    UsdUtils.ModifyAssetPaths(fragment, check)
-    if bad:
-        raise _Bad("; ".join(bad))
+    bad = layer_problems(fragment, ctx.stage_dir, ctx.variables)
+    if bad:  # checked before the fragment is composed: no file outside is ever opened
+        raise _Bad("; ".join(f"{where}: {why}" for where, why in bad))
     merged = Sdf.Layer.CreateAnonymous(".usda")
     merged.TransferContent(fragment)
     UsdUtils.StitchLayers(merged, ctx.edits)  # the fragment's opinions win

@@ -18,6 +18,7 @@ from typing import Any, Callable
 from pxr import Sdf, Tf
 
 from ..delta.apply import apply_deltas
+from ..delta.assets import layer_problems, stage_variables
 from ..delta.edits import open_edits_layer, open_with_edits, revision_of, save_edits
 from ..delta.effect import Effect, classify
 from ..delta.notices import ChangedPaths
@@ -86,6 +87,9 @@ class LiveStage:
             raise StageError("stage file not found", str(self.stage_path))
         validate.check_layer_file(self.stage_path)
         self.edits = open_edits_layer(self.edits_path)
+        root = Sdf.Layer.FindOrOpen(str(self.stage_path))
+        if root is not None:  # else open_with_edits says why it cannot be opened
+            self._check_folder_rule(self.edits, root)
         self.stage = open_with_edits(self.stage_path, self.edits)
         self.changes = ChangedPaths(self.stage)
         self.scene = scene_from_stage(self.stage, self.luminaire)
@@ -95,6 +99,34 @@ class LiveStage:
 
     def _close(self) -> None:
         self.changes.close()
+
+    def _check_folder_rule(self, edits: Sdf.Layer, root: Sdf.Layer) -> None:
+        """Raise :class:`StageError` when ``edits`` (the edits layer, perhaps as saved on
+        disk) names an asset that resolves outside the stage's folder, its expressions
+        evaluated with ``root``'s variables: composing it would open that file."""
+        problems = layer_problems(edits, self.stage_path.parent.resolve(),
+                                  stage_variables(root=root))
+        if problems:
+            where, why = problems[0]
+            raise StageError(why, f"{self.edits_path} {where}")
+
+    def _check_saved_edits(self, changed: set[Path]) -> None:
+        """The folder rule on the edits layer and root layer as saved on disk, before
+        either is reloaded (a file that cannot be opened is left to the reload)."""
+        if not changed & {self.edits_path, self.stage_path}:
+            return
+
+        def saved(path: Path, current: Sdf.Layer) -> Sdf.Layer | None:
+            if path not in changed:
+                return current
+            try:
+                return Sdf.Layer.OpenAsAnonymous(str(path))
+            except Tf.ErrorException:
+                return None
+        edits = saved(self.edits_path, self.edits)
+        root = saved(self.stage_path, self.stage.GetRootLayer())
+        if edits is not None and root is not None:
+            self._check_folder_rule(edits, root)
 
     def layer_files(self) -> set[Path]:
         """Files on disk of the layers the stage uses (root, sublayers, references,
@@ -170,12 +202,15 @@ class LiveStage:
             return None
         self.changes.take()
         for path, _ in changed:
-            if path not in files:  # a light's file: read again with the scene below
+            if path in files:  # a light's file is read again with the scene below
+                try:
+                    validate.check_layer_file(path)
+                except StageError as exc:
+                    raise LayerUnreadable(exc.message, str(path)) from None
+        self._check_saved_edits({p for p, _ in changed})
+        for path, _ in changed:
+            if path not in files:
                 continue
-            try:
-                validate.check_layer_file(path)
-            except StageError as exc:
-                raise LayerUnreadable(exc.message, str(path)) from None
             layer = Sdf.Layer.Find(str(path))
             if layer is None:
                 continue
