@@ -12,6 +12,9 @@ from ..schema import SCHEMA_DIR
 
 #: The protocol's JSON Schema (draft 2020-12).
 DELTA_SCHEMA_PATH = SCHEMA_DIR / "scene-delta.schema.json"
+#: Deepest nesting of arrays and objects a request may have (a delta needs five levels:
+#: a matrix in a delta in the list in the body); deeper is refused before it is checked.
+MAX_DEPTH = 32
 
 
 @dataclass(frozen=True)
@@ -104,4 +107,35 @@ def parse_request(raw: bytes) -> dict[str, Any]:
     except json.JSONDecodeError as exc:
         raise DeltaError([Problem("/", f"body is not JSON: {exc.msg} at line {exc.lineno} "
                                        f"column {exc.colno}")], 400) from None
+    except RecursionError:
+        raise DeltaError([Problem("/", f"body is nested too deeply (more than {MAX_DEPTH} "
+                                       "levels of arrays and objects)")], 400) from None
+    check_shape(body)
     return check_request(body)
+
+
+def check_shape(body: Any) -> None:
+    """Refuse what no schema check should see: nesting deeper than :data:`MAX_DEPTH`
+    (400), and text holding a NUL character (422: USD would cut the text short there).
+    Walked without recursion, so that no depth can exhaust the stack."""
+    stack: list[tuple[Any, tuple, int]] = [(body, (), 1)]
+    nul: list[Problem] = []
+    while stack:
+        value, path, depth = stack.pop()
+        if isinstance(value, (list, dict)):
+            if depth > MAX_DEPTH:
+                raise DeltaError([Problem(_pointer(path), f"body is nested too deeply "
+                                          f"(more than {MAX_DEPTH} levels of arrays and "
+                                          "objects)")], 400)
+            items = value.items() if isinstance(value, dict) else enumerate(value)
+            for key, item in items:
+                if isinstance(key, str) and "\x00" in key:
+                    nul.append(Problem(_pointer(path), f"name {key!r} contains a NUL "
+                                                       "character"))
+                if isinstance(item, (list, dict, str)):
+                    stack.append((item, path + (key,), depth + 1))
+        elif isinstance(value, str) and "\x00" in value:
+            nul.append(Problem(_pointer(path), f"text {value[:80]!r} contains a NUL "
+                                               "character"))
+    if nul:
+        raise DeltaError(sorted(nul, key=lambda p: p.where), 422)

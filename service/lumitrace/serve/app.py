@@ -33,6 +33,16 @@ def _problem(status: int, message: str, problems=()) -> web.Response:
     return _json({"error": message, "problems": [p.as_dict() for p in problems]}, status)
 
 
+def _header_bytes(value: str) -> bytes:
+    """A header's value as the bytes the client sent: what is not UTF-8 (Latin-1, say)
+    arrives as surrogate escapes, which a plain ``encode`` refuses (a 500 for a wrong
+    token)."""
+    try:
+        return value.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:  # a lone surrogate no client byte maps to
+        return value.encode("utf-8", "surrogatepass")
+
+
 def make_app(live: LiveStage, engine: Engine, events: EventLog,
              token: str | None = None) -> web.Application:
     """The aiohttp application of a running service."""
@@ -40,8 +50,8 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     @web.middleware
     async def guard(request: web.Request, handler):
         if token is not None:
-            given = request.headers.get("Authorization", "")
-            if not hmac.compare_digest(given.encode(), f"Bearer {token}".encode()):
+            given = _header_bytes(request.headers.get("Authorization", ""))
+            if not hmac.compare_digest(given, f"Bearer {token}".encode()):
                 return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
                                      "TOKEN)")
         try:
