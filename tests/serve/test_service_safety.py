@@ -239,3 +239,44 @@ def _raw_header_get(url: str, authorization: bytes) -> tuple[int, str, bytes]:
         return r.status, r.getheader("Content-Type", ""), r.read()
     finally:
         conn.close()
+
+
+# ------------------------------------------------------------------------------------------
+# One stage, one service
+# ------------------------------------------------------------------------------------------
+
+def _serve(stage: Path, *args) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "lumitrace.cli", "serve", str(stage),
+                             "--port", "0", *map(str, (*FAST, *args))],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_a_second_service_on_a_stage_refuses_and_a_killed_ones_lock_is_stale(stage):
+    """A second `lumitrace serve` of a stage (by another spelling of its path, too) exits 2
+    with one line naming the first service's port and process; once the first is killed
+    with SIGKILL, its lock is no obstacle: the next service starts and serves."""
+    with Service(stage, *FAST) as first:
+        port = first.url.rstrip("/").rsplit(":", 1)[1]
+        link = stage.parent.parent / "link.usda"
+        link.symlink_to(stage)
+        for spelling in (stage, link, stage.parent / ".." / "stage" / stage.name):
+            second = _serve(spelling)
+            try:
+                out, err = second.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                second.kill()
+                second.communicate()
+                pytest.fail(f"a second service of {spelling} started")
+            lines = err.strip().splitlines()
+            assert second.returncode == 2 and len(lines) == 1, (second.returncode, err)
+            assert f"port {port}" in lines[0] and f"process {first.proc.pid}" in lines[0], \
+                lines[0]
+            assert "lumitrace: serving" not in out
+        assert first.client.status()["revision"] == 0  # the first one serves on
+        first.proc.send_signal(signal.SIGKILL)
+        first.proc.wait(30)
+    with Service(stage, *FAST) as after:
+        after.wait_done(0)
+        assert after.client.send([_set_ies("./good.ies")])["revision"] == 1
+        rc, _ = after.stop()
+        assert rc == 0

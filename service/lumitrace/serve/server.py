@@ -18,6 +18,7 @@ from .app import make_app
 from .engine import Engine
 from .events import EventLog
 from .live import LiveStage
+from .lock import StageLock
 from .watcher import watch_layers
 
 DEFAULT_HOST = "127.0.0.1"
@@ -47,13 +48,17 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           out_dir: Path | None = None) -> int:
     """Run the service until a signal; return the exit status (0)."""
     check_binding(host, token)
-    events = EventLog()
-    live = LiveStage(stage)
-    engine = Engine(live, settings, events, out_dir)
+    lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
-        asyncio.run(_main(live, engine, events, host, port, token))
+        events = EventLog()
+        live = LiveStage(stage)
+        engine = Engine(live, settings, events, out_dir)
+        try:
+            asyncio.run(_main(live, engine, events, host, port, token, lock))
+        finally:
+            live.close()
     finally:
-        live.close()
+        lock.release()
     return 0
 
 
@@ -72,7 +77,7 @@ def _route_warnings(events: EventLog) -> None:
 
 
 async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
-                token: str | None) -> None:
+                token: str | None, lock: StageLock) -> None:
     loop = asyncio.get_running_loop()
     events.bind(loop)
     _route_warnings(events)
@@ -86,6 +91,7 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
     await site.start()
     bound = runner.addresses[0]
     url = f"http://{bound[0] if ':' not in bound[0] else '[' + bound[0] + ']'}:{bound[1]}/"
+    lock.record(port=bound[1], url=url)
     print(f"lumitrace: serving {live.stage_path} at {url} (revision {live.revision}, edits "
           f"in {live.edits_path.name})", flush=True)
     events.publish("started", url=url, revision=live.revision, stage=str(live.stage_path))
