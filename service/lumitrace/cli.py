@@ -117,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Compose the stage and compare its lumitrace:result:* "
                                    "attributes with the scene as it is now: a pipeline gate.")
     c.add_argument("stage", type=Path)
+    c.add_argument("--out", type=Path, default=None,
+                   help="the folder a trace wrote the results to (trace --out DIR, with or "
+                        "without --no-sublayer): its result layer is judged")
     c.add_argument("--json", action="store_true", help="print one JSON object")
 
     v = sub.add_parser("serve", help="the live service: watch the stage, accept scene deltas, "
@@ -337,6 +340,9 @@ def cmd_trace(args) -> int:
                 print(f"warning: {args.stage}: removed the stale lumitrace:result:* opinions "
                       f"on {prim} from its root layer", file=sys.stderr)
         refuse_hidden_results(args.stage)
+    from .publish.outputs import claim_planned_outputs
+
+    claim_planned_outputs(scene, args.out)
     for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
@@ -396,7 +402,7 @@ def cmd_rays(args) -> int:
 def cmd_check(args) -> int:
     from .publish.check import check_stage
 
-    verdict = check_stage(args.stage)
+    verdict = check_stage(args.stage, args.out)
     print(json.dumps(verdict.as_dict()) if args.json else f"{args.stage}: {verdict.status}: "
           f"{verdict.message}")
     return verdict.exit_status

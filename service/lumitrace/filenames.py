@@ -20,6 +20,16 @@ SOLID_SUFFIX = ".solid.png"
 PHOTOMETRY_SUFFIX = ".photometry.json"
 COLOUR_SUFFIX = ".colour.json"
 COLOUR_DIAGRAM_SUFFIX = ".colour.png"
+#: Every file a trace may write for ``NAME`` in its output folder: the only names an
+#: interrupted publishing may be completed onto, and the files a run may replace.
+OUTPUT_SUFFIXES = (INTENSITY_SUFFIX, LATLONG_SUFFIX, IES_SUFFIX, LDT_SUFFIX, POLAR_SUFFIX,
+                   SOLID_SUFFIX, PHOTOMETRY_SUFFIX, COLOUR_SUFFIX, COLOUR_DIAGRAM_SUFFIX,
+                   RESULT_LAYER_SUFFIX)
+
+
+def output_names(name: str) -> set[str]:
+    """The file names a trace of stage ``NAME`` may write in its output folder."""
+    return {name + suffix for suffix in OUTPUT_SUFFIXES}
 
 
 def stage_name(stage_path: str | os.PathLike) -> str:

@@ -90,6 +90,20 @@ def summary(source: "str | os.PathLike | RayFile") -> tuple[float | None, np.nda
     return float(f.flux.astype(np.float64).sum()), extent
 
 
+def header_texts(path: str | os.PathLike) -> tuple[str, ...] | None:
+    """The nine description fields of a TM-25 file's header (read alone, not the rays);
+    None for a file that is not a TM-25 ray file."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(TEXT_END)
+    except OSError:
+        return None
+    if len(head) < TEXT_END or head[:4] != MAGIC:
+        return None
+    return tuple(_text(head[TEXT_AT + 4 * TEXT_CHARS * k:TEXT_AT + 4 * TEXT_CHARS * (k + 1)])
+                 for k in range(TEXT_FIELDS))
+
+
 def read_tm25(path: str | os.PathLike) -> RayFile:
     """Read a TM-25 ray file (see the module docstring for what is supported)."""
     path = os.fspath(path)

@@ -10,6 +10,7 @@ import pytest
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 from lumitrace import atomic
+from lumitrace.publish import sublayer
 from lumitrace.errors import OutputError
 from lumitrace.report.references import read_expectation
 from lumitrace.publish import result_layer as writer
@@ -285,7 +286,13 @@ def test_crash_while_replacing_the_root_leaves_it_intact(stage_copy, monkeypatch
         if Path(dst) == stage_path:
             raise OSError("disk full")
         real_replace(src, dst)
+
+    def exchange(a, b):
+        if Path(b) == stage_path:
+            raise OSError("disk full")
+        return False
     monkeypatch.setattr(atomic.os, "replace", replace)
+    monkeypatch.setattr(sublayer, "_exchange", exchange)  # the swap that replaces a rename
     with pytest.raises(OutputError, match="disk full"):
         write_result_layer(stage_path, "/Luminaire", {"photons": 1})
     assert stage_path.read_bytes() == before

@@ -125,7 +125,7 @@ def test_stale_staging_and_temporary_files_are_cleaned_up(disc):
 def test_a_crash_after_the_commit_point_is_rolled_forward(tmp_path, monkeypatch):
     from lumitrace.publish import transaction as tr
 
-    targets = [tmp_path / "lamp.a", tmp_path / "lamp.b"]
+    targets = [tmp_path / "lamp.ies", tmp_path / "lamp.ldt"]
     for t in targets:
         t.write_text("old")
     tx = tr.Transaction("lamp", tmp_path)
@@ -159,8 +159,8 @@ def test_a_stage_saved_during_the_sublayer_edit_is_not_lost(disc, monkeypatch):
     real = sublayer._edited_bytes
     saved = []
 
-    def dcc_saves_meanwhile(stage, data, entry, root):
-        out = real(stage, data, entry, root)
+    def dcc_saves_meanwhile(stage, data, *args):
+        out = real(stage, data, *args)
         if not saved:
             text = disc.read_text().replace("(\n", '(\n    doc = "edited by a DCC"\n', 1)
             disc.write_text(text)

@@ -7,10 +7,13 @@ result layer (not from stronger opinions left, say, by flattening a stage on pub
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..filenames import RESULT_LAYER_SUFFIX, result_layer_path
+from .ownership import STAGE_KEY
+from .runs import layer_data
 from ..schema import RESULT_PREFIX
 from .result_layer import REPRESENTATION
 
@@ -82,14 +85,30 @@ class Check:
                 "exitStatus": self.exit_status, **self.values}
 
 
-def check_stage(stage_path: str | Path) -> Check:
-    """Compose ``stage_path`` and judge its results against the scene it composes now."""
+def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Check:
+    """Compose ``stage_path`` and judge its results against the scene it composes now.
+    ``results`` is the folder a trace wrote them to with ``--out`` (and, say,
+    ``--no-sublayer``): its result layer is then composed over the stage and judged."""
     from pxr import Usd
 
     from ..stage.reader import read_stage
 
     scene = read_stage(stage_path)
     stage = Usd.Stage.Open(str(stage_path))
+    if results is not None:
+        layer = Path(results) / Path(result_layer_path(stage_path)).name
+        if not layer.is_file():
+            return Check("missing", f"no result layer {layer}: trace the stage with --out "
+                         f"{results}", STALE, {"resultLayer": str(layer)})
+        reference = layer_data(layer).get(STAGE_KEY)
+        try:
+            ours = bool(reference) and os.path.samefile(layer.parent / reference, stage_path)
+        except OSError:
+            ours = False
+        if not ours:
+            return Check("stale", f"{layer} holds the results of another stage "
+                         f"({reference or 'unknown'})", STALE, {"resultLayer": str(layer)})
+        stage.GetSessionLayer().subLayerPaths.append(str(layer.absolute()))
     prim = stage.GetPrimAtPath(scene.luminaire_path)
     names = ("sceneHash", "converged", "relativeError", "relativeErrorBound", "photons",
              "photometryError", "iesFile")
@@ -100,8 +119,8 @@ def check_stage(stage_path: str | Path) -> Check:
         values[name] = v if isinstance(v, (str, int, float, bool, type(None))) else \
             getattr(v, "path", str(v))
     values["currentSceneHash"] = scene.content_hash()
-    layered = any(_is_result_layer(layer)
-                  for layer in stage.GetLayerStack(includeSessionLayers=False))
+    layered = results is None and any(
+        _is_result_layer(layer) for layer in stage.GetLayerStack(includeSessionLayers=False))
     # opinions stronger than a result layer hide it; without one (a stage flattened with
     # its results) they are the results, judged by their hash
     stronger = stronger_result_opinions(stage, scene.luminaire_path,

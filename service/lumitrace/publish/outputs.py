@@ -28,7 +28,7 @@ from .latlong import write_latlong_texture
 from .photometric import photometric_paths, write_colour_files, write_photometric_files
 from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
-from .runs import layer_data
+from .ownership import claim_outputs, ownership_record
 from .result_layer import result_layer_text, write_layer_file
 from .sublayer import reload_if_open, sublayer_into_root
 from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signals_held
@@ -118,6 +118,26 @@ def output_place(scene, out_dir: str | os.PathLike | None,
     return None, out, name, out
 
 
+def planned_outputs(scene, out_dir: str | os.PathLike | None, name: str | None = None
+                    ) -> tuple[Path | None, str, dict[str, Path]]:
+    """(stage file or None, NAME, every output path a run may write, by key): see
+    :func:`output_place`."""
+    stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
+    paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
+             "latlong_map": out / f"{name}{LATLONG_SUFFIX}",
+             **photometric_paths(out, name),
+             "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
+    return stage_path, name, paths
+
+
+def claim_planned_outputs(scene, out_dir: str | os.PathLike | None,
+                          name: str | None = None) -> None:
+    """Refuse, before any tracing, a run whose outputs would replace a file lumitrace did
+    not write for this stage or one the stage reads (see :mod:`.ownership`)."""
+    stage_path, _, paths = planned_outputs(scene, out_dir, name)
+    claim_outputs(stage_path, paths, scene.input_files())
+
+
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
                   sublayer: bool = True, pictures: bool = True,
@@ -129,16 +149,15 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
     return the record. Waits up to ``wait`` s for another run publishing the same NAME.
     ``pictures`` False skips the polar curve and photometric solid (the slow part; the
-    record then names none); ``extra`` adds entries to the EXR header and the result
-    layer's customLayerData (the service's revision). ``on_stage(step)`` runs the steps
-    that touch layers open in this process (reloading the result layer, sublayering it):
-    a service passes the runner of its USD thread; by default they run here."""
+    record then names none, and the previous run's are removed); ``extra`` adds entries to
+    the EXR header and the result layer's customLayerData (the service's revision).
+    ``on_stage(step)`` runs the steps that touch layers open in this process (reloading
+    the result layer, sublayering it): a service passes the runner of its USD thread; by
+    default they run here. Only files lumitrace wrote for this stage are replaced
+    (:mod:`.ownership`)."""
     scene = result.scene
-    stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
-    paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
-             "latlong_map": out / f"{name}{LATLONG_SUFFIX}",
-             **photometric_paths(out, name),
-             "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
+    stage_path, name, paths = planned_outputs(scene, out_dir, name)
+    layer_dir = paths["result_layer"].parent
     drawable = plotting_available()
     if pictures and not drawable:
         warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
@@ -155,12 +174,14 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         paths.pop("polar_diagram")
         paths.pop("photometric_solid")
     record = build_record(result, ph, paths, col)
-    folders = [out, layer_dir]
+    folders = [layer_dir]
     with locked(folders, name, wait):
         for note in recover(folders, name, [p.name for p in paths.values()]):
             warn(note, OutputWarning)
-        check_ownership(stage_path, paths)
-        tx = Transaction(name, layer_dir)
+        claim = claim_outputs(stage_path, paths, scene.input_files())
+        for note in claim.notes:
+            warn(note, OutputWarning)
+        tx = Transaction(name, layer_dir, removals=list(claim.dropped))
         try:
             staged = {k: tx.staged(v) for k, v in paths.items()}
             write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id)
@@ -175,12 +196,14 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                     "stagePath": str(stage_path or "")}
             write_intensity_exr(staged["intensity_map"], channels, meta)
             write_latlong_texture(staged["latlong_map"], est.filtered, scene.up_axis)
+            owned = ownership_record(stage_path, layer_dir,
+                                     {paths[k].name: f for k, f in staged.items()
+                                      if k != "result_layer"})
             text = result_layer_text(stage_path, scene.luminaire_path,
                                      record.layer_values(layer_dir),
                                      photometric_light(scene, ph, paths["ies"], layer_dir),
                                      layer_dir,
-                                     {**(extra or {}), "runId": tx.run_id,
-                                      "stage": str(stage_path or "")},
+                                     {**(extra or {}), "runId": tx.run_id, **owned},
                                      (scene.up_axis, scene.meters_per_unit))
             write_layer_file(stage_path, staged["result_layer"], text)
             tx.commit(last=paths["result_layer"])
@@ -202,24 +225,3 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
 
 def _here(step: Callable[[], None]) -> None:
     step()
-
-
-def check_ownership(stage_path: Path | None, paths: dict[str, Path]) -> None:
-    """Refuse to overwrite outputs that belong to another stage of the same NAME (say
-    ``lamp.usda`` and ``lamp.usdc`` in one folder, or two stages with one ``--out``)."""
-    from .exr import read_exr_metadata
-
-    exr = paths["intensity_map"]
-    if exr.exists():
-        meta = read_exr_metadata(exr) or {}
-        other = meta.get("stagePath")
-        if other and (stage_path is None or Path(other) != stage_path):
-            raise OutputError(f"holds the result of another stage, {other}; write this "
-                              f"stage's outputs to a folder of their own (--out)", str(exr))
-    layer = paths["result_layer"]
-    if layer.exists():
-        other = layer_data(layer).get("stage")
-        if other and (stage_path is None or Path(other) != stage_path):
-            raise OutputError(f"is the result layer of another stage, {other}; rename one "
-                              "of the stages (their results would share this file)",
-                              str(layer))

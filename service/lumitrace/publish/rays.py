@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from .. import __version__
 from ..errors import LumitraceError
 from ..run.session import allocate
 from ..scene import Scene
-from ..tm25 import RayFile, SIMULATION, write_tm25
+from ..tm25 import RayFile, SIMULATION, header_texts, write_tm25
 from ..trace.job import BatchJob, MAX_DEPTH
 from ..trace.prepared import prepare
 from ..trace.tracer import trace_batch
@@ -61,9 +62,27 @@ def exit_rays(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DE
                    date=datetime.datetime.now().strftime("%Y-%m-%d %H:%M:%S"))
 
 
+def claim_ray_file(path: str | os.PathLike, scene: Scene) -> None:
+    """Refuse a ray file path that the stage reads (its own layers, a light's profile or
+    rays) or that holds a file other than the exit rays lumitrace wrote for this stage."""
+    path = Path(path)
+    if os.path.realpath(path) in scene.input_files():
+        raise LumitraceError("is a file the stage reads: the ray file would replace it; "
+                             "name another (--out)", str(path))
+    if not os.path.lexists(path):
+        return
+    texts = header_texts(path) if path.is_file() and not path.is_symlink() else None
+    stage = os.path.basename(scene.stage_path)
+    if texts is None or not texts[3].startswith("lumitrace ") or texts[8] != stage:
+        raise LumitraceError(f"exists and is not a ray file lumitrace wrote for {stage}: "
+                             "move it away or name another (--out)", str(path))
+
+
 def write_exit_rays(path: str | os.PathLike, scene: Scene, photons: int, seed: int = 0,
                     max_rays: int = MAX_RAYS) -> RayFile:
-    """Trace ``photons`` photons and write their exit rays to ``path`` (TM-25-13)."""
+    """Trace ``photons`` photons and write their exit rays to ``path`` (TM-25-13); only a
+    path :func:`claim_ray_file` allows is written."""
+    claim_ray_file(path, scene)
     if photons > max_rays:
         raise LumitraceError(f"{photons} photons could make more than the {max_rays} rays a "
                              "ray file may hold (28 bytes each); trace fewer", str(path))

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
 import os
 import stat
 import tempfile
@@ -10,6 +12,9 @@ from pathlib import Path
 
 from ..errors import OutputError, OutputWarning
 from ..atomic import fsync_path
+from ..filenames import RESULT_LAYER_SUFFIX
+from .ownership import STAGE_KEY
+from .runs import layer_data
 from .usda_text import insert_sublayer_text
 from ..stage.diagnostics import tf_message
 
@@ -59,18 +64,23 @@ def _open_bytes_copy(data: bytes, stage: Path):
     return layer
 
 
-def _edited_bytes(stage: Path, data: bytes, entry: str, root) -> bytes:
-    """The root layer's bytes with ``entry`` first in its subLayers: a text edit of a
-    .usda file (comments and formatting kept), else Sdf's export in the file's format."""
+def _edited_bytes(stage: Path, data: bytes, entry: str | None, root,
+                  remove: tuple[str, ...] = ()) -> bytes:
+    """The root layer's bytes with ``entry`` first in its subLayers (None: none added) and
+    the entries ``remove`` taken out: a text edit of a .usda file (comments and formatting
+    kept), else Sdf's export in the file's format."""
     if data.startswith(b"#usda"):
-        text = insert_sublayer_text(data.decode("utf-8"), entry, root)
+        text = insert_sublayer_text(data.decode("utf-8"), entry, root, remove)
         if text is not None:
             return text.encode("utf-8")
     from pxr import Sdf
 
     copy = Sdf.Layer.CreateAnonymous(".usda")
     copy.TransferContent(root)
-    copy.subLayerPaths.insert(0, entry)
+    for old in remove:
+        copy.subLayerPaths.remove(old)
+    if entry is not None:
+        copy.subLayerPaths.insert(0, entry)
     fmt = "usda" if data.startswith(b"#usda") else "usdc"
     fd, tmp = tempfile.mkstemp(prefix=f".{stage.stem}.", suffix=f".tmp.{fmt}",
                                dir=stage.parent)
@@ -84,14 +94,61 @@ def _edited_bytes(stage: Path, data: bytes, entry: str, root) -> bytes:
             os.unlink(tmp)
 
 
+_AT_FDCWD, _RENAME_EXCHANGE = -100, 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the files at ``a`` and ``b`` in one step (Linux ``renameat2`` with
+    ``RENAME_EXCHANGE``); False where the system or the file system cannot."""
+    libc = _libc()
+    fn = getattr(libc, "renameat2", None) if libc is not None else None
+    if fn is None:
+        return False
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+_LIBC: list = []
+
+
+def _libc():
+    if not _LIBC:
+        try:
+            _LIBC.append(ctypes.CDLL(None, use_errno=True))
+        except OSError:
+            _LIBC.append(None)
+    return _LIBC[0]
+
+
+def _swap_in(tmp: Path, target: Path, data: bytes, expected: bytes) -> bool | None:
+    """Put ``tmp`` (holding ``data``) at ``target`` if ``target`` holds ``expected`` at
+    that instant: the files are exchanged, and what came out is compared; a save that
+    landed in between is swapped back (and one landing after our swap is kept as the
+    newest). True: done; False: the file changed; None: no atomic exchange here."""
+    if not _exchange(tmp, target):
+        return None
+    if tmp.read_bytes() == expected:
+        return True
+    _exchange(tmp, target)  # a newer save was swapped out: put it back
+    if tmp.read_bytes() != data:
+        _exchange(tmp, target)  # and another landed on ours meanwhile: it is the newest
+    return False
+
+
 def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) -> bool:
     """Write ``data`` over ``target`` if it still holds ``expected``; keep its inode when
-    it has other hard links or another owner we cannot give the new file, else rename a
-    temporary file with the same mode and owner over it. False when the file changed."""
+    it has other hard links or another owner we cannot give the new file, else swap a
+    temporary file with the same mode and owner in for it (atomically compared: see
+    :func:`_swap_in`). False when the file changed."""
     in_place = st.st_nlink > 1
     if not in_place:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}",
                                    dir=target.parent)
+        tmp = Path(tmp)
         try:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
@@ -106,8 +163,12 @@ def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) ->
             if not in_place:
                 if target.read_bytes() != expected:   # compare ...
                     return False
-                os.replace(tmp, target)                 # ... and swap
-                tmp = None
+                swapped = _swap_in(tmp, target, data, expected)  # ... and swap
+                if swapped is None:  # no atomic exchange: a rename, with its window
+                    os.replace(tmp, target)
+                    tmp = None
+                elif not swapped:
+                    return False
         finally:
             if tmp is not None:
                 with contextlib.suppress(OSError):
@@ -126,9 +187,30 @@ def _replace_keeping_identity(target: Path, data: bytes, expected: bytes, st) ->
     return True
 
 
+def _other_result_of(entry: str, stage: Path, layer_path: Path) -> bool:
+    """Whether the subLayers ``entry`` is another result layer of ``stage`` than
+    ``layer_path`` (one from an earlier ``--out``, or a moved stage's, now gone): a stage
+    composes one result, the newest."""
+    if not entry.endswith(RESULT_LAYER_SUFFIX) or _resolves_to(entry, stage.parent, layer_path):
+        return False
+    if "://" in entry or entry.startswith("@"):
+        return False
+    path = Path(entry) if os.path.isabs(entry) else stage.parent / entry
+    if not path.exists():
+        return path.name == layer_path.name
+    reference = layer_data(path).get(STAGE_KEY)
+    if not reference:
+        return False
+    try:
+        return os.path.samefile(path.parent / reference, stage)
+    except OSError:
+        return False
+
+
 def sublayer_into_root(stage: Path, layer_path: Path) -> None:
     """Put the result layer (``./NAME.lumitrace.usda`` beside the stage, or its path
-    relative to the stage's folder) first in the stage root layer's subLayers, once.
+    relative to the stage's folder) first in the stage root layer's subLayers, once, and
+    take out the stage's other result layers (one stage, one current result).
 
     A compare-and-swap: the file is read, the edit made on that copy, and the file is
     replaced only if it still holds exactly what was read; a save by anyone else in between
@@ -150,14 +232,16 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> None:
             raise OutputError(f"cannot read the stage's root layer: {exc.strerror}",
                               str(stage)) from exc
         root = _open_bytes_copy(data, target)
-        if any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths):
+        stale = tuple(p for p in root.subLayerPaths if _other_result_of(p, stage, layer_path))
+        present = any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths)
+        if present and not stale:
             _sync_open_root(stage, entry, layer_path)
             return
         if not (os.access(target, os.W_OK) and os.access(target.parent, os.W_OK)):
             _warn(f"{stage}: the root layer is not writable; the result is in "
                   f"{layer_path.name} but is not sublayered into the stage")
             return
-        new = _edited_bytes(target, data, entry, root)
+        new = _edited_bytes(target, data, None if present else entry, root, stale)
         try:
             if _replace_keeping_identity(target, new, data, st):
                 _sync_open_root(stage, entry, layer_path)
@@ -186,10 +270,15 @@ def _sync_open_root(stage: Path, entry: str, layer_path: Path) -> None:
     layer = Sdf.Layer.Find(str(stage))
     if layer is None:
         return
-    if any(_resolves_to(p, stage.parent, layer_path) for p in layer.subLayerPaths):
+    stale = [p for p in layer.subLayerPaths if _other_result_of(p, stage, layer_path)]
+    if any(_resolves_to(p, stage.parent, layer_path) for p in layer.subLayerPaths) and \
+            not stale:
         return
     if layer.dirty:
-        layer.subLayerPaths.insert(0, entry)
+        for old in stale:
+            layer.subLayerPaths.remove(old)
+        if not any(_resolves_to(p, stage.parent, layer_path) for p in layer.subLayerPaths):
+            layer.subLayerPaths.insert(0, entry)
     else:
         layer.Reload(force=True)
 

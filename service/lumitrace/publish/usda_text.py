@@ -2,20 +2,31 @@
 every comment and all formatting, and check the edit against an Sdf round trip."""
 from __future__ import annotations
 
-def insert_sublayer_text(text: str, entry: str, root) -> str | None:
-    """``text`` with ``@entry@`` first in its ``subLayers``, or ``None`` when the edit is
-    not certain to equal ``root`` (the layer as read by Sdf) with the entry inserted."""
+def insert_sublayer_text(text: str, entry: str | None, root, remove: tuple[str, ...] = ()
+                         ) -> str | None:
+    """``text`` with ``@entry@`` first in its ``subLayers`` (None: no entry added) and the
+    entries ``remove`` taken out, or ``None`` when the edit is not certain to equal
+    ``root`` (the layer as read by Sdf) so edited."""
     from pxr import Sdf, Tf
 
     try:
-        candidate = _edit_header(text, entry)
+        candidate = text
+        for old in remove:
+            candidate = _remove_entry(candidate, old)
+            if candidate is None:
+                return None
+        if entry is not None:
+            candidate = _edit_header(candidate, entry)
     except ValueError:
         return None
     if candidate is None:
         return None
     expected = Sdf.Layer.CreateAnonymous(".usda")
     expected.TransferContent(root)
-    expected.subLayerPaths.insert(0, entry)
+    for old in remove:
+        expected.subLayerPaths.remove(old)
+    if entry is not None:
+        expected.subLayerPaths.insert(0, entry)
     check = Sdf.Layer.CreateAnonymous(".usda")
     try:
         if not check.ImportFromString(candidate):
@@ -25,6 +36,55 @@ def insert_sublayer_text(text: str, entry: str, root) -> str | None:
     if check.ExportToString() != expected.ExportToString():
         return None
     return candidate
+
+
+def _remove_entry(text: str, entry: str) -> str | None:
+    """``text`` without the ``@entry@`` of its header's ``subLayers`` (and the comma or
+    the line that held it); None where it is not found there."""
+    start = _header_start(text)
+    if start is None:
+        return None
+    close, sub_open = _scan_block(text, start)
+    if sub_open is None:
+        return None
+    at = text.find(f"@{entry}@", sub_open, close)
+    if at < 0:
+        return None
+    end = at + len(entry) + 2
+    j = end
+    while j < close and text[j] in " \t":
+        j += 1
+    if j < close and text[j] == ",":
+        end = j + 1
+    else:  # the last entry: drop the comma before it
+        k = at - 1
+        while k > sub_open and text[k] in " \t\r\n":
+            k -= 1
+        if text[k] == ",":
+            at = k
+    line_start = text.rfind("\n", 0, at) + 1
+    line_end = text.find("\n", end)
+    if text[line_start:at].strip() == "" and line_end >= 0 and \
+            text[end:line_end].strip() == "":
+        return text[:line_start] + text[line_end + 1:]
+    return text[:at] + text[end:]
+
+
+def _header_start(text: str) -> int | None:
+    """Index of the ``(`` opening the layer metadata block (None: no block)."""
+    end = text.find("\n")
+    if end < 0:
+        return None
+    i = end + 1
+    while i < len(text):
+        if text[i] in " \t\r\n":
+            i += 1
+        elif text[i] == "#":
+            j = text.find("\n", i)
+            i = len(text) if j < 0 else j + 1
+        else:
+            break
+    return i if i < len(text) and text[i] == "(" else None
 
 
 def _edit_header(text: str, entry: str) -> str | None:

@@ -7,6 +7,7 @@ be hashed, pickled to workers and compared.
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -230,6 +231,9 @@ class Scene:
     #: like :attr:`Emitter.to_world`: local stage units to world metres), which places the
     #: photometric frame and the stand-in light; empty: the identity
     luminaire_to_world: tuple = ()
+    #: the files the stage was read from (its layers, real paths), which no output may
+    #: replace; the emitters' IES and ray files are in :meth:`input_files`
+    layer_files: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def photometric_axes(self) -> np.ndarray:
@@ -285,6 +289,15 @@ class Scene:
             out[name] = (self.triangles[sel], mats[self.material_index[sel]]
                          if len(self.materials) else np.zeros(0, object))
         return out
+
+    def input_files(self) -> set[str]:
+        """Real paths of every file the scene was read from: the stage's layers and the
+        emitters' IES profiles and ray files."""
+        files = set(self.layer_files)
+        for e in self.emitters:
+            files.update(str(f) for f in (e.ies.file if e.ies is not None else None, e.rays)
+                         if f)
+        return {os.path.realpath(f) for f in files}
 
     def content_hash(self) -> str:
         """SHA-256 of everything the traced result depends on (geometry, materials,

@@ -95,6 +95,8 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
         raise StageError("stage file not found", str(file))
     if file.is_dir():
         raise StageError("is a folder, not a USD stage file", str(file))
+    if not file.is_file():  # a FIFO or a device would be waited on, not read
+        raise StageError("is not a regular file, not a USD stage file", str(file))
     file = file.resolve()
     validate.check_layer_file(file)
     with UsdDiagnostics() as diagnostics:
@@ -224,6 +226,8 @@ class _Reader:
             warnings=tuple(self.warnings),
             time_code=scene_time_code(self.time),
             luminaire_to_world=self._luminaire_to_world(root),
+            layer_files=tuple(layer.realPath for layer in self.stage.GetUsedLayers()
+                              if layer.realPath),
         )
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
