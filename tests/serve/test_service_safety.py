@@ -280,3 +280,80 @@ def test_a_second_service_on_a_stage_refuses_and_a_killed_ones_lock_is_stale(sta
         assert after.client.send([_set_ies("./good.ies")])["revision"] == 1
         rc, _ = after.stop()
         assert rc == 0
+
+
+# ------------------------------------------------------------------------------------------
+# The engine never dies silently
+# ------------------------------------------------------------------------------------------
+
+def _shape(stage: Path, ies: str) -> None:
+    """Give the stage's source an IES profile (ShapingAPI) read from ``ies``."""
+    text = stage.read_text().replace(
+        'prepend apiSchemas = ["LumitraceEmitterAPI"]\n    )\n    {\n',
+        'prepend apiSchemas = ["LumitraceEmitterAPI", "ShapingAPI"]\n    )\n    {\n'
+        f'        asset inputs:shaping:ies:file = @{ies}@\n', 1)
+    assert ies in text
+    stage.write_text(text)
+
+
+def _wait_event(service: Service, predicate, timeout: float = 30.0):
+    """The first event the service keeps that matches ``predicate``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = [e for e in service.client.history(0) if predicate(e)]
+        if found:
+            return found[0]
+        time.sleep(0.1)
+    raise TimeoutError("no such event")
+
+
+def test_a_revision_the_engine_cannot_trace_is_an_error_and_the_next_one_traces(stage):
+    """A stage whose light reads a garbage IES profile (as left in the edits layer, or on
+    disk, before a restart): the engine reports it as an ``error`` event and in
+    ``/status.last_error`` (state ``error``), keeps answering, and traces the next good
+    revision, which clears ``last_error``."""
+    (stage.parent / "bad.ies").write_text("junk\n")
+    _shape(stage, "./bad.ies")
+    with Service(stage, *FAST) as s:
+        error = _wait_event(s, lambda e: e.kind == "error")
+        assert error.data["revision"] == 0 and "IES" in error.data["message"], error.data
+        status = s.wait_status(lambda st: st["last_error"] is not None, timeout=30)
+        assert status["state"] == "error" and "bad.ies" in status["last_error"], status
+        assert s.proc.poll() is None
+        answer = s.client.send([_set_ies("./good.ies")])
+        assert answer["revision"] == 1
+        status = s.wait_done(1)
+        assert status["last_error"] is None and status["photons"] == 20_000
+        assert s.client.results()["revision"] == 1
+
+
+def test_a_garbage_ies_profile_is_refused_at_the_door_and_the_last_result_stays(stage):
+    """A delta adding a light whose IES profile cannot be read is a 422 naming the light
+    and property; the profile of a light turned to garbage on disk is an ``error`` event
+    while the last good result stays served; the repaired file traces again."""
+    (stage.parent / "bad.ies").write_text("junk\n")
+    _shape(stage, "./good.ies")
+    with Service(stage, *FAST) as s:
+        s.wait_done(0)
+        good = s.client.results()
+        code, payload = _post(s.url, [{
+            "op": "add", "path": "/Luminaire/Spot", "type": "DiskLight",
+            "apiSchemas": ["ShapingAPI", "LumitraceEmitterAPI"],
+            "properties": {"inputs:radius": 0.01, "lumitrace:luminousFlux": 100.0,
+                           IES_FILE: "./bad.ies"}}])
+        assert code == 422, payload
+        said = _said(payload)
+        assert "/Luminaire/Spot" in said and IES_FILE in said and "bad.ies" in said, said
+        assert s.client.status()["revision"] == 0
+        (stage.parent / "good.ies").write_text("IESNA:LM-63-2019\nTILT=NONE\n1 2 3\n")
+        error = _wait_event(s, lambda e: e.kind == "error")
+        assert "cannot be traced" in error.data["message"] and IES_FILE in \
+            error.data["message"], error.data
+        status = s.client.status()
+        assert status["revision"] == 0 and status["written_revision"] == 0
+        assert s.client.results()["input_hash"] == good["input_hash"]
+        _ies(stage.parent / "good.ies", 30.0)
+        s.wait_status(lambda st: st["revision"] == 1)
+        status = s.wait_done(1)
+        assert status["last_error"] is None
+        assert s.client.results()["input_hash"] != good["input_hash"]

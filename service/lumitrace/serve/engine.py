@@ -73,6 +73,9 @@ class Engine:
         self._last_write = 0.0
         self._written_full = False
         self.error: str | None = None
+        #: a revision failed: nothing is refined until the next one (the last result
+        #: written stays served), and the next one is traced afresh
+        self._halted = False
         #: the session's pinned tracing frame (set by the first revision)
         self.frame: TracingFrame | None = None
         self.records_cap = records_cap
@@ -111,8 +114,8 @@ class Engine:
             elapsed = max(time.perf_counter() - self.started, 1e-9)
             return {
                 "traced_revision": rev.number if rev else None,
-                "state": ("stopping" if self._stopping else "starting" if r is None else
-                          "done" if self.done else "tracing"),
+                "state": ("stopping" if self._stopping else "error" if self._halted else
+                          "starting" if r is None else "done" if self.done else "tracing"),
                 "photons": acc.photons if acc else 0,
                 "iterations": r.iteration if r else 0,
                 "relative_error": defined(est.error) if est else None,
@@ -137,22 +140,49 @@ class Engine:
             self._pool = pool
             while True:
                 with self._cv:
-                    while (self._pending is None and not self._stopping
-                           and (self.refinement is None or self.done)
-                           and not self._pictures_due()):
+                    while self._pending is None and not self._stopping and self._idle():
                         self._cv.wait()
                     if self._stopping:
                         break
                     if self._pending is not None:
                         self._settle_burst()
                     pending, self._pending = self._pending, None
-                if pending is not None:
-                    self._take(pending)
-                elif self._pictures_due():
-                    self._write(pictures=True)
-                else:
-                    self._round(pool)
-        self._final_write()
+                try:
+                    self._step(pending, pool)
+                except Exception as exc:  # the engine never dies: the revision is reported
+                    self._failed(pending, exc)
+        if not self._halted:
+            self._final_write()
+
+    def _idle(self) -> bool:
+        """Nothing to do until a new revision: none traced yet, the current one done and
+        written, or the current one failed."""
+        return self._halted or (self.refinement is None or self.done) \
+            and not self._pictures_due()
+
+    def _step(self, pending: Revision | None, pool: ThreadPoolExecutor) -> None:
+        """One unit of work: take a new revision, draw the pictures, or trace a round."""
+        if pending is not None:
+            self._take(pending)
+            self._halted = False
+        elif self._pictures_due():
+            self._write(pictures=True)
+        else:
+            self._round(pool)
+
+    def _failed(self, pending: Revision | None, exc: Exception) -> None:
+        """A revision that cannot be traced or written: an ``error`` event and
+        ``last_error``; the last result written stays served, nothing more is refined,
+        and the next revision is traced afresh (the refinement may be half-changed)."""
+        rev = pending or self.revision
+        number = rev.number if rev is not None else None
+        what = str(exc) if isinstance(exc, LumitraceError) else f"{type(exc).__name__}: {exc}"
+        message = f"revision {number} cannot be traced: {what}"
+        with self._cv:
+            self._halted = True
+            self.error = message
+        self.events.publish("error", revision=number, message=message,
+                            where=getattr(exc, "where", None))
 
     def _settle_burst(self) -> None:
         """In a burst of revisions, wait (holding the lock's condition) until it pauses."""
@@ -171,7 +201,7 @@ class Engine:
     def _take(self, rev: Revision) -> None:
         """Start refining ``rev``: a rescale for a flux-only edit, the same photons for an
         edit the tracer does not see, a new refinement otherwise."""
-        old = self.refinement
+        old = self.refinement if not self._halted else None  # after a failure: afresh
         kind = rev.effect.kind
         self.events.publish("revision", revision=rev.number, source=rev.source,
                             effect=rev.effect.as_dict(), layers=list(rev.layers))
@@ -251,15 +281,15 @@ class Engine:
         keep = r.records is not None
         futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
         tallies = []
-        for f in futures:
-            if self._interrupted():
-                for g in futures:
-                    g.cancel()
-                for g in futures:  # let running batches end before the scene changes
-                    if not g.cancelled():
-                        g.exception()
-                return  # the round is dropped: its photons never reach the map
-            tallies.append(f.result())
+        try:
+            for f in futures:
+                if self._interrupted():
+                    _drain(futures)
+                    return  # the round is dropped: its photons never reach the map
+                tallies.append(f.result())
+        except BaseException:
+            _drain(futures)  # a batch failed: none of the round may outlive it
+            raise
         with self._cv:
             est = r.add_round(tallies)
         acc = r.accumulator
@@ -331,6 +361,16 @@ class Engine:
                             relative_error=record["relative_error"], pictures=pictures,
                             input_hash=record["input_hash"], seconds=now - t0,
                             outputs=record.summary().get("outputs", {}))
+
+
+def _drain(futures) -> None:
+    """Cancel the batches not started and let the running ones end (before the scene
+    they trace changes)."""
+    for g in futures:
+        g.cancel()
+    for g in futures:
+        if not g.cancelled():
+            g.exception()
 
 
 def _rebuilt(ps, scene) -> list[str] | None:

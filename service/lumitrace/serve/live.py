@@ -29,6 +29,7 @@ from ..scene import Scene
 from ..stage import validate
 from ..stage.diagnostics import tf_message
 from ..stage.reader import scene_from_stage
+from ..trace.profiles import profile_table
 
 
 class LayerUnreadable(LumitraceError):
@@ -53,6 +54,20 @@ def file_digest(path: Path) -> str | None:
         return hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError:
         return None
+
+
+def check_profiles(scene: Scene) -> None:
+    """Read the IES profile of every light that has one (each file once, cached as the
+    tracer will use it), so that a profile that cannot be traced is refused at the door
+    (:class:`StageError` naming the light) rather than found by the engine."""
+    for emitter in scene.emitters:
+        if emitter.ies is None:
+            continue
+        try:
+            profile_table(emitter.ies)
+        except LumitraceError as exc:
+            said = exc.message if exc.where and exc.where in exc.message else str(exc)
+            raise StageError(said, emitter.path, "inputs:shaping:ies:file") from None
 
 
 class LiveStage:
@@ -169,6 +184,7 @@ class LiveStage:
         apply_deltas(self.stage, self.edits, deltas, self.stage_path.parent)
         try:
             scene = scene_from_stage(self.stage, self.luminaire)
+            check_profiles(scene)
         except StageError as exc:
             self.edits.ImportFromString(backup)
             raise DeltaError([Problem(exc.where or "/", exc.message if not exc.prop else
@@ -225,6 +241,7 @@ class LiveStage:
         if self.edits_path in {p for p, _ in changed}:
             self.revision = max(self.revision, revision_of(self.edits))
         scene = scene_from_stage(self.stage, self.luminaire)
+        check_profiles(scene)
         effect = classify(self.scene, scene, self.changes.take())
         self.revision += 1
         self.scene = scene
