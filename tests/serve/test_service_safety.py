@@ -351,6 +351,7 @@ def test_a_garbage_ies_profile_is_refused_at_the_door_and_the_last_result_stays(
             error.data["message"], error.data
         status = s.client.status()
         assert status["revision"] == 0 and status["written_revision"] == 0
+        assert "cannot be traced" in status["last_error"], status
         assert s.client.results()["input_hash"] == good["input_hash"]
         _ies(stage.parent / "good.ies", 30.0)
         s.wait_status(lambda st: st["revision"] == 1)

@@ -94,6 +94,12 @@ class Engine:
             self._arrivals = [self._arrivals[-1], time.monotonic()]
             self._cv.notify_all()
 
+    def report_error(self, message: str) -> None:
+        """An error found outside the engine (a layer saved on disk that cannot be
+        read): ``last_error`` until the next result is written."""
+        with self._cv:
+            self.error = message
+
     def stop(self, timeout: float | None = None) -> None:
         """Stop refining, write the final result (with pictures) and end the thread."""
         with self._cv:

@@ -96,7 +96,8 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
           f"in {live.edits_path.name})", flush=True)
     events.publish("started", url=url, revision=live.revision, stage=str(live.stage_path))
     engine.start(live.start())
-    watcher = asyncio.create_task(watch_layers(live, engine.submit, events, stop))
+    watcher = asyncio.create_task(watch_layers(live, engine.submit, events, stop,
+                                               engine.report_error))
     await stop.wait()
     events.publish("stopping", revision=live.revision)
     await loop.run_in_executor(None, engine.stop)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional
 
 from ..errors import StageError
 from .events import EventLog
@@ -23,8 +23,10 @@ RETRY_STEP = 0.1
 
 
 async def watch_layers(live: LiveStage, submit: Callable[[Revision], None],
-                       events: EventLog, stop: asyncio.Event) -> None:
-    """Watch until ``stop`` is set; ``submit`` gets each new revision."""
+                       events: EventLog, stop: asyncio.Event,
+                       report: Optional[Callable[[str], None]] = None) -> None:
+    """Watch until ``stop`` is set; ``submit`` gets each new revision, ``report`` each
+    error (for ``/status``'s ``last_error``) besides its event."""
     from watchfiles import awatch
 
     while not stop.is_set():
@@ -33,12 +35,25 @@ async def watch_layers(live: LiveStage, submit: Callable[[Revision], None],
                                     debounce=DEBOUNCE_MS, step=10, recursive=False,
                                     watch_filter=None, yield_on_timeout=False):
             paths = {Path(p).absolute() for _, p in changes}
-            await _reload(live, paths, submit, events)
+            await _reload(live, paths, submit, _Errors(events, report))
             if await live.acall(live.folders) != folders:
                 break  # a layer in a new folder: watch it too
 
 
-async def _reload(live: LiveStage, paths: set[Path], submit, events: EventLog) -> None:
+class _Errors:
+    """Where the watcher's errors go: an ``error`` event, and ``report``."""
+
+    def __init__(self, events: EventLog, report: Optional[Callable[[str], None]]):
+        self.events = events
+        self.report = report
+
+    def publish(self, kind: str, message: str, **data) -> None:
+        self.events.publish(kind, message=message, **data)
+        if self.report is not None:
+            self.report(message)
+
+
+async def _reload(live: LiveStage, paths: set[Path], submit, events: _Errors) -> None:
     waited = 0.0
     while True:
         try:
