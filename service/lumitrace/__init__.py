@@ -3,7 +3,24 @@
 Importing the package registers the lumitrace USD schema plugin, so it must happen before
 any stage is composed (late registration is silently ignored by USD).
 """
-from .schema import register_schema
+import signal as _signal
+import sys as _sys
+import time as _time
+
+#: When this process started lumitrace (``time.perf_counter``): ``trace --time`` counts
+#: from here, so loading and reading the stage are part of the time asked for.
+STARTED = _time.perf_counter()
+
+#: Signals received while ``python -m lumitrace`` loads the package (USD takes a few
+#: tenths of a second and can swallow a KeyboardInterrupt): recorded from the first
+#: instant and handed to the command line by ``__main__``, as the ``lumitrace`` entry
+#: point does for its own start.
+EARLY_SIGNALS: list[int] = []
+if _sys.argv[:1] == ["-m"]:  # being imported to run as ``python -m lumitrace``
+    for _s in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
+        _signal.signal(_s, lambda signum, _frame: EARLY_SIGNALS.append(signum))
+
+from .schema import register_schema  # noqa: E402  (after the signal recorders)
 
 register_schema()
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -329,7 +330,8 @@ def cmd_trace(args) -> int:
 
         if not args.edits.is_file():
             raise LumitraceError("edits layer not found", str(args.edits))
-        scene = scene_from_stage(open_with_edits(args.stage, args.edits))
+        scene = scene_from_stage(open_with_edits(args.stage, args.edits), args.luminaire,
+                                 time=args.time_code)
     else:
         scene = read_stage(args.stage, args.luminaire, time=args.time_code)
     if not args.no_sublayer:
@@ -343,6 +345,8 @@ def cmd_trace(args) -> int:
     from .publish.outputs import claim_planned_outputs
 
     claim_planned_outputs(scene, args.out)
+    if args.frame is not None:
+        args.frame.check_fits(scene)
     for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
@@ -355,7 +359,9 @@ def cmd_trace(args) -> int:
     bar, update = _progress_bar(settings.budget(), args.time,
                                 not (args.no_progress or args.json or args.quiet))
     try:
-        result = run(scene, settings, progress=update, frame=args.frame)
+        from . import STARTED
+
+        result = run(scene, settings, progress=update, frame=args.frame, clock_start=STARTED)
     finally:
         if bar is not None:
             bar.close()
@@ -419,7 +425,7 @@ def cmd_serve(args) -> int:
                              resolution=args.resolution, threshold=args.threshold,
                              seed=args.seed, threads=args.threads or default_threads(),
                              workers="threads")
-    preflight(args.stage, args.out)
+    preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
@@ -585,9 +591,11 @@ def refuse_hidden_results(stage: Path) -> None:
             str(stage))
 
 
-def preflight(stage: Path, out: Path | None) -> None:
+def preflight(stage: Path, out: Path | None, stage_folder_written: bool = False) -> None:
     """What can be checked before a long trace: the stage is a regular file, the output
-    folders exist or can be made, and can be written to."""
+    folder (``out``, else the stage's) exists or can be made, and can be written to, as
+    can the stage's own folder where ``stage_folder_written`` (the service's edits
+    layer lives there)."""
     import stat as st
 
     try:
@@ -598,63 +606,82 @@ def preflight(stage: Path, out: Path | None) -> None:
         raise LumitraceError(f"cannot open the stage: {exc.strerror}", str(stage)) from None
     if not st.S_ISREG(mode):
         raise LumitraceError("the stage is not a regular file", str(stage))
-    folders = [stage.absolute().parent] + ([out.absolute()] if out is not None else [])
+    folders = [out.absolute() if out is not None else stage.absolute().parent]
+    if stage_folder_written and out is not None:
+        folders.append(stage.absolute().parent)
     for folder in folders:
-        if folder.exists() and not folder.is_dir():
-            raise LumitraceError("the output folder is a file, not a folder", str(folder))
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise LumitraceError(f"cannot create the output folder: {exc.strerror}",
-                                 str(folder)) from None
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise LumitraceError("the output folder is not writable (results go to the "
-                                 "stage's folder unless --out names another)", str(folder))
+        _writable_folder(folder, out is None)
+
+
+def _writable_folder(folder: Path, hint_out: bool) -> None:
+    """Make ``folder`` if missing and prove it writable by writing in it."""
+    if folder.exists() and not folder.is_dir():
+        raise LumitraceError("the output folder is a file, not a folder", str(folder))
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LumitraceError(f"cannot create the output folder: {exc.strerror}",
+                             str(folder)) from None
+    try:  # a real write: permissions, read-only mounts and ACLs all answer it
+        import tempfile
+
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        hint = "" if not hint_out else \
+            " (results go to the stage's folder unless --out names another)"
+        raise LumitraceError(f"the output folder is not writable: {exc.strerror}{hint}",
+                             str(folder)) from None
+
+
+def _dispatch(args) -> int:
+    if args.command == "trace":
+        return cmd_trace(args)
+    check_interrupted()  # the others have no USD-loading phase of their own
+    return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve,
+            "edits": cmd_edits, "check": cmd_check, "rays": cmd_rays}[args.command](args)
+
+
+def _failure(exc: BaseException) -> tuple[int, str]:
+    """The exit status and the one line for a run that failed with ``exc``; None's
+    status for an exception that is no user-facing failure."""
+    if isinstance(exc, LumitraceError):
+        return 2, f"lumitrace: error: {exc}"
+    if isinstance(exc, Interrupted):
+        return 128 + exc.signum, _interrupted_message(exc)
+    if isinstance(exc, KeyboardInterrupt):
+        return 130, "lumitrace: interrupted; nothing was written, earlier outputs are unchanged"
+    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+    return 2, f"lumitrace: error: {where}{getattr(exc, 'strerror', None) or exc}"
 
 
 def main(argv: list[str] | None = None, early_signals: list[int] | None = None) -> int:
     """The command line; ``early_signals`` are signals the entry point caught before
-    lumitrace was imported (the run then stops before it starts)."""
+    lumitrace was imported (the run then stops before it starts). A command given
+    ``--json`` prints one JSON object on stdout whatever happens, a failure included."""
+    for name in ("stdout", "stderr"):  # a closed stream (``>&-``) is one nobody reads
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w"))
     previous = {s: signal.signal(s, _raise_interrupted) for s in HANDLED_SIGNALS}
+    args = None
     try:
         _RECEIVED.extend(early_signals or ())
         check_interrupted(defer=True)
         args = build_parser().parse_args(argv)
         warnings.showwarning = _show_warning
-        if args.command == "trace":
-            return cmd_trace(args)
-        if args.command != "trace":  # the others have no USD-loading phase of their own
-            check_interrupted()
-        if args.command == "report":
-            return cmd_report(args)
-        if args.command == "bench":
-            return cmd_bench(args)
-        if args.command == "serve":
-            return cmd_serve(args)
-        if args.command == "edits":
-            return cmd_edits(args)
-        if args.command == "check":
-            return cmd_check(args)
-        if args.command == "rays":
-            return cmd_rays(args)
-    except LumitraceError as exc:
-        print(f"lumitrace: error: {exc}", file=sys.stderr)
-        return 2
-    except Interrupted as exc:
-        print(_interrupted_message(exc), file=sys.stderr)
-        return 128 + exc.signum
-    except KeyboardInterrupt:
-        print("lumitrace: interrupted; nothing was written, earlier outputs are unchanged",
-              file=sys.stderr)
-        return 130
-    except OSError as exc:
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"lumitrace: error: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 2
+        return _dispatch(args)
+    except (LumitraceError, Interrupted, KeyboardInterrupt, OSError) as exc:
+        code, line = _failure(exc)
+        print(line, file=sys.stderr)
+        if getattr(args, "json", False):
+            with contextlib.suppress(OSError, ValueError):
+                message = line.removeprefix("lumitrace: ").removeprefix("error: ")
+                print(json.dumps({"error": message, "exit_status": code,
+                                  "command": args.command}), flush=True)
+        return code
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

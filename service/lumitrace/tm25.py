@@ -169,6 +169,7 @@ def read_tm25(path: str | os.PathLike) -> RayFile:
             k += COLUMNS[f]
     photometric = bool(flags["luminous_flux"])
     flux = (cols["luminous_flux"] if photometric else cols["radiant_flux"])[:, 0]
+    _check_rays(cols["position"], cols["direction"], flux, path)
     return RayFile(positions=np.ascontiguousarray(cols["position"]),
                    directions=np.ascontiguousarray(cols["direction"]),
                    flux=np.ascontiguousarray(flux), photometric=photometric,
@@ -181,6 +182,24 @@ def read_tm25(path: str | os.PathLike) -> RayFile:
                    date=date.split(b"\0", 1)[0].decode("ascii", errors="replace"),
                    spectral_id=int(spectral),
                    extra={"wavelength_range_nm": (float(wl_lo), float(wl_hi))})
+
+
+def _check_rays(positions: np.ndarray, directions: np.ndarray, flux: np.ndarray,
+                path: str) -> None:
+    """Raise naming the first ray whose start point, direction or flux cannot be traced:
+    not finite, a direction of zero length, a negative flux."""
+    with np.errstate(all="ignore"):
+        length = np.sqrt(np.sum(directions.astype(np.float64) ** 2, axis=1))
+    problems = (
+        (~np.isfinite(positions).all(axis=1), "a start point that is not finite"),
+        (~np.isfinite(directions).all(axis=1), "a direction that is not finite"),
+        (length == 0, "a direction of zero length"),
+        (~np.isfinite(flux) | (flux < 0), "a flux that is negative or not finite"),
+    )
+    for bad, what in problems:
+        if bad.any():
+            first = int(np.argmax(bad))
+            raise _error(f"ray {first} (of {len(flux)}; {int(bad.sum())} such) has {what}", path)
 
 
 def format_tm25(rays: RayFile) -> bytes:

@@ -11,11 +11,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from pxr import Sdf, Usd, UsdUtils
+from pxr import Sdf, Tf, Usd, UsdUtils
 
 from ..atomic import atomic_path, fsync_path, write_text_durably
 from ..errors import StageError
 from ..filenames import edits_layer_path
+from ..stage.diagnostics import tf_message
 
 #: customLayerData key holding the last accepted revision.
 REVISION_KEY = "lumitrace:revision"
@@ -25,9 +26,7 @@ def open_edits_layer(path: str | os.PathLike) -> Sdf.Layer:
     """The edits layer at ``path``, created empty (in memory only) when there is none."""
     path = Path(path).absolute()
     if path.exists():
-        layer = Sdf.Layer.FindOrOpen(str(path))
-        if layer is None:
-            raise StageError("cannot open the edits layer", str(path))
+        layer = _open_layer(path, "the edits layer")
         layer.Reload(force=True)
         return layer
     layer = Sdf.Layer.FindOrOpen(str(path)) or Sdf.Layer.CreateNew(str(path))
@@ -35,6 +34,20 @@ def open_edits_layer(path: str | os.PathLike) -> Sdf.Layer:
         raise StageError("cannot create the edits layer", str(path))
     layer.documentation = ("lumitrace scene deltas accepted by the service, applied over "
                            "the stage as its strongest layer")
+    return layer
+
+
+def _open_layer(path: Path, what: str) -> Sdf.Layer:
+    """The layer file at ``path``; a :class:`StageError` naming it when it is not a
+    readable USD layer (garbage, a folder, another format)."""
+    if not path.is_file():
+        raise StageError(f"cannot open {what}: not a regular file", str(path))
+    try:
+        layer = Sdf.Layer.FindOrOpen(str(path))
+    except Tf.ErrorException as exc:
+        raise StageError(f"cannot open {what}: {tf_message(exc)}", str(path)) from None
+    if layer is None:
+        raise StageError(f"cannot open {what}", str(path))
     return layer
 
 
@@ -51,8 +64,12 @@ def open_with_edits(stage_path: str | os.PathLike,
     if edits is not None:
         layer = edits if isinstance(edits, Sdf.Layer) else open_edits_layer(edits)
         session.subLayerPaths.append(layer.identifier)
-    root = Sdf.Layer.FindOrOpen(str(stage_path))
-    stage = Usd.Stage.Open(root, session, Usd.Stage.LoadAll) if root is not None else None
+    root = _open_layer(stage_path, "the stage")
+    try:
+        stage = Usd.Stage.Open(root, session, Usd.Stage.LoadAll)
+    except Tf.ErrorException as exc:
+        raise StageError(f"cannot open as a USD stage: {tf_message(exc)}",
+                         str(stage_path)) from None
     if stage is None:
         raise StageError("cannot open as a USD stage", str(stage_path))
     return stage
@@ -80,10 +97,8 @@ def merge_edits(stage_path: str | os.PathLike) -> Path:
     path = edits_layer_path(stage_path)
     if not path.exists():
         raise StageError("no edits layer to merge", str(path))
-    root = Sdf.Layer.FindOrOpen(str(stage_path))
-    edits = Sdf.Layer.FindOrOpen(str(path))
-    if root is None or edits is None:
-        raise StageError("cannot open the stage or its edits layer", str(stage_path))
+    root = _open_layer(stage_path, "the stage")
+    edits = _open_layer(path, "the edits layer")
     strong = Sdf.Layer.CreateAnonymous(".usda")
     strong.TransferContent(edits)
     UsdUtils.StitchLayers(strong, root)  # strong's opinions win, root's fill in

@@ -32,12 +32,16 @@ def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
     ax = fig.add_subplot(projection="polar")
     ax.set_theta_zero_location("S")
     ax.set_theta_direction(1)
+    top = 0.0
     for c, style, label in ((0.0, "-", "C0 - C180"), (90.0, "--", "C90 - C270")):
         right = grid.at(np.array([c]))[0] * per_klm
         left = grid.at(np.array([c + 180.0]))[0] * per_klm
         theta = np.concatenate([np.radians(g), 2 * np.pi - np.radians(g[::-1])])
         r = np.concatenate([right, left[::-1]])
+        top = max(top, float(np.nanmax(r)) if r.size else 0.0)
         ax.plot(theta, r, style, lw=1.6, color="#c0392b" if c == 0 else "#2c5aa0", label=label)
+    # the radius starts at zero: autoscaled, a curve of zeros would be drawn as a circle
+    ax.set_ylim(0.0, top * 1.05 if top > 0 else 1.0)
     ax.set_thetagrids(np.arange(0, 360, 30),
                       [f"{int(a if a <= 180 else 360 - a)}°" for a in range(0, 360, 30)])
     ax.set_rlabel_position(100)
@@ -48,6 +52,10 @@ def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
     ax.yaxis.set_major_locator(MaxNLocator(4))
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
     ax.tick_params(axis="y", labelsize=8)
+    if not top > 0:
+        ax.text(0.5, 0.5, "no light leaves the luminaire", transform=ax.transAxes,
+                ha="center", va="center", fontsize=11)
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: ""))
     ax.grid(True, lw=0.4, alpha=0.6)
     ax.set_title((title + "\n" if title else "") + "cd/klm", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.1), fontsize=8, frameon=False)

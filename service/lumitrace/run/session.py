@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from ..errors import warn
+from ..errors import LumitraceError, warn
 from ..film.accumulate import Accumulator
 from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
@@ -30,6 +30,9 @@ from .settings import TraceSettings
 FIRST_ITERATION = 1 << 15
 ESTIMATE_SHARE = 0.1
 ROUND_SECONDS = 1.0
+#: Share of ``--time`` left at which a session stops rather than start a round (rounds are
+#: sized to end by the deadline at the rate measured so far).
+DEADLINE_SLACK = 0.02
 #: A session stopped only by time or error ends once this many photons left no light
 #: outside the luminaire: its error is undefined and would never reach a target.
 NO_ESCAPE_PHOTONS = 1 << 20
@@ -82,8 +85,35 @@ class TraceResult:
         return self.estimate.meets(self.settings.convergence_target)
 
 
-def allocate(fluxes: list[float], photons: int) -> list[int]:
-    """Split ``photons`` among emitters in proportion to flux (largest remainder)."""
+#: Photons each emitter traces at the least: an emitter without photons would drop its
+#: flux from the result, and the error estimate's two halves need one photon each.
+MIN_EMITTER_PHOTONS = 2
+
+
+def allocate(fluxes: list[float], photons: int, minimum: int = 0) -> list[int]:
+    """Split ``photons`` among emitters in proportion to flux (largest remainder), each
+    getting at least ``minimum`` (the others share the rest in proportion to flux); the
+    split in proportion alone where it gives everyone ``minimum``."""
+    if photons < minimum * len(fluxes):
+        raise ValueError(f"{photons} photons cannot give {len(fluxes)} emitters "
+                         f"{minimum} each")
+    pinned: set[int] = set()
+    while True:
+        free = [i for i in range(len(fluxes)) if i not in pinned]
+        share = _proportional([fluxes[i] for i in free], photons - minimum * len(pinned))
+        low = {i for i, n in zip(free, share) if n < minimum}
+        if not low:
+            out = [minimum] * len(fluxes)
+            for i, n in zip(free, share):
+                out[i] = n
+            return out
+        pinned |= low
+
+
+def _proportional(fluxes: list[float], photons: int) -> list[int]:
+    """Split ``photons`` in proportion to ``fluxes`` by largest remainder."""
+    if not fluxes:
+        return []
     total = float(sum(fluxes))
     exact = [photons * f / total for f in fluxes]
     base = [int(math.floor(x)) for x in exact]
@@ -160,8 +190,13 @@ class Refinement:
         fluxes = [e.flux for e in scene.emitters]
         self.shares = [f / sum(fluxes) for f in fluxes]
         self.budget = settings.budget()
-        self.targets = (allocate(fluxes, self.budget) if self.budget is not None
-                        else [math.inf] * len(fluxes))
+        if self.budget is not None and self.budget < MIN_EMITTER_PHOTONS * len(fluxes):
+            raise LumitraceError(
+                f"{self.budget:,} photons are too few for {len(fluxes):,} emitters: each "
+                f"needs at least {MIN_EMITTER_PHOTONS}, so trace at least "
+                f"{MIN_EMITTER_PHOTONS * len(fluxes):,} (--photons)", scene.luminaire_path)
+        self.targets = (allocate(fluxes, self.budget, MIN_EMITTER_PHOTONS)
+                        if self.budget is not None else [math.inf] * len(fluxes))
         self.done = [0] * len(fluxes)
         threads = max(1, int(settings.threads))
         self.full_round = threads * settings.batch_size * 2
@@ -169,10 +204,11 @@ class Refinement:
         self.iteration = 0
         self.estimate: MapEstimate | None = None
 
-    def next_jobs(self) -> list[BatchJob]:
-        """The batch jobs of the next round (empty when the photon budget is spent)."""
-        return _round_jobs(self.done, self.targets, self.shares, self.round_photons,
-                           self.settings)
+    def next_jobs(self, most: int | None = None) -> list[BatchJob]:
+        """The batch jobs of the next round (empty when the photon budget is spent), of at
+        most ``most`` photons when given (a round that must end by a deadline)."""
+        size = self.round_photons if most is None else max(1, min(self.round_photons, most))
+        return _round_jobs(self.done, self.targets, self.shares, size, self.settings)
 
     def add_round(self, tallies, estimated: bool = True) -> MapEstimate | None:
         """Add a round's tallies; estimate the map and its error, unless not ``estimated``
@@ -246,11 +282,13 @@ class Refinement:
 
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
         progress: Callable[[Progress], None] | None = None,
-        frame: TracingFrame | None = None) -> TraceResult:
+        frame: TracingFrame | None = None, clock_start: float | None = None) -> TraceResult:
     """Trace ``scene`` until the settings say stop; return the accumulated result.
 
     ``frame`` pins the normalised tracing frame (default: the scene's own bounds);
-    ``progress`` is called after every iteration with an immutable snapshot.
+    ``progress`` is called after every iteration with an immutable snapshot;
+    ``clock_start`` (``time.perf_counter``) is when ``settings.seconds`` started to count
+    (default: now; the command line counts from its own start).
     """
     check_memory(len(scene.emitters), settings.resolution, settings.threads, settings.budget())
     t0 = time.perf_counter()
@@ -261,10 +299,20 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     mode = workers.choose(settings.workers, threads, r.budget)
     with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:
         start = time.perf_counter()
+        deadline = None if settings.seconds is None else \
+            (clock_start if clock_start is not None else start) + settings.seconds
         # a round's map estimate serves the progress shown and the target error only
         estimated = progress is not None or settings.target_error is not None
         while True:
-            jobs = r.next_jobs()
+            most = None
+            if deadline is not None and r.iteration:
+                # a round sized to end by the deadline, at the rate of the rounds so far
+                now = time.perf_counter()
+                left = deadline - now
+                if left <= DEADLINE_SLACK * settings.seconds:
+                    break
+                most = int(r.accumulator.photons / max(now - start, 1e-9) * left)
+            jobs = r.next_jobs(most)
             if not jobs:
                 break
             est = r.add_round(trace_jobs(jobs), estimated)
@@ -272,7 +320,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
             if progress is not None:
                 progress(Progress(r.iteration, r.accumulator.photons, elapsed, est.error,
                                   r.budget, est, r.accumulator.snapshot()))
-            if settings.seconds is not None and elapsed >= settings.seconds:
+            if deadline is not None and time.perf_counter() >= deadline:
                 break
             if r.reached_target():
                 break

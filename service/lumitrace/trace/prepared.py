@@ -14,6 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..errors import LumitraceError
 from ..scene import DIELECTRIC, Scene
 from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
@@ -54,6 +55,31 @@ class TracingFrame:
         return cls(tuple(float(c) for c in center), scale,
                    CellGrid.around((lo - center) / scale, (hi - center) / scale),
                    Goniometer.of(scene))
+
+    def check_fits(self, scene: Scene) -> None:
+        """Raise unless ``scene`` traces accurately in this frame: its bounds within
+        :data:`FRAME_REACH` frame units of the centre and, for a scene with extent, at
+        least 1 / FRAME_REACH of a unit across (float32 geometry and the ray offsets are
+        sized for a unit box)."""
+        own = TracingFrame.of(scene)
+        offset = float(np.max(np.abs(np.subtract(own.center, self.center)))) / self.scale
+        size = own.scale / self.scale
+        pts = scene.bound_points()
+        has_extent = bool(np.ptp(pts, axis=0).max() > 0) if len(pts) else False
+        if not (np.isfinite(offset) and offset + size <= FRAME_REACH) or \
+                (has_extent and not size >= 1.0 / FRAME_REACH):
+            raise LumitraceError(
+                f"the tracing frame (centre {', '.join(f'{c:g}' for c in self.center)} m, "
+                f"scale {self.scale:g} m) does not fit the luminaire (centre "
+                f"{', '.join(f'{c:.6g}' for c in own.center)} m, half extent "
+                f"{own.scale:.6g} m): its parts would lie {offset + size:.3g} frame units "
+                f"out, at {size:.3g} units across; give the frame the service reports "
+                "for this luminaire", "--frame")
+
+
+#: How far (in frame units, the frame's scale) a pinned frame may place the luminaire's
+#: bounds from its centre, and the inverse of the smallest size it may shrink it to.
+FRAME_REACH = 1.0e3
 
 
 @dataclass
