@@ -60,21 +60,32 @@ def _many_lights(path: Path, n: int) -> Path:
 def test_fewer_photons_than_emitters_is_refused_and_every_emitter_counts(tmp_path):
     stage = _many_lights(tmp_path / "many.usda", 400)
     code, out, err = trace(stage, "--json", photons=300)
-    assert code == 2 and "800" in err and "emitters" in err, err
+    assert code == 2 and "at least 400" in err and "emitters" in err, err
     assert json.loads(out.strip().splitlines()[-1])["exit_status"] == 2
+    # one photon a light: every light's flux is there, and no error is claimed
+    code, out, err = trace(stage, "--json", "--target-error", "0.5", photons=400)
+    assert code == 3, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["emitted_lm"] == pytest.approx(400.0)
+    assert summary["relative_error"] is None and summary.get("photometry_error") is None
+    assert summary["converged"] is False
     code, out, err = trace(stage, "--json", photons=1000)
     assert code == 0, err
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["emitted_lm"] == pytest.approx(400.0)  # every light's flux is there
+    assert summary["emitted_lm"] == pytest.approx(400.0)
+    assert summary["relative_error"] > 0.1  # 2.5 photons a light: honest, and large
 
 
 def test_allocation_gives_every_emitter_its_minimum_and_keeps_the_usual_split():
     from lumitrace.run.session import allocate
 
     assert allocate([1.0, 2.0, 1.0], 8) == [2, 4, 2]
+    assert allocate([1000.0, 1e-6], 10, minimum=1) == [9, 1]
     assert allocate([1000.0, 1e-6], 10, minimum=2) == [8, 2]
     assert sum(allocate([1.0] * 5 + [1e6], 20, minimum=2)) == 20
     assert min(allocate([1.0] * 5 + [1e6], 20, minimum=2)) == 2
+    with pytest.raises(ValueError):
+        allocate([1.0] * 5, 4, minimum=1)
 
 
 # -- 10. --edits keeps --luminaire and --time-code --------------------------------------

@@ -297,6 +297,12 @@ class Accumulator:
         return sum(t.segments for t in self.emitters)
 
     @property
+    def spread_known(self) -> bool:
+        """Whether every light has the two photons its variance needs: with one, the
+        result's standard errors (and so its error estimates) are undefined."""
+        return all(t.photons >= 2 for t in self.emitters if t.flux > 0)
+
+    @property
     def shape(self) -> tuple[int, int]:
         return (6 * self.resolution, self.resolution)
 

@@ -42,8 +42,8 @@ def _raw_noise2(acc: Accumulator, omega: np.ndarray) -> float:
 
 def raw_relative_error(acc: Accumulator) -> float:
     """Estimated relative RMS error of the raw map, from binomial texel variances."""
-    if acc.photons < 2:  # one photon says nothing about its own spread
-        return math.inf
+    if acc.photons < 2 or not acc.spread_known:
+        return math.inf  # one photon (of the map, or of a light) says nothing of its spread
     omega = texel_solid_angles(acc.resolution)
     raw = acc.intensity()
     noise2 = _raw_noise2(acc, omega)
@@ -105,7 +105,7 @@ def estimate(acc: Accumulator, threshold: float) -> MapEstimate:
     raw = flux / omega
     noise_raw2 = _raw_noise2(acc, omega)
     raw_err = raw_relative_error(acc)
-    if threshold <= 0:
+    if threshold <= 0 or not math.isfinite(raw_err):  # no spread known: no filter judged
         return _raw_estimate(acc, raw, flux, threshold, raw_err)
     filtered = pull_push(flux, counts, threshold, omega)
     # each half filtered on its own, with the weights its own photons give at half the

@@ -213,4 +213,4 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         field_angle_c90_c270=spreads[90.0, 0.1][0],
         field_angle_c90_c270_error=spreads[90.0, 0.1][1],
         cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
-        photometry_error=relative_error(grid, c_step))
+        photometry_error=relative_error(grid, c_step) if acc.spread_known else None)

@@ -86,8 +86,8 @@ class TraceResult:
 
 
 #: Photons each emitter traces at the least: an emitter without photons would drop its
-#: flux from the result, and the error estimate's two halves need one photon each.
-MIN_EMITTER_PHOTONS = 2
+#: flux from the result (with one photon its error, and so the map's, is undefined).
+MIN_EMITTER_PHOTONS = 1
 
 
 def allocate(fluxes: list[float], photons: int, minimum: int = 0) -> list[int]:
@@ -193,7 +193,7 @@ class Refinement:
         if self.budget is not None and self.budget < MIN_EMITTER_PHOTONS * len(fluxes):
             raise LumitraceError(
                 f"{self.budget:,} photons are too few for {len(fluxes):,} emitters: each "
-                f"needs at least {MIN_EMITTER_PHOTONS}, so trace at least "
+                f"needs at least {MIN_EMITTER_PHOTONS} photon, so trace at least "
                 f"{MIN_EMITTER_PHOTONS * len(fluxes):,} (--photons)", scene.luminaire_path)
         self.targets = (allocate(fluxes, self.budget, MIN_EMITTER_PHOTONS)
                         if self.budget is not None else [math.inf] * len(fluxes))
