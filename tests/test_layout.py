@@ -77,6 +77,15 @@ def test_imports_only_run_down_the_flow(path):
     assert not bad, f"{path.relative_to(PACKAGE)} imports {bad} (rank {RANKS[own]})"
 
 
+@pytest.mark.parametrize("path", sorted((PACKAGE / "publish").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_writing_knows_no_session_and_traces_nothing(path):
+    """publish/ writes the result it is handed: it imports neither the sessions of run/
+    nor the tracer (exit rays come out of trace/, the result record from film/)."""
+    bad = [m for m in _imports(path) if m.startswith(("lumitrace.run", "lumitrace.trace"))]
+    assert not bad, f"publish/{path.name} imports {bad}"
+
+
 def test_import_graph_has_no_cycle():
     graph = {}
     for path in MODULES:

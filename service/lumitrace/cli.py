@@ -370,6 +370,10 @@ def cmd_trace(args) -> int:
 
     record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
                            pictures=not args.no_pictures)
+    if _RECEIVED:  # a signal a library swallowed while the outputs were written
+        stop = Interrupted(_RECEIVED[0])
+        stop.published = True
+        raise stop
     summary = record.summary()
     target = args.target_error
     bound = record["relative_error_bound"]
@@ -394,12 +398,16 @@ def cmd_trace(args) -> int:
 
 def cmd_rays(args) -> int:
     from .filenames import stage_name
-    from .publish.rays import MAX_RAYS, write_exit_rays
+    from .publish.rays import MAX_RAYS, check_ray_count, claim_ray_file, write_ray_file
     from .stage.reader import read_stage
+    from .trace.exit_rays import exit_rays
 
     scene = read_stage(args.stage, args.luminaire)
     out = args.out or args.stage.with_name(f"{stage_name(args.stage)}.TM25RAY")
-    rays = write_exit_rays(out, scene, args.photons, args.seed, args.max_rays or MAX_RAYS)
+    check_ray_count(out, args.photons, args.max_rays or MAX_RAYS)
+    claim_ray_file(out, scene)  # before the trace: a refusal costs no photons
+    rays = exit_rays(scene, args.photons, args.seed)
+    write_ray_file(out, rays, scene)
     print(f"{out}: {len(rays):,} rays, {rays.flux.astype(float).sum():.6g} lm "
           f"(of {args.photons:,} photons)")
     return 0

@@ -21,7 +21,7 @@ from ..photometry import frame
 from ..film.convergence import colour_maps
 from ..photometry.colour import ColourOverAngle, colour_over_angle
 from ..photometry.distribution import Photometry, photometry_of
-from ..run.session import TraceResult
+from ..film.result import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
 from .latlong import write_latlong_texture

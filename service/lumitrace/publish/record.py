@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..run.session import TraceResult
+from ..film.result import TraceResult
 from ..schema import RESULT_FIELDS
 
 _FIELDS = {f.key: f for f in RESULT_FIELDS}

@@ -16,6 +16,8 @@ from ..film.accumulate import Accumulator
 from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
+from ..film.result import TraceResult
+from ..trace.allocation import MIN_EMITTER_PHOTONS, allocate
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
 from ..trace.records import PhotonRecords
@@ -56,72 +58,6 @@ class Progress:
     budget: int | None
     estimate: MapEstimate | None = None
     accumulator: Accumulator | None = None
-
-
-@dataclass
-class TraceResult:
-    """The accumulated photons of a session and the maps estimated from them."""
-
-    scene: Scene
-    settings: TraceSettings
-    accumulator: Accumulator
-    iterations: int
-    seconds: float
-    prepare_seconds: float
-    estimate: MapEstimate
-
-    @property
-    def photons(self) -> int:
-        return self.accumulator.photons
-
-    @property
-    def relative_error(self) -> float:
-        """Estimated relative RMS error of the map written as ``Y``."""
-        return self.estimate.error
-
-    @property
-    def converged(self) -> bool:
-        """Whether the map's error bound (not its point estimate) is within the target."""
-        return self.estimate.meets(self.settings.convergence_target)
-
-
-#: Photons each emitter traces at the least: an emitter without photons would drop its
-#: flux from the result (with one photon its error, and so the map's, is undefined).
-MIN_EMITTER_PHOTONS = 1
-
-
-def allocate(fluxes: list[float], photons: int, minimum: int = 0) -> list[int]:
-    """Split ``photons`` among emitters in proportion to flux (largest remainder), each
-    getting at least ``minimum`` (the others share the rest in proportion to flux); the
-    split in proportion alone where it gives everyone ``minimum``."""
-    if photons < minimum * len(fluxes):
-        raise ValueError(f"{photons} photons cannot give {len(fluxes)} emitters "
-                         f"{minimum} each")
-    pinned: set[int] = set()
-    while True:
-        free = [i for i in range(len(fluxes)) if i not in pinned]
-        share = _proportional([fluxes[i] for i in free], photons - minimum * len(pinned))
-        low = {i for i, n in zip(free, share) if n < minimum}
-        if not low:
-            out = [minimum] * len(fluxes)
-            for i, n in zip(free, share):
-                out[i] = n
-            return out
-        pinned |= low
-
-
-def _proportional(fluxes: list[float], photons: int) -> list[int]:
-    """Split ``photons`` in proportion to ``fluxes`` by largest remainder."""
-    if not fluxes:
-        return []
-    total = float(sum(fluxes))
-    exact = [photons * f / total for f in fluxes]
-    base = [int(math.floor(x)) for x in exact]
-    rest = photons - sum(base)
-    order = sorted(range(len(fluxes)), key=lambda i: (base[i] - exact[i], i))
-    for i in order[:rest]:
-        base[i] += 1
-    return base
 
 
 #: With a photon budget alone, an emitter's job in a round holds at least this many photons
