@@ -30,7 +30,7 @@ from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
 from .ownership import claim_outputs, ownership_record
 from .result_layer import result_layer_text, write_layer_file
-from .sublayer import reload_if_open, sublayer_into_root
+from .sublayer import RootEdit, reload_if_open, sublayer_into_root
 from .transaction import DEFAULT_LOCK_WAIT, Transaction, locked, recover, signals_held
 
 
@@ -152,8 +152,9 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     record then names none, and the previous run's are removed); ``extra`` adds entries to
     the EXR header and the result layer's customLayerData (the service's revision).
     ``on_stage(step)`` runs the steps that touch layers open in this process (reloading
-    the result layer, sublayering it): a service passes the runner of its USD thread; by
-    default they run here. Only files lumitrace wrote for this stage are replaced
+    the result layer, sublayering it) and returns what ``step`` returns (the stage's
+    :class:`~.sublayer.RootEdit`, None without one): a service passes the runner of its USD
+    thread; by default they run here. Only files lumitrace wrote for this stage are replaced
     (:mod:`.ownership`)."""
     scene = result.scene
     stage_path, name, paths = planned_outputs(scene, out_dir, name)
@@ -214,11 +215,12 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         except BaseException:
             tx.abort()
             raise
-        def stage_steps() -> None:
+        def stage_steps() -> RootEdit | None:
             reload_if_open(paths["result_layer"])
             if sublayer and stage_path is not None:
                 with signals_held():
-                    sublayer_into_root(stage_path, paths["result_layer"])
+                    return sublayer_into_root(stage_path, paths["result_layer"])
+            return None
         (on_stage or _here)(stage_steps)
     return record
 

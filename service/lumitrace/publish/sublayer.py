@@ -8,6 +8,7 @@ import os
 import stat
 import tempfile
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import OutputError, OutputWarning
@@ -207,7 +208,18 @@ def _other_result_of(entry: str, stage: Path, layer_path: Path) -> bool:
         return False
 
 
-def sublayer_into_root(stage: Path, layer_path: Path) -> None:
+@dataclass(frozen=True)
+class RootEdit:
+    """What :func:`sublayer_into_root` found and did: the root layer's bytes it read
+    (``read``) and the bytes it wrote in their place (``wrote``; None: nothing written).
+    A watcher of the stage compares these with what it last loaded, so that a save by
+    someone else, even one landing in the middle of the edit, is never taken for ours."""
+
+    read: bytes | None = None
+    wrote: bytes | None = None
+
+
+def sublayer_into_root(stage: Path, layer_path: Path) -> RootEdit:
     """Put the result layer (``./NAME.lumitrace.usda`` beside the stage, or its path
     relative to the stage's folder) first in the stage root layer's subLayers, once, and
     take out the stage's other result layers (one stage, one current result).
@@ -222,7 +234,7 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> None:
     if stage.suffix.lower() == ".usdz":
         _warn(f"{stage}: a .usdz package is not modified; add {entry} to its subLayers "
               f"(or open {layer_path.name} over it) to see the result in the stage")
-        return
+        return RootEdit()
     target = Path(os.path.realpath(stage))   # edit the file, not a symlink to it
     for _ in range(CAS_ATTEMPTS):
         try:
@@ -236,16 +248,16 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> None:
         present = any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths)
         if present and not stale:
             _sync_open_root(stage, entry, layer_path)
-            return
+            return RootEdit(data)
         if not (os.access(target, os.W_OK) and os.access(target.parent, os.W_OK)):
             _warn(f"{stage}: the root layer is not writable; the result is in "
                   f"{layer_path.name} but is not sublayered into the stage")
-            return
+            return RootEdit(data)
         new = _edited_bytes(target, data, None if present else entry, root, stale)
         try:
             if _replace_keeping_identity(target, new, data, st):
                 _sync_open_root(stage, entry, layer_path)
-                return
+                return RootEdit(data, new)
         except OSError as exc:
             raise OutputError(f"cannot sublayer the result layer into the stage: {exc}",
                               str(stage)) from exc

@@ -25,6 +25,7 @@ from ..delta.notices import ChangedPaths
 from ..delta.protocol import DeltaError, Problem
 from ..errors import LumitraceError, StageError
 from ..filenames import RESULT_LAYER_SUFFIX, edits_layer_path
+from ..publish.sublayer import RootEdit
 from ..scene import Scene
 from ..stage import validate
 from ..stage.diagnostics import tf_message
@@ -251,12 +252,19 @@ class LiveStage:
 
     def write(self, write: Callable[[], Any]) -> Any:
         """Run ``write`` (publishing outputs, which may add the result sublayer to the root
-        layer) and take note of the root layer it changed, so that the watcher does not see
-        our own write as an edit; an edit someone saved just before is still seen."""
+        layer) and take note of what it did to the root layer (:meth:`_note_root_edit`)."""
+        outcome = write()
+        if isinstance(outcome, RootEdit):
+            self._note_root_edit(outcome)
+        return outcome
+
+    def _note_root_edit(self, edit: RootEdit) -> None:
+        """Our own write of the root layer is known content (the watcher skips it) only
+        when what it started from is what the service last loaded: a save by anyone else,
+        read by the edit or landing after it, leaves a file unlike what we know, and the
+        watcher makes it a revision. Content is compared, never timing."""
         root = self.stage_path
-        before = file_digest(root)
-        try:
-            return write()
-        finally:
-            if before == self.known.get(root):
-                self.known[root] = file_digest(root)
+        if edit.wrote is None or edit.read is None:
+            return
+        if hashlib.sha256(edit.read).hexdigest() == self.known.get(root):
+            self.known[root] = hashlib.sha256(edit.wrote).hexdigest()

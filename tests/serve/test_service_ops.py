@@ -1,0 +1,100 @@
+"""``lumitrace serve`` as an operator meets it, each case on a real server process on a free
+loopback port: saves that land while the service writes its result, a stage that vanishes
+and comes back, restarts (revisions and event ids), what it says on stderr, the edits
+commands while it serves, heavy deltas, and the scripts in ``tools/``."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from service_process import Service
+
+from helpers.paths import ROOT
+
+DEMO = ROOT / "stages" / "downlight.usda"
+REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
+SPEC = "lumitrace:specularReflectance"
+#: Quick settings that converge: ``lumitrace check`` can say "current" (exit 0).
+QUICK = ("--target-error", 0.3, "--resolution", 8, "--threads", 1, "--seed", 5)
+FLUX = "lumitrace:luminousFlux = 1200"
+#: How long after a result layer is replaced a save lands (s): inside the stage step.
+DELAYS = (0.0005, 0.001, 0.0015)
+
+
+@pytest.fixture
+def stage(tmp_path) -> Path:
+    path = tmp_path / "downlight.usda"
+    shutil.copy(DEMO, path)
+    return path
+
+
+def _save(path: Path, text: str) -> None:
+    """Save a file as a DCC does: a temporary file renamed over it."""
+    tmp = path.with_name(f".{path.name}.saving")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _signature(path: Path):
+    """What changes when a file is replaced or rewritten (None: no file)."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def _wait_change(path: Path, before, timeout: float = 10.0) -> bool:
+    """Spin until ``path`` is no longer what ``before`` says (True) or ``timeout`` s pass."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if _signature(path) != before:
+            return True
+        time.sleep(0.0002)
+    return False
+
+
+def _check(stage: Path) -> tuple[int, dict]:
+    run = subprocess.run([sys.executable, "-m", "lumitrace.cli", "check", str(stage),
+                          "--json"], capture_output=True, text=True, timeout=120)
+    return run.returncode, json.loads(run.stdout.strip().splitlines()[-1])
+
+
+# ------------------------------------------------------------------------------------------
+# A save that lands while the service writes its result
+# ------------------------------------------------------------------------------------------
+
+def test_saves_timed_into_result_writes_are_never_lost(stage):
+    """Each of 40 saves of the stage lands the moment the service commits a result (the
+    result layer just replaced, the stage's sublayer step under way): each becomes a
+    revision, the last result is of the last save, and ``lumitrace check`` says current."""
+    layer = stage.parent / "downlight.lumitrace.usda"
+    with Service(stage, *QUICK) as s:
+        s.wait_done(0)
+        text = stage.read_text()  # with the result sublayer, as a DCC that loaded it saves
+        assert FLUX in text
+        lost, before = [], _signature(layer)
+        for i in range(40):
+            if i and lost[-1:] != [i - 1]:  # the last save's result (a rescale) is being
+                assert _wait_change(layer, before), f"no result after save {i - 1}"
+                time.sleep(DELAYS[i % len(DELAYS)])
+            before = _signature(layer)  # written: land in that write
+            _save(stage, text.replace(FLUX, f"lumitrace:luminousFlux = {1300 + i}"))
+            try:
+                s.wait_status(lambda st: st["revision"] >= i + 1 - len(lost), timeout=4)
+            except TimeoutError:
+                lost.append(i)
+        assert not lost, f"{len(lost)} of 40 saves never became revisions: {lost}"
+        status = s.wait_done(40)
+        assert status["revision"] == 40 and status["last_error"] is None
+        assert s.client.results()["emitted_lm"] == pytest.approx(1339.0)
+        revisions = [e for e in s.client.history(0) if e.kind == "revision"]
+        assert [e.data["source"] for e in revisions[1:]] == ["file"] * 40
+        rc, verdict = _check(stage)
+        assert rc == 0 and verdict["status"] == "current", verdict
