@@ -143,6 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
+    v.add_argument("--no-viewer", action="store_true",
+                   help="do not serve the live view page at / (the JSON API only)")
     v.add_argument("--token", default=None,
                    help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
     v.add_argument("--out", type=Path, default=None, help="output folder (default: beside "
@@ -437,7 +439,8 @@ def cmd_serve(args) -> int:
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
-    return serve(args.stage, settings, args.host, args.port, token, args.out)
+    return serve(args.stage, settings, args.host, args.port, token, args.out,
+                 viewer=not args.no_viewer)
 
 
 def cmd_edits(args) -> int:

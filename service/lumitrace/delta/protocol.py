@@ -96,6 +96,21 @@ def _not_json(constant: str):
 
 def parse_request(raw: bytes) -> dict[str, Any]:
     """Decode and validate a request body (UTF-8 JSON); 400 for what is not JSON at all."""
+    return check_request(_decode(raw))
+
+
+def parse_json_object(raw: bytes) -> dict[str, Any]:
+    """Decode a request body that must be one JSON object (the session's settings), with
+    the same checks of encoding, numbers, depth and NUL characters as a delta's."""
+    body = _decode(raw)
+    if not isinstance(body, dict):
+        raise DeltaError([Problem("/", f"body must be a JSON object, got "
+                                       f"{type(body).__name__}")], 400)
+    return body
+
+
+def _decode(raw: bytes) -> Any:
+    """A request body's JSON value, checked by :func:`check_shape`."""
     try:
         body = json.loads(raw.decode("utf-8"), parse_constant=_not_json)
     except UnicodeDecodeError as exc:
@@ -111,7 +126,7 @@ def parse_request(raw: bytes) -> dict[str, Any]:
         raise DeltaError([Problem("/", f"body is nested too deeply (more than {MAX_DEPTH} "
                                        "levels of arrays and objects)")], 400) from None
     check_shape(body)
-    return check_request(body)
+    return body
 
 
 def check_shape(body: Any) -> None:

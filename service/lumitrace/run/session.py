@@ -178,6 +178,23 @@ class Refinement:
         if sum(r.nbytes for r in self.records) > self.records_cap:
             self.records, self.records_dropped = None, True
 
+    def retarget(self, settings: TraceSettings) -> None:
+        """Take new stop criteria and threshold (a service's client changed them): the
+        photons traced stay, and the budget, if any, is shared out again."""
+        self.settings = settings
+        self.budget = settings.budget()
+        fluxes = [e.flux for e in self.scene.emitters]
+        if self.budget is not None and self.budget < MIN_EMITTER_PHOTONS * len(fluxes):
+            raise LumitraceError(f"{self.budget:,} photons are too few for {len(fluxes):,} "
+                                 "emitters", "photons")
+        self.targets = (allocate(fluxes, self.budget, MIN_EMITTER_PHOTONS)
+                        if self.budget is not None else [math.inf] * len(fluxes))
+
+    def finished(self) -> bool:
+        """Whether refining is over: the target reached, the budget spent, or no light
+        escaping."""
+        return self.reached_target() or self.no_escape() or not self.next_jobs()
+
     def reestimate(self) -> MapEstimate:
         """Estimate the map again (after photons were retraced)."""
         self.estimate = estimate(self.accumulator, self.settings.threshold)

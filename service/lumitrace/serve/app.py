@@ -12,14 +12,17 @@ from typing import Any
 
 from aiohttp import web
 
-from ..delta.protocol import DeltaError, delta_schema, parse_request
+from ..delta.protocol import DeltaError, delta_schema, parse_json_object, parse_request
 from ..errors import LumitraceError
 from .engine import Engine
 from .events import EventLog
 from .live import LiveStage
+from .viewer import PAGE_DIR, PAGE_FILES, PreviewCache, editable_scene, geometry_frame
 
 #: Largest request body accepted (bytes): a layer fragment or a mesh's points fit.
 MAX_BODY_BYTES = 8 << 20
+#: What the page may load: its own files only (no CDN, no network), inline styles.
+PAGE_POLICY = "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'"
 #: Seconds between keep-alive comments on an idle event stream.
 KEEPALIVE_SECONDS = 15.0
 
@@ -44,12 +47,18 @@ def _header_bytes(value: str) -> bytes:
 
 
 def make_app(live: LiveStage, engine: Engine, events: EventLog,
-             token: str | None = None) -> web.Application:
-    """The aiohttp application of a running service."""
+             token: str | None = None, viewer: bool = True) -> web.Application:
+    """The aiohttp application of a running service (with the live view page unless
+    ``viewer`` is False)."""
+    previews = PreviewCache()
 
     @web.middleware
     async def guard(request: web.Request, handler):
-        if token is not None:
+        # the page's own files hold no data: they load without the token, and the page
+        # then sends it with every request it makes
+        public = viewer and request.method == "GET" and (
+            request.path == "/" or request.path.startswith("/page/"))
+        if token is not None and not public:
             given = _header_bytes(request.headers.get("Authorization", ""))
             if not hmac.compare_digest(given, f"Bearer {token}".encode()):
                 return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
@@ -125,8 +134,53 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             pass
         return response
 
+    async def page(request: web.Request) -> web.Response:
+        name = request.match_info.get("name", "index.html")
+        if name not in PAGE_FILES:
+            return _problem(404, f"no page file {name!r}")
+        return web.Response(body=(PAGE_DIR / name).read_bytes(),
+                            content_type=PAGE_FILES[name],
+                            headers={"Cache-Control": "no-cache",
+                                     "Content-Security-Policy": PAGE_POLICY})
+
+    async def preview(_request: web.Request) -> web.Response:
+        data = await asyncio.get_running_loop().run_in_executor(None, previews.get, engine)
+        if data is None:
+            return _problem(404, "nothing traced yet")
+        return web.Response(body=data, content_type="application/octet-stream",
+                            headers={"Cache-Control": "no-store"})
+
+    async def geometry(_request: web.Request) -> web.Response:
+        rev = engine.revision
+        if rev is None:
+            return _problem(404, "no revision taken yet")
+        data = await asyncio.get_running_loop().run_in_executor(
+            None, geometry_frame, rev.scene, rev.number)
+        return web.Response(body=data, content_type="application/octet-stream")
+
+    async def scene(_request: web.Request) -> web.Response:
+        rev = engine.revision
+        if rev is None:
+            return _problem(404, "no revision taken yet")
+        return _json(editable_scene(rev.scene, rev.number))
+
+    async def settings(request: web.Request) -> web.Response:
+        if request.method == "GET":
+            return _json(engine.session_settings())
+        try:
+            body = parse_json_object(await request.read())
+            return _json(engine.update_settings(body))
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+        except LumitraceError as exc:
+            return _problem(422, str(exc))
+
     app = web.Application(middlewares=[guard], client_max_size=MAX_BODY_BYTES)
     app.add_routes([web.get("/status", status), web.post("/deltas", deltas),
                     web.get("/events", stream), web.get("/results", results),
-                    web.get("/schema", schema)])
+                    web.get("/schema", schema), web.get("/preview", preview),
+                    web.get("/geometry", geometry), web.get("/scene", scene),
+                    web.get("/settings", settings), web.post("/settings", settings)])
+    if viewer:
+        app.add_routes([web.get("/", page), web.get("/page/{name}", page)])
     return app

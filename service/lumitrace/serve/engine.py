@@ -21,7 +21,7 @@ from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord, defined
 from ..run.incremental import Selection, retrace, select
 from ..run.session import Refinement
-from ..run.settings import TraceSettings
+from ..run.settings import SettingsError, TraceSettings
 from ..trace.prepared import TracingFrame, prepare
 from ..trace.tracer import trace_batch
 from .events import EventLog
@@ -78,6 +78,8 @@ class Engine:
         self._halted = False
         #: the session's pinned tracing frame (set by the first revision)
         self.frame: TracingFrame | None = None
+        #: paused by a client: nothing is traced until it resumes (edits are still taken)
+        self.paused = False
         self.records_cap = records_cap
 
     # -- control (any thread) -----------------------------------------------------------
@@ -110,6 +112,68 @@ class Engine:
     def _interrupted(self) -> bool:
         return self._stopping or self._pending is not None
 
+    # -- the session's knobs ----------------------------------------------------------------
+
+    def session_settings(self) -> dict[str, Any]:
+        """The knobs a client may read and change: filter threshold, target error or
+        photon budget, paused."""
+        with self._cv:
+            s = self.settings
+            return {"threshold": s.threshold, "target_error": s.target_error,
+                    "photons": s.photons, "paused": self.paused}
+
+    def update_settings(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """Apply a client's changes (checked as the command line's are: a
+        :class:`~lumitrace.run.settings.SettingsError` names a bad one, nothing changes).
+        A new threshold re-filters the current map at once, without retracing; a new
+        target or budget goes on refining (or stops) from the photons traced."""
+        known = {"threshold", "target_error", "photons", "paused"}
+        unknown = sorted(set(changes) - known)
+        if unknown:
+            raise SettingsError(f"unknown setting(s) {', '.join(unknown)}; known: "
+                                f"{', '.join(sorted(known))}")
+        paused = changes.get("paused", None)
+        if paused is not None and not isinstance(paused, bool):
+            raise SettingsError(f"must be true or false, got {paused!r}", prop="paused")
+        knobs = {k: v for k, v in changes.items() if k != "paused"}
+        if "photons" in knobs and knobs["photons"] is not None:
+            knobs.setdefault("target_error", None)
+        elif "target_error" in knobs and knobs["target_error"] is not None:
+            knobs.setdefault("photons", None)
+        new = replace(self.settings, **knobs) if knobs else self.settings  # checks them
+        with self._cv:
+            refilter = new.threshold != self.settings.threshold
+            self.settings = new
+            if paused is not None:
+                self.paused = paused
+            r = self.refinement
+            if r is not None and knobs:
+                r.retarget(new)
+                if refilter and r.accumulator.photons:
+                    r.reestimate()
+                self.done = r.finished()
+                if not self.done:
+                    self._written_full = False
+            self._cv.notify_all()
+        self.events.publish("settings", **self.session_settings())
+        return self.session_settings()
+
+    def snapshot(self) -> dict[str, Any] | None:
+        """The current refinement as the preview needs it: a frozen copy of its counts and
+        estimate, its revision and photons (None before the first round)."""
+        with self._cv:
+            r, rev = self.refinement, self.revision
+            if r is None or rev is None or not r.accumulator.photons:
+                return None
+            est = r.estimate
+            return {"scene": r.scene, "accumulator": r.accumulator.snapshot(),
+                    "estimate_": est, "revision": rev.number,
+                    "photons": r.accumulator.photons, "iteration": r.iteration,
+                    "threshold": self.settings.threshold,
+                    "target": self.settings.convergence_target,
+                    "converged": bool(est and est.meets(self.settings.convergence_target)),
+                    "seconds": time.perf_counter() - self.started}
+
     # -- status ---------------------------------------------------------------------------
 
     def status(self) -> dict[str, Any]:
@@ -121,7 +185,8 @@ class Engine:
             return {
                 "traced_revision": rev.number if rev else None,
                 "state": ("stopping" if self._stopping else "error" if self._halted else
-                          "starting" if r is None else "done" if self.done else "tracing"),
+                          "starting" if r is None else "done" if self.done else
+                          "paused" if self.paused else "tracing"),
                 "photons": acc.photons if acc else 0,
                 "iterations": r.iteration if r else 0,
                 "relative_error": defined(est.error) if est else None,
@@ -163,7 +228,7 @@ class Engine:
     def _idle(self) -> bool:
         """Nothing to do until a new revision: none traced yet, the current one done and
         written, or the current one failed."""
-        return self._halted or (self.refinement is None or self.done) \
+        return self._halted or self.paused or (self.refinement is None or self.done) \
             and not self._pictures_due()
 
     def _step(self, pending: Revision | None, pool: ThreadPoolExecutor) -> None:
@@ -311,9 +376,7 @@ class Engine:
             self._write(pictures=False)
 
     def _reached(self) -> bool:
-        if self.refinement.reached_target():
-            return True
-        return self.refinement.no_escape() or not self.refinement.next_jobs()
+        return self.refinement.finished()
 
     def _finish(self) -> None:
         with self._cv:

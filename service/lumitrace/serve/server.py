@@ -45,8 +45,9 @@ def check_binding(host: str, token: str | None) -> None:
 
 def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           port: int = DEFAULT_PORT, token: str | None = None,
-          out_dir: Path | None = None) -> int:
-    """Run the service until a signal; return the exit status (0)."""
+          out_dir: Path | None = None, viewer: bool = True) -> int:
+    """Run the service until a signal; return the exit status (0). ``viewer`` serves the
+    live view page at ``/``."""
     check_binding(host, token)
     lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
@@ -54,7 +55,7 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
         live = LiveStage(stage)
         engine = Engine(live, settings, events, out_dir)
         try:
-            asyncio.run(_main(live, engine, events, host, port, token, lock))
+            asyncio.run(_main(live, engine, events, host, port, token, lock, viewer))
         finally:
             live.close()
     finally:
@@ -77,14 +78,15 @@ def _route_warnings(events: EventLog) -> None:
 
 
 async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
-                token: str | None, lock: StageLock) -> None:
+                token: str | None, lock: StageLock, viewer: bool = True) -> None:
     loop = asyncio.get_running_loop()
     events.bind(loop)
     _route_warnings(events)
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         loop.add_signal_handler(sig, stop.set)
-    runner = web.AppRunner(make_app(live, engine, events, token), handle_signals=False,
+    runner = web.AppRunner(make_app(live, engine, events, token, viewer),
+                           handle_signals=False,
                            access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port, reuse_address=True)
@@ -94,6 +96,8 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
     lock.record(port=bound[1], url=url)
     print(f"lumitrace: serving {live.stage_path} at {url} (revision {live.revision}, edits "
           f"in {live.edits_path.name})", flush=True)
+    if viewer:
+        print(f"lumitrace: live view at {url} (open it in a browser)", flush=True)
     events.publish("started", url=url, revision=live.revision, stage=str(live.stage_path))
     engine.start(live.start())
     watcher = asyncio.create_task(watch_layers(live, engine.submit, events, stop,

@@ -1,0 +1,819 @@
+// lumitrace live view: one more client of the service's HTTP API (no framework, no build).
+// Everything shown comes from the service: /preview and /geometry (binary frames),
+// /scene, /status, /results, /settings and the event stream; edits are POST /deltas.
+"use strict";
+
+const LT = (window.lumitrace = {
+  token: sessionStorage.getItem("lumitrace-token") || null,
+  status: null, scene: null, geometry: null, preview: null, results: null,
+  polar: null, history: [], events: [], lastEventId: 0, drawn: { preview: 0, view3d: 0 },
+  timings: [], problems: [], errors: [], frames: 0, undo: [], selected: null,
+});
+window.addEventListener("error", (e) => LT.errors.push(String(e.message)));
+
+// ---- HTTP -------------------------------------------------------------------------------
+
+function headers(extra) {
+  const h = Object.assign({}, extra || {});
+  if (LT.token) h.Authorization = "Bearer " + LT.token;
+  return h;
+}
+
+async function api(path, options) {
+  const opts = Object.assign({}, options || {});
+  opts.headers = headers(opts.headers);
+  const r = await fetch(path, opts);
+  if (r.status === 401) { askToken("the token was not accepted"); throw new Error("401"); }
+  return r;
+}
+
+async function getJSON(path) {
+  const r = await api(path);
+  const body = await r.json();
+  if (!r.ok) throw Object.assign(new Error(body.error || r.statusText), { body, status: r.status });
+  return body;
+}
+
+async function postJSON(path, data) {
+  const r = await api(path, { method: "POST", body: JSON.stringify(data),
+                              headers: { "Content-Type": "application/json" } });
+  const body = await r.json();
+  return { ok: r.ok, status: r.status, body };
+}
+
+// A binary frame: "LTV1", uint32 header length, JSON header, float32 arrays.
+function readFrame(buffer) {
+  const view = new DataView(buffer);
+  const magic = String.fromCharCode(...new Uint8Array(buffer, 0, 4));
+  if (magic !== "LTV1") throw new Error("not a lumitrace view frame");
+  const n = view.getUint32(4, true);
+  const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 8, n)));
+  const arrays = {};
+  for (const [name, spec] of Object.entries(header.arrays)) {
+    const count = spec.shape.reduce((a, b) => a * b, 1);
+    arrays[name] = { data: new Float32Array(buffer, 8 + n + spec.offset, count), shape: spec.shape };
+  }
+  return { header, arrays, bytes: buffer.byteLength };
+}
+
+async function getFrame(path) {
+  const r = await api(path);
+  if (!r.ok) return null;
+  return readFrame(await r.arrayBuffer());
+}
+
+// ---- the token ----------------------------------------------------------------------------
+
+function askToken(why) {
+  document.getElementById("token-box").hidden = false;
+  document.getElementById("token-problem").textContent = why || "";
+  setConnection(false);
+}
+
+document.getElementById("token-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  LT.token = document.getElementById("token-input").value;
+  sessionStorage.setItem("lumitrace-token", LT.token);  // this tab only, never in a URL
+  document.getElementById("token-box").hidden = true;
+  start();
+});
+
+// ---- the event stream (fetch, so the token travels in a header) ---------------------------
+
+function setConnection(on) {
+  const b = document.getElementById("connection");
+  b.textContent = on ? "live" : "offline";
+  b.classList.toggle("off", !on);
+}
+
+async function follow() {
+  for (;;) {
+    try {
+      const r = await api("/events", { headers: LT.lastEventId ? { "Last-Event-ID": String(LT.lastEventId) } : {} });
+      if (!r.ok || !r.body) throw new Error("event stream " + r.status);
+      setConnection(true);
+      const reader = r.body.getReader();
+      const text = new TextDecoder();
+      let buf = "";
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) break;
+        buf += text.decode(value, { stream: true });
+        let cut;
+        while ((cut = buf.indexOf("\n\n")) >= 0) {
+          handleBlock(buf.slice(0, cut));
+          buf = buf.slice(cut + 2);
+        }
+      }
+    } catch (err) {
+      if (String(err.message) === "401") return;
+    }
+    setConnection(false);
+    await new Promise((res) => setTimeout(res, 1000));  // reconnect, resuming at the last id
+  }
+}
+
+function handleBlock(block) {
+  let kind = "message", id = null, data = "";
+  for (const line of block.split("\n")) {
+    if (line.startsWith(":")) continue;
+    const [field, ...rest] = line.split(":");
+    const value = rest.join(":").replace(/^ /, "");
+    if (field === "event") kind = value;
+    else if (field === "id") id = parseInt(value, 10);
+    else if (field === "data") data += value;
+  }
+  if (id) LT.lastEventId = id;
+  let payload = {};
+  try { payload = data ? JSON.parse(data) : {}; } catch (e) { payload = { raw: data }; }
+  onEvent(kind, payload);
+}
+
+function onEvent(kind, e) {
+  LT.events.push({ kind, ...e });
+  logEvent(kind, e);
+  if (kind === "iteration" || kind === "written" || kind === "done" || kind === "retrace" ||
+      kind === "settings") refresh();
+  if (kind === "revision" || kind === "restart" || kind === "retrace") {
+    refreshScene();
+    refresh();
+  }
+  if (kind === "iteration") remember(e.revision, e.photons, e.seconds, e.relative_error, null);
+  if (kind !== "iteration") refreshStatus();
+}
+
+function logEvent(kind, e) {
+  if (kind === "iteration" && LT.events.length > 3 && e.iteration > 3 && e.iteration % 4) return;
+  const li = document.createElement("li");
+  li.className = kind;
+  const bits = [];
+  if (e.revision != null) bits.push("rev " + e.revision);
+  if (kind === "revision") bits.push(`from ${e.source || "?"}: ${e.effect ? e.effect.kind : ""}`);
+  if (kind === "retrace") bits.push(`retraced ${fmtInt(e.photons)} of ${fmtInt(e.of)} photons (${pct(e.photons / Math.max(e.of, 1))})`);
+  if (kind === "restart") bits.push(e.reason || "");
+  if (kind === "iteration") bits.push(`${fmtInt(e.photons)} photons, error ${pct(e.relative_error)}`);
+  if (kind === "written") bits.push(`${fmtInt(e.photons)} photons${e.pictures ? ", pictures" : ""}`);
+  if (kind === "done") bits.push(e.converged ? "converged" : "budget spent");
+  if (e.message) bits.push(e.message);
+  li.textContent = `${new Date().toLocaleTimeString()} ${kind}: ${bits.join(" · ")}`;
+  const log = document.getElementById("log");
+  log.prepend(li);
+  while (log.children.length > 300) log.lastChild.remove();
+}
+
+// ---- refreshing -----------------------------------------------------------------------------
+
+let inFlight = false, again = false;
+async function refresh() {
+  if (inFlight) { again = true; return; }
+  inFlight = true;
+  try {
+    const frame = await getFrame("/preview");
+    if (frame) {
+      LT.preview = frame;
+      drawPreview();
+    }
+  } catch (e) { /* shown by the connection badge */ }
+  inFlight = false;
+  if (again) { again = false; refresh(); }
+}
+
+async function refreshStatus() {
+  try {
+    LT.status = await getJSON("/status");
+    const s = LT.status;
+    text("stage", s.stage);
+    text("revision", s.revision);
+    text("state", s.state);
+    text("rate", fmtInt(s.photons_per_second));
+    document.getElementById("pause").textContent = s.state === "paused" ? "Resume" : "Pause";
+    try { LT.results = await getJSON("/results"); } catch (e) { /* none yet */ }
+  } catch (e) { /* offline */ }
+}
+
+async function refreshScene() {
+  try {
+    LT.scene = await getJSON("/scene");
+    const geo = await getFrame("/geometry");
+    if (geo) { LT.geometry = geo; buildParts(); }
+    fillEditor();
+  } catch (e) { /* not yet */ }
+}
+
+function drawPreview() {
+  const p = LT.preview, h = p.header;
+  text("photons", fmtInt(h.photons));
+  text("error", pct(h.relative_error));
+  text("bound", pct(h.relative_error_bound));
+  const c = document.getElementById("converged");
+  c.textContent = h.converged ? "converged" : "not converged";
+  c.classList.toggle("yes", !!h.converged);
+  remember(h.revision, h.photons, h.seconds, h.relative_error, h.relative_error_bound);
+  drawMap();
+  drawPolar();
+  drawConvergence();
+  drawFigures();
+  buildSolid();
+  LT.drawn.preview = performance.now();
+  LT.drawnRevision = h.revision;
+  if (!LT.scene || LT.scene.revision !== h.revision) refreshScene();  // the scene it shows
+  for (const t of LT.timings) {
+    if (t.drawn == null && h.revision >= t.revision) t.drawn = performance.now() - t.sent;
+  }
+}
+
+// The convergence history: one point per (revision, photons), in photon order.
+function remember(revision, photons, seconds, error, bound) {
+  const old = LT.history.find((q) => q.revision === revision && q.photons === photons);
+  if (old) { if (bound != null) old.bound = bound; return; }
+  LT.history.push({ revision, photons, seconds, error, bound });
+  LT.history.sort((a, b) => a.revision - b.revision || a.photons - b.photons);
+}
+
+// ---- colour -----------------------------------------------------------------------------
+
+// Turbo, Google's perceptual rainbow, as a polynomial fit (t in [0, 1] -> r, g, b in 0..1)
+function turbo(t) {
+  t = Math.min(1, Math.max(0, t));
+  const r = 0.13572138 + t * (4.61539260 + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943))));
+  const g = 0.09140261 + t * (2.19418839 + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604))));
+  const b = 0.10667330 + t * (12.64194608 + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973))));
+  return [Math.min(1, Math.max(0, r)), Math.min(1, Math.max(0, g)), Math.min(1, Math.max(0, b))];
+}
+
+function scaler(max, log) {
+  if (!(max > 0)) return () => 0;
+  if (!log) return (v) => v / max;
+  const lo = max * 1e-3;
+  return (v) => (v <= lo ? 0 : Math.log(v / lo) / Math.log(max / lo));
+}
+
+function legend(el, max, log, unit) {
+  const stops = [];
+  for (let i = 0; i <= 10; i++) {
+    const [r, g, b] = turbo(i / 10);
+    stops.push(`rgb(${r * 255 | 0},${g * 255 | 0},${b * 255 | 0})`);
+  }
+  el.innerHTML = `<div class="bar" style="background:linear-gradient(to right,${stops.join(",")})"></div>` +
+    `<div class="ends"><span>${log ? fmt(max * 1e-3) : "0"}</span><span>${fmt(max)} ${unit}</span></div>`;
+}
+
+// ---- the intensity map (lat-long in the photometric frame) ---------------------------------
+
+function drawMap() {
+  const p = LT.preview;
+  if (!p) return;
+  const kind = document.querySelector("input[name=map-kind]:checked").value;
+  const log = document.getElementById("map-log").checked;
+  const a = p.arrays[kind], [rows, cols] = a.shape;
+  const canvas = document.getElementById("map"), ctx = canvas.getContext("2d");
+  let max = 0;
+  for (const v of a.data) if (v > max) max = v;
+  const s = scaler(max, log);
+  const img = ctx.createImageData(cols, rows);
+  for (let i = 0; i < rows * cols; i++) {
+    const [r, g, b] = turbo(s(a.data[i]));
+    img.data[4 * i] = r * 255; img.data[4 * i + 1] = g * 255; img.data[4 * i + 2] = b * 255;
+    img.data[4 * i + 3] = 255;
+  }
+  const tmp = document.createElement("canvas");
+  tmp.width = cols; tmp.height = rows;
+  tmp.getContext("2d").putImageData(img, 0, 0);
+  ctx.imageSmoothingEnabled = false;
+  ctx.drawImage(tmp, 0, 0, canvas.width, canvas.height);
+  LT.map = { kind, max, rows, cols };
+  legend(document.getElementById("map-legend"), max, log, "cd");
+}
+
+// ---- the polar curve -------------------------------------------------------------------------
+
+function planeIndex(cs, c) {
+  let best = 0;
+  for (let i = 0; i < cs.length; i++) if (Math.abs(cs[i] - c) < Math.abs(cs[best] - c)) best = i;
+  return best;
+}
+
+function drawPolar() {
+  const h = LT.preview.header, g = LT.preview.arrays.grid, sg = LT.preview.arrays.sigma;
+  const nG = h.gamma.length, perKlm = 1000 / h.lamp_lumens;
+  const row = (c) => {
+    const i = planeIndex(h.c, c);
+    return { cd: Array.from(g.data.slice(i * nG, (i + 1) * nG)),
+             sigma: Array.from(sg.data.slice(i * nG, (i + 1) * nG)), c: h.c[i] };
+  };
+  const planes = { 0: row(0), 180: row(180), 90: row(90), 270: row(270) };
+  LT.polar = { gamma: h.gamma, planes, per_klm: perKlm, revision: h.revision, photons: h.photons };
+  let max = 0;
+  for (const p of Object.values(planes)) p.cd.forEach((v, k) => { max = Math.max(max, (v + p.sigma[k]) * perKlm); });
+  const R = 190, scale = max > 0 ? R / max : 1;
+  const pt = (gam, v, side) => {
+    const a = gam * Math.PI / 180;
+    return [side * v * scale * Math.sin(a), v * scale * Math.cos(a)];
+  };
+  const path = (right, left, pick) => {
+    const pts = [];
+    h.gamma.forEach((gam, k) => pts.push(pt(gam, pick(right, k), 1)));
+    for (let k = nG - 1; k >= 0; k--) pts.push(pt(h.gamma[k], pick(left, k), -1));
+    return "M" + pts.map((q) => q[0].toFixed(1) + "," + q[1].toFixed(1)).join("L") + "Z";
+  };
+  let svg = "";
+  const rings = niceTicks(max, 4);
+  for (const t of rings) {
+    svg += `<circle r="${(t * scale).toFixed(1)}" fill="none" stroke="#ddd"/>` +
+      `<text x="3" y="${(-t * scale - 2).toFixed(1)}" font-size="10" fill="#888">${fmt(t)}</text>`;
+  }
+  for (let a = 0; a < 360; a += 30) {
+    const r = a * Math.PI / 180;
+    svg += `<line x1="0" y1="0" x2="${(R * Math.sin(r)).toFixed(1)}" y2="${(R * Math.cos(r)).toFixed(1)}" stroke="#eee"/>`;
+  }
+  const colours = { 0: "#c0392b", 90: "#2c5aa0" };
+  for (const [c, other] of [[0, 180], [90, 270]]) {
+    const right = planes[c], left = planes[other];
+    const hi = (p, k) => (p.cd[k] + p.sigma[k]) * perKlm, lo = (p, k) => Math.max(0, p.cd[k] - p.sigma[k]) * perKlm;
+    svg += `<path d="${path(right, left, hi)} ${path(right, left, lo)}" fill="${colours[c]}" fill-opacity="0.25" fill-rule="evenodd" stroke="none"/>`;
+    svg += `<path d="${path(right, left, (p, k) => p.cd[k] * perKlm)}" fill="none" stroke="${colours[c]}" stroke-width="1.6" ${c === 90 ? 'stroke-dasharray="5,3"' : ""}/>`;
+  }
+  svg += `<text x="-200" y="215" font-size="11" fill="#c0392b">C0 - C180</text>` +
+    `<text x="-120" y="215" font-size="11" fill="#2c5aa0">C90 - C270</text>` +
+    `<text x="110" y="215" font-size="11" fill="#666">cd/klm, nadir down</text>`;
+  document.getElementById("polar").innerHTML = svg;
+}
+
+function niceTicks(max, n) {
+  if (!(max > 0)) return [];
+  const raw = max / n, mag = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
+  const out = [];
+  for (let t = step; t <= max * 1.0001; t += step) out.push(t);
+  return out;
+}
+
+// ---- convergence ------------------------------------------------------------------------------
+
+function drawConvergence() {
+  const h = LT.preview.header;
+  const pts = LT.history.filter((q) => q.revision === h.revision && q.error != null && q.photons > 0);
+  const W = 420, H = 240, L = 48, B = 30, T = 10, Rm = 10;
+  let svg = `<rect x="${L}" y="${T}" width="${W - L - Rm}" height="${H - T - B}" fill="none" stroke="#ccc"/>`;
+  if (pts.length) {
+    const xs = pts.map((q) => Math.log10(q.photons));
+    const ys = pts.flatMap((q) => [q.error, q.bound || q.error, h.target_error]).filter((v) => v > 0).map(Math.log10);
+    const x0 = Math.min(...xs), x1 = Math.max(...xs, x0 + 1), y0 = Math.min(...ys) - 0.1, y1 = Math.max(...ys) + 0.1;
+    const X = (v) => L + (v - x0) / (x1 - x0) * (W - L - Rm), Y = (v) => T + (y1 - v) / (y1 - y0) * (H - T - B);
+    const line = (key, colour, dash) => {
+      const q = pts.filter((p) => p[key] > 0);
+      if (!q.length) return "";
+      return `<polyline fill="none" stroke="${colour}" stroke-width="1.6" ${dash ? 'stroke-dasharray="4,3"' : ""} points="${q.map((p) => X(Math.log10(p.photons)).toFixed(1) + "," + Y(Math.log10(p[key])).toFixed(1)).join(" ")}"/>`;
+    };
+    svg += line("error", "#c0392b") + line("bound", "#c0392b", true);
+    if (h.target_error > 0) {
+      const y = Y(Math.log10(h.target_error)).toFixed(1);
+      svg += `<line x1="${L}" x2="${W - Rm}" y1="${y}" y2="${y}" stroke="#1e8449"/><text x="${W - Rm - 70}" y="${y - 3}" font-size="10" fill="#1e8449">target ${pct(h.target_error)}</text>`;
+    }
+    svg += `<text x="${L}" y="${H - 8}" font-size="10" fill="#666">${fmtInt(Math.pow(10, x0))}</text>` +
+      `<text x="${W - Rm - 60}" y="${H - 8}" font-size="10" fill="#666">${fmtInt(Math.pow(10, x1))} photons</text>` +
+      `<text x="2" y="${T + 10}" font-size="10" fill="#666">${pct(Math.pow(10, y1))}</text>` +
+      `<text x="2" y="${H - B}" font-size="10" fill="#666">${pct(Math.pow(10, y0))}</text>` +
+      `<text x="${L + 6}" y="${T + 14}" font-size="10" fill="#c0392b">estimate (solid), bound (dashed)</text>`;
+  }
+  document.getElementById("convergence").innerHTML = svg;
+}
+
+// ---- figures --------------------------------------------------------------------------------
+
+function drawFigures() {
+  const f = LT.preview.header.figures;
+  const pm = (v, e, unit, d) => v == null ? "-" : `${Number(v).toFixed(d)}${unit ? " " + unit : ""}${e == null ? "" : " ± " + Number(e).toFixed(d)}`;
+  const rows = [
+    ["luminous flux", pm(f.luminous_flux, f.luminous_flux_error, "lm", 1)],
+    ["light output ratio", pm(f.light_output_ratio, f.light_output_ratio_error, "", 4)],
+    ["peak intensity", pm(f.peak_intensity, f.peak_intensity_error, "cd", 1)],
+    ["beam angle C0-C180", pm(f.beam_angle_c0_c180, f.beam_angle_c0_c180_error, "°", 1)],
+    ["beam angle C90-C270", pm(f.beam_angle_c90_c270, f.beam_angle_c90_c270_error, "°", 1)],
+    ["field angle C0-C180", pm(f.field_angle_c0_c180, f.field_angle_c0_c180_error, "°", 1)],
+    ["field angle C90-C270", pm(f.field_angle_c90_c270, f.field_angle_c90_c270_error, "°", 1)],
+    ["downward flux", f.downward_flux_fraction == null ? "-" : pct(f.downward_flux_fraction)],
+    ["files' error", pct(f.photometry_error)],
+    ["CIE flux code", f.cie_flux_code || "-"],
+  ];
+  if (LT.results && LT.results.cct_K != null) {
+    rows.push(["CCT", `${LT.results.cct_K.toFixed(0)} K`], ["Duv", LT.results.duv.toFixed(4)]);
+  }
+  document.getElementById("figures").innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+  LT.figures = f;
+}
+
+// ---- the 3D view (WebGL2) -------------------------------------------------------------------
+
+const gl = document.getElementById("view3d").getContext("webgl2", { antialias: true, preserveDrawingBuffer: true });
+const cam = { theta: -0.9, phi: 0.35, dist: 0.6, target: [0, 0, 0] };
+const meshes = { parts: null, solid: null };
+
+function shader(type, src) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, src);
+  gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+  return s;
+}
+
+const program = (() => {
+  if (!gl) return null;
+  const p = gl.createProgram();
+  gl.attachShader(p, shader(gl.VERTEX_SHADER, `#version 300 es
+    in vec3 pos; in vec3 nrm; in vec3 col;
+    uniform mat4 mvp; out vec3 vn; out vec3 vc;
+    void main() { gl_Position = mvp * vec4(pos, 1.0); vn = nrm; vc = col; }`));
+  gl.attachShader(p, shader(gl.FRAGMENT_SHADER, `#version 300 es
+    precision mediump float; in vec3 vn; in vec3 vc; uniform float alpha; out vec4 o;
+    void main() { vec3 l = normalize(vec3(0.4, -0.5, 0.75));
+      float d = abs(dot(normalize(vn), l)); o = vec4(vc * (0.35 + 0.65 * d), alpha); }`));
+  gl.linkProgram(p);
+  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+  return p;
+})();
+
+function upload(positions, normals, colours) {
+  const vao = gl.createVertexArray();
+  gl.bindVertexArray(vao);
+  const attrs = [["pos", positions], ["nrm", normals], ["col", colours]];
+  for (const [name, data] of attrs) {
+    const buf = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, buf);
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    const loc = gl.getAttribLocation(program, name);
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, 3, gl.FLOAT, false, 0, 0);
+  }
+  gl.bindVertexArray(null);
+  return { vao, count: positions.length / 3 };
+}
+
+const PART_COLOURS = [[0.85, 0.85, 0.82], [0.65, 0.72, 0.85], [0.9, 0.75, 0.55], [0.6, 0.8, 0.65],
+                      [0.8, 0.6, 0.75], [0.7, 0.7, 0.7]];
+
+function buildParts() {
+  if (!gl || !LT.geometry) return;
+  const pos = LT.geometry.arrays.positions.data, counts = LT.geometry.header.counts;
+  const n = pos.length / 3, nrm = new Float32Array(pos.length), col = new Float32Array(pos.length);
+  let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  const partOf = new Int32Array(n / 3);
+  let t = 0;
+  counts.forEach((c, part) => { for (let k = 0; k < c; k++) partOf[t++] = part; });
+  for (let i = 0; i < n; i += 3) {
+    const a = i * 3, b = a + 3, c = a + 6;
+    const u = [pos[b] - pos[a], pos[b + 1] - pos[a + 1], pos[b + 2] - pos[a + 2]];
+    const v = [pos[c] - pos[a], pos[c + 1] - pos[a + 1], pos[c + 2] - pos[a + 2]];
+    const nx = u[1] * v[2] - u[2] * v[1], ny = u[2] * v[0] - u[0] * v[2], nz = u[0] * v[1] - u[1] * v[0];
+    const part = partOf[i / 3];
+    const base = PART_COLOURS[part % PART_COLOURS.length];
+    const colour = part === LT.selected ? [1.0, 0.55, 0.1] : base;
+    for (let k = 0; k < 3; k++) {
+      nrm.set([nx, ny, nz], a + 3 * k);
+      col.set(colour, a + 3 * k);
+      for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], pos[a + 3 * k + d]); hi[d] = Math.max(hi[d], pos[a + 3 * k + d]); }
+    }
+  }
+  LT.partOf = partOf;
+  if (n) {
+    LT.extent = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2;
+    if (!LT.framed) {
+      cam.target = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2];
+      cam.dist = LT.extent * 6;
+      LT.framed = true;
+    }
+  }
+  meshes.parts = upload(pos, nrm, col);
+  buildSolid();
+}
+
+function direction(cDeg, gDeg) {
+  const c = cDeg * Math.PI / 180, g = gDeg * Math.PI / 180;
+  return [Math.sin(g) * Math.cos(c), Math.sin(g) * Math.sin(c), -Math.cos(g)];
+}
+
+function buildSolid() {
+  if (!gl || !LT.preview) return;
+  const h = LT.preview.header, g = LT.preview.arrays.grid.data;
+  const log = document.getElementById("solid-log").checked;
+  const cs = h.c.concat([360]), nC = h.c.length, nG = h.gamma.length;
+  let max = 0;
+  for (const v of g) max = Math.max(max, v);
+  const s = scaler(max, log), R = (LT.extent || 0.05) * 2.5;
+  const at = (i, k) => g[(i % nC) * nG + k];
+  const pos = [], nrm = [], col = [];
+  const vert = (i, k) => {
+    const v = at(i, k), d = direction(cs[i], h.gamma[k]), r = s(v) * R;
+    return { p: [cam.target[0] * 0 + d[0] * r, d[1] * r, d[2] * r], c: turbo(s(v)) };
+  };
+  for (let i = 0; i < nC; i++) {
+    for (let k = 0; k + 1 < nG; k++) {
+      const q = [vert(i, k), vert(i + 1, k), vert(i + 1, k + 1), vert(i, k + 1)];
+      for (const tri of [[0, 1, 2], [0, 2, 3]]) {
+        const [a, b, c] = tri.map((j) => q[j]);
+        const u = a.p.map((x, d) => b.p[d] - x), v = a.p.map((x, d) => c.p[d] - x);
+        const n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        for (const w of [a, b, c]) { pos.push(...w.p); nrm.push(...n); col.push(...w.c); }
+      }
+    }
+  }
+  meshes.solid = upload(new Float32Array(pos), new Float32Array(nrm), new Float32Array(col));
+  legend(document.getElementById("solid-legend"), max, log, "cd");
+}
+
+function matMul(a, b) {
+  const o = new Float32Array(16);
+  for (let i = 0; i < 4; i++) for (let j = 0; j < 4; j++) {
+    let s = 0;
+    for (let k = 0; k < 4; k++) s += a[k * 4 + j] * b[i * 4 + k];
+    o[i * 4 + j] = s;
+  }
+  return o;
+}
+
+function viewProjection(aspect) {
+  const eye = [cam.target[0] + cam.dist * Math.cos(cam.phi) * Math.cos(cam.theta),
+               cam.target[1] + cam.dist * Math.cos(cam.phi) * Math.sin(cam.theta),
+               cam.target[2] + cam.dist * Math.sin(cam.phi)];
+  const f = norm(sub(cam.target, eye)), r = norm(cross(f, [0, 0, 1])), u = cross(r, f);
+  const view = new Float32Array([r[0], u[0], -f[0], 0, r[1], u[1], -f[1], 0, r[2], u[2], -f[2], 0,
+    -dot(r, eye), -dot(u, eye), dot(f, eye), 1]);
+  const near = cam.dist / 100, far = cam.dist * 100, t = 1 / Math.tan(0.4);
+  const proj = new Float32Array([t / aspect, 0, 0, 0, 0, t, 0, 0, 0, 0, (far + near) / (near - far), -1,
+    0, 0, 2 * far * near / (near - far), 0]);
+  return { vp: matMul(proj, view), eye, r, u, f };
+}
+
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const norm = (a) => { const l = Math.hypot(...a) || 1; return [a[0] / l, a[1] / l, a[2] / l]; };
+
+function render() {
+  requestAnimationFrame(render);
+  if (!gl || !program) return;
+  const canvas = gl.canvas;
+  const w = canvas.clientWidth | 0, hgt = canvas.clientHeight | 0;
+  if (w && (canvas.width !== w || canvas.height !== hgt)) { canvas.width = w; canvas.height = hgt; }
+  gl.viewport(0, 0, canvas.width, canvas.height);
+  gl.clearColor(0.07, 0.07, 0.08, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  gl.enable(gl.DEPTH_TEST);
+  gl.useProgram(program);
+  const { vp } = viewProjection(canvas.width / Math.max(canvas.height, 1));
+  gl.uniformMatrix4fv(gl.getUniformLocation(program, "mvp"), false, vp);
+  const alpha = gl.getUniformLocation(program, "alpha");
+  if (meshes.parts) {
+    gl.disable(gl.BLEND);
+    gl.uniform1f(alpha, 1.0);
+    gl.bindVertexArray(meshes.parts.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, meshes.parts.count);
+  }
+  if (meshes.solid && document.getElementById("solid-show").checked) {
+    gl.enable(gl.BLEND);
+    gl.blendFunc(gl.SRC_ALPHA, gl.ONE_MINUS_SRC_ALPHA);
+    gl.depthMask(false);
+    gl.uniform1f(alpha, 0.55);
+    gl.bindVertexArray(meshes.solid.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, meshes.solid.count);
+    gl.depthMask(true);
+  }
+  gl.bindVertexArray(null);
+  LT.frames++;
+  LT.drawn.view3d = performance.now();
+}
+
+// orbit, pan, zoom, pick
+(function controls() {
+  const canvas = document.getElementById("view3d");
+  let drag = null;
+  canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+  canvas.addEventListener("mousedown", (e) => { drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2, moved: false }; });
+  window.addEventListener("mouseup", (e) => {
+    if (drag && !drag.moved && e.target === canvas) pick(e);
+    drag = null;
+  });
+  window.addEventListener("mousemove", (e) => {
+    if (!drag) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    if (Math.abs(dx) + Math.abs(dy) > 2) drag.moved = true;
+    drag.x = e.clientX; drag.y = e.clientY;
+    if (drag.pan) {
+      const { r, u } = viewProjection(1), k = cam.dist * 0.002;
+      cam.target = cam.target.map((t, d) => t - r[d] * dx * k + u[d] * dy * k);
+    } else {
+      cam.theta -= dx * 0.008;
+      cam.phi = Math.max(-1.5, Math.min(1.5, cam.phi + dy * 0.008));
+    }
+  });
+  canvas.addEventListener("wheel", (e) => { e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); }, { passive: false });
+})();
+
+function pick(e) {
+  if (!LT.geometry) return;
+  const canvas = gl.canvas, rect = canvas.getBoundingClientRect();
+  const x = ((e.clientX - rect.left) / rect.width) * 2 - 1, y = 1 - ((e.clientY - rect.top) / rect.height) * 2;
+  const { eye, r, u, f } = viewProjection(rect.width / rect.height);
+  const t = Math.tan(0.4), aspect = rect.width / rect.height;
+  const dir = norm([0, 1, 2].map((d) => f[d] + r[d] * x * t * aspect + u[d] * y * t));
+  const pos = LT.geometry.arrays.positions.data;
+  let best = Infinity, part = null;
+  for (let i = 0; i < pos.length; i += 9) {  // Moller-Trumbore against every triangle
+    const a = [pos[i], pos[i + 1], pos[i + 2]];
+    const e1 = [pos[i + 3] - a[0], pos[i + 4] - a[1], pos[i + 5] - a[2]];
+    const e2 = [pos[i + 6] - a[0], pos[i + 7] - a[1], pos[i + 8] - a[2]];
+    const p = cross(dir, e2), det = dot(e1, p);
+    if (Math.abs(det) < 1e-12) continue;
+    const s = sub(eye, a), uu = dot(s, p) / det;
+    if (uu < 0 || uu > 1) continue;
+    const q = cross(s, e1), vv = dot(dir, q) / det;
+    if (vv < 0 || uu + vv > 1) continue;
+    const d = dot(e2, q) / det;
+    if (d > 0 && d < best) { best = d; part = LT.partOf[i / 9]; }
+  }
+  if (part != null) selectPart(part);
+}
+
+// ---- the editor ------------------------------------------------------------------------------
+
+function selectPart(index) {
+  LT.selected = index;
+  document.getElementById("part-select").value = String(index);
+  buildParts();
+  fillEditor();
+}
+
+document.getElementById("part-select").addEventListener("change", (e) => selectPart(parseInt(e.target.value, 10)));
+
+const FIELDS = [["reflectance", "reflectance"], ["specularReflectance", "specular reflectance"],
+                ["transmittance", "transmittance"], ["roughness", "roughness"], ["ior", "index of refraction"]];
+
+function fillEditor() {
+  const sc = LT.scene;
+  if (!sc) return;
+  const sel = document.getElementById("part-select");
+  const keep = LT.selected != null ? LT.selected : 0;
+  sel.innerHTML = sc.parts.map((p, i) => `<option value="${i}">${esc(p.path)}</option>`).join("");
+  if (sc.parts.length) { sel.value = String(keep); LT.selected = keep; }
+  const part = sc.parts[LT.selected];
+  const box = document.getElementById("material-box");
+  box.innerHTML = "";
+  if (part) {
+    for (const mpath of part.materials) {
+      const m = sc.materials.find((x) => x.path === mpath);
+      if (!m) continue;
+      const fs = document.createElement("fieldset");
+      fs.innerHTML = `<legend>material ${esc(m.path)}</legend>`;
+      const scat = document.createElement("div");
+      scat.className = "row";
+      scat.innerHTML = `<label>scattering <select data-prop="scattering">${sc.scattering_models.map((t) => `<option ${t === m.scattering ? "selected" : ""}>${t}</option>`).join("")}</select></label><span class="problem"></span>`;
+      fs.appendChild(scat);
+      for (const [key, label] of FIELDS) {
+        const range = sc.ranges[key] || [0, null];
+        const row = document.createElement("div");
+        row.className = "row";
+        const max = range[1] == null ? "" : `max="${range[1]}"`;
+        row.innerHTML = `<label>${label} <input type="number" step="any" data-prop="${key}" min="${range[0]}" ${max} value="${round(m[key])}"></label><span class="problem"></span>`;
+        fs.appendChild(row);
+      }
+      fs.querySelectorAll("[data-prop]").forEach((input) => {
+        input.disabled = !m.editable;
+        input.addEventListener("change", () => {
+          const prop = input.dataset.prop;
+          const value = prop === "scattering" ? input.value : Number(input.value);
+          const old = m[prop];
+          edit([{ op: "set", path: m.path, property: sc.properties[prop], value }],
+               [{ op: "set", path: m.path, property: sc.properties[prop], value: old }], input);
+        });
+      });
+      box.appendChild(fs);
+    }
+  }
+  const tbox = document.getElementById("transform-box");
+  tbox.innerHTML = part ? `<fieldset><legend>move ${esc(part.path)} (stage units, degrees)</legend>
+    <div class="row">translate <input type="number" step="any" id="tx" value="0"><input type="number" step="any" id="ty" value="0"><input type="number" step="any" id="tz" value="0"></div>
+    <div class="row">rotate <input type="number" step="any" id="rx" value="0"><input type="number" step="any" id="ry" value="0"><input type="number" step="any" id="rz" value="0"></div>
+    <div class="row">scale <input type="number" step="any" id="sx" value="1"><input type="number" step="any" id="sy" value="1"><input type="number" step="any" id="sz" value="1"></div>
+    <div class="row"><button id="apply-transform">Set transform</button><span class="problem"></span></div></fieldset>` : "";
+  const at = document.getElementById("apply-transform");
+  if (at) at.addEventListener("click", () => {
+    const v = (id) => Number(document.getElementById(id).value);
+    edit([{ op: "transform", path: part.path, translate: [v("tx"), v("ty"), v("tz")],
+            rotate: [v("rx"), v("ry"), v("rz")], scale: [v("sx"), v("sy"), v("sz")] }], null, at);
+  });
+  const ebox = document.getElementById("emitter-box");
+  ebox.innerHTML = `<fieldset><legend>emitters (lm)</legend>${sc.emitters.map((e, i) =>
+    `<div class="row"><label>${esc(e.path)} <input type="number" min="0" step="any" data-emitter="${i}" value="${e.flux}" ${e.editable ? "" : "disabled"}></label><span class="problem"></span></div>`).join("")}</fieldset>`;
+  ebox.querySelectorAll("[data-emitter]").forEach((input) => input.addEventListener("change", () => {
+    const e = sc.emitters[parseInt(input.dataset.emitter, 10)];
+    edit([{ op: "set", path: e.path, property: sc.properties.flux, value: Number(input.value) }],
+         [{ op: "set", path: e.path, property: sc.properties.flux, value: e.flux }], input);
+  }));
+}
+
+function problemOf(control) {
+  const row = control && control.closest(".row");
+  return (row && row.querySelector(".problem")) || document.getElementById("editor-problem");
+}
+
+async function edit(deltas, inverse, control) {
+  // the control again after the editor is rebuilt (same data attributes in the same box)
+  const box = control.closest("fieldset") ? control.closest("fieldset").parentElement : null;
+  const attrs = ["data-prop", "data-emitter", "id"].filter((a) => control.hasAttribute(a))
+    .map((a) => `[${a}="${control.getAttribute(a)}"]`).join("");
+  const legend = control.closest("fieldset") ? control.closest("fieldset").querySelector("legend").textContent : "";
+  const find = () => {
+    if (!box) return control;
+    for (const fs of box.querySelectorAll("fieldset")) {
+      if (fs.querySelector("legend").textContent === legend) return fs.querySelector(attrs) || control;
+    }
+    return control;
+  };
+  let shown = problemOf(control);
+  shown.textContent = "";
+  const sent = performance.now();
+  const base = LT.status ? LT.status.revision : undefined;
+  const r = await postJSON("/deltas", { deltas, base_revision: base });
+  if (!r.ok) {
+    const why = (r.body.problems || []).map((p) => (p.where ? p.where + ": " : "") + p.why).join("; ") || r.body.error;
+    shown.textContent = why;
+    LT.problems.push({ deltas, status: r.status, why });
+    await refreshScene();  // the control goes back to the stage's value
+    problemOf(find()).textContent = why;
+    return;
+  }
+  LT.timings.push({ revision: r.body.revision, sent, drawn: null, effect: r.body.effect });
+  if (inverse) LT.undo.push(inverse);
+  document.getElementById("undo").disabled = LT.undo.length === 0;
+  await refreshStatus();
+}
+
+document.getElementById("undo").addEventListener("click", async () => {
+  const inverse = LT.undo.pop();
+  document.getElementById("undo").disabled = LT.undo.length === 0;
+  if (inverse) {
+    const r = await postJSON("/deltas", { deltas: inverse });
+    if (!r.ok) document.getElementById("editor-problem").textContent = r.body.error;
+  }
+});
+
+// ---- the session's knobs -------------------------------------------------------------------
+
+async function loadSession() {
+  try {
+    const s = await getJSON("/settings");
+    document.getElementById("threshold").value = s.threshold;
+    document.getElementById("target-error").value = s.target_error == null ? "" : s.target_error;
+    document.getElementById("budget").value = s.photons == null ? "" : s.photons;
+    LT.settings = s;
+  } catch (e) { /* not yet */ }
+}
+
+document.getElementById("apply-session").addEventListener("click", async () => {
+  document.querySelectorAll("#session-panel .problem").forEach((p) => { p.textContent = ""; });
+  const body = { threshold: Number(document.getElementById("threshold").value) };
+  const target = document.getElementById("target-error").value, budget = document.getElementById("budget").value;
+  if (budget !== "") body.photons = Number(budget);
+  else if (target !== "") body.target_error = Number(target);
+  const r = await postJSON("/settings", body);
+  if (!r.ok) {
+    const prop = (r.body.error || "").split(":")[0];
+    const el = document.querySelector(`#session-panel .problem[data-for="${prop}"]`) ||
+      document.querySelector("#session-panel .problem");
+    el.textContent = r.body.error;
+  } else LT.settings = r.body;
+  loadSession();
+});
+
+document.getElementById("pause").addEventListener("click", async () => {
+  const paused = LT.status && LT.status.state === "paused";
+  await postJSON("/settings", { paused: !paused });
+  refreshStatus();
+});
+
+for (const id of ["map-log"]) document.getElementById(id).addEventListener("change", drawMap);
+document.querySelectorAll("input[name=map-kind]").forEach((el) => el.addEventListener("change", drawMap));
+document.getElementById("solid-log").addEventListener("change", buildSolid);
+
+// ---- helpers and start ---------------------------------------------------------------------
+
+function round(v) { return Number(Number(v).toPrecision(6)); }
+function text(id, v) { document.getElementById(id).textContent = v == null ? "-" : String(v); }
+function pct(v) { return v == null || !isFinite(v) ? "undefined" : (100 * v).toFixed(2) + "%"; }
+function fmt(v) { return v >= 100 ? Math.round(v).toLocaleString("en") : Number(v).toPrecision(3); }
+function fmtInt(v) { return v == null ? "-" : Math.round(v).toLocaleString("en"); }
+function esc(s) { return String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]); }
+
+async function start() {
+  try {
+    await refreshStatus();
+    if (!LT.status) { askToken(LT.token ? "" : ""); return; }
+  } catch (e) { return; }
+  await refreshScene();
+  await loadSession();
+  await refresh();
+  follow();
+}
+
+requestAnimationFrame(render);
+start();

@@ -1,0 +1,194 @@
+"""What the live view page reads from the service: the preview of the current refinement,
+the luminaire's triangles, the editable scene and the session's settings.
+
+Maps and triangles travel as one binary frame: ``LTV1``, a little-endian uint32 length,
+that many bytes of JSON header (padded to 4 bytes), then float32 arrays whose offsets
+(bytes from the start of the data) and shapes the header gives. Everything is in the
+photometric frame: x along C0, y along C90, z up (nadir is -z), metres and candela.
+"""
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import struct
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import schema
+from ..film.convergence import estimate
+from ..film.cubemap import sample_map
+from ..photometry import frame
+from ..photometry.distribution import photometry_of
+from ..publish.record import defined
+from ..scene import Scene
+
+MAGIC = b"LTV1"
+#: The lat-long view of the map: gamma rows (0 at nadir) by C columns, in degrees.
+LATLONG_GAMMA = np.linspace(0.0, 180.0, 91)
+LATLONG_C = np.linspace(0.0, 360.0, 181)
+#: Triangles above which the page gets every k-th triangle of a part (stated in the header).
+MAX_TRIANGLES = 150_000
+#: The files the page is made of (served from the package, no network).
+PAGE_DIR = Path(__file__).with_name("page")
+PAGE_FILES = {"index.html": "text/html", "viewer.js": "text/javascript",
+              "viewer.css": "text/css"}
+
+
+def frame_bytes(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
+    """One binary frame of ``arrays`` (as float32) with ``header`` (JSON)."""
+    parts, layout, offset = [], {}, 0
+    for name, a in arrays.items():
+        data = np.ascontiguousarray(a, dtype="<f4")
+        layout[name] = {"offset": offset, "shape": list(data.shape)}
+        parts.append(data.tobytes())
+        offset += data.nbytes
+    text = json.dumps({**header, "arrays": layout}, allow_nan=False, default=str).encode()
+    text += b" " * (-len(text) % 4)
+    return MAGIC + struct.pack("<I", len(text)) + text + b"".join(parts)
+
+
+def read_frame(data: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The header and arrays of a frame made by :func:`frame_bytes` (for clients, tests)."""
+    if data[:4] != MAGIC:
+        raise ValueError("not a lumitrace view frame")
+    (n,) = struct.unpack_from("<I", data, 4)
+    header = json.loads(data[8:8 + n])
+    body = memoryview(data)[8 + n:]
+    arrays = {}
+    for name, spec in header["arrays"].items():
+        count = int(np.prod(spec["shape"])) if spec["shape"] else 1
+        arrays[name] = np.frombuffer(body, "<f4", count, spec["offset"]).reshape(spec["shape"])
+    return header, arrays
+
+
+def _photometric_points(scene: Scene, points: np.ndarray) -> np.ndarray:
+    """World points (m) in the photometric frame, about the luminaire's origin."""
+    axes = np.asarray(scene.photometric_axes)  # rows C0, C90, up
+    m = np.asarray(scene.luminaire_to_world) if scene.luminaire_to_world else None
+    origin = m[:3, 3] if m is not None else np.zeros(3)
+    return (points - origin) @ axes.T
+
+
+def geometry_frame(scene: Scene, revision: int) -> bytes:
+    """The luminaire's triangles per part in the photometric frame (m), every k-th
+    triangle of a scene above :data:`MAX_TRIANGLES` (the header says k)."""
+    tri = np.asarray(scene.triangles, np.float64).reshape(-1, 3, 3)
+    step = max(1, math.ceil(len(tri) / MAX_TRIANGLES))
+    keep = np.arange(0, len(tri), step)
+    local = _photometric_points(scene, tri[keep].reshape(-1, 3)).reshape(-1, 3, 3)
+    part = np.asarray(scene.part_index)[keep]
+    order = np.argsort(part, kind="stable")
+    counts = np.bincount(part, minlength=len(scene.parts)).tolist() if len(part) else \
+        [0] * len(scene.parts)
+    emitters = [{"path": e.path, "position": _photometric_points(
+        scene, np.asarray(e.to_world, np.float64)[:3, 3][None])[0].tolist()}
+        for e in scene.emitters]
+    header = {"revision": revision, "parts": list(scene.parts), "counts": counts,
+              "triangles": int(len(tri)), "every": step, "emitters": emitters,
+              "units": "m, photometric frame (x C0, y C90, z up)"}
+    return frame_bytes(header, {"positions": local[order].reshape(-1, 3)})
+
+
+@dataclass
+class _Cached:
+    key: tuple
+    data: bytes
+
+
+class PreviewCache:
+    """The current preview frame, made once per (revision, photons, threshold)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._cached: _Cached | None = None
+
+    def get(self, engine) -> bytes | None:
+        snap = engine.snapshot()
+        if snap is None:
+            return None
+        key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
+        with self._lock:
+            if self._cached is not None and self._cached.key == key:
+                return self._cached.data
+        data = preview_frame(**snap)
+        with self._lock:
+            self._cached = _Cached(key, data)
+        return data
+
+
+def preview_frame(scene: Scene, accumulator, estimate_, revision: int, photons: int,
+                  iteration: int, threshold: float, target: float,
+                  converged: bool, seconds: float) -> bytes:
+    """The preview of a refinement: the map (filtered and raw, cd) on a lat-long grid in
+    the photometric frame, the published C-gamma grid (cd) with its standard errors, and
+    the figures, tagged with revision and photons."""
+    est = estimate_ if estimate_ is not None and estimate_.threshold == threshold \
+        else estimate(accumulator, threshold)
+    ph = photometry_of(scene, accumulator)
+    full = ph.grid.full()
+    cc, gg = np.meshgrid(LATLONG_C, LATLONG_GAMMA)
+    dirs = frame.directions(cc, gg, scene.up_axis, frame.luminaire_rotation(scene))
+    flat = dirs.reshape(-1, 3)
+    shape = cc.shape
+    filtered = sample_map(est.filtered, flat).reshape(shape)
+    raw = sample_map(est.raw, flat).reshape(shape)
+    fig = ph.figures.as_dict()
+    header = {
+        "revision": revision, "photons": photons, "iterations": iteration,
+        "seconds": seconds, "threshold": threshold, "target_error": target,
+        "relative_error": defined(est.error), "relative_error_bound": defined(est.error_bound),
+        "raw_relative_error": defined(est.raw_error), "stepped_back": bool(est.stepped_back),
+        "converged": converged, "lamp_lumens": ph.lamp_flux, "symmetry": ph.grid.symmetry,
+        "c": full.c.tolist(), "gamma": full.gamma.tolist(),
+        "latlong": {"c": LATLONG_C.tolist(), "gamma": LATLONG_GAMMA.tolist()},
+        "figures": {k: _plain(v) for k, v in fig.items()},
+        "units": {"map": "cd", "grid": "cd", "sigma": "cd"},
+    }
+    sigma = full.sigma if full.sigma is not None else np.zeros_like(full.candela)
+    return frame_bytes(header, {"filtered": filtered, "raw": raw, "grid": full.candela,
+                                "sigma": sigma})
+
+
+def _plain(value: Any) -> Any:
+    """A figure as JSON holds it: numbers as floats (None where undefined), tuples as
+    lists."""
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bool, str)) or value is None:
+        return value
+    if isinstance(value, numbers.Real):
+        return defined(float(value))
+    return str(value)
+
+
+def editable_scene(scene: Scene, revision: int) -> dict[str, Any]:
+    """The parts, their materials (the prim that holds each material's values, and the
+    values), the emitters and their fluxes, with the ranges a delta must respect."""
+    index = np.asarray(scene.material_index)
+    part = np.asarray(scene.part_index)
+    parts = []
+    for k, name in enumerate(scene.parts):
+        mats = sorted(set(index[part == k].tolist()))
+        parts.append({"path": name, "materials": [scene.materials[m].path for m in mats],
+                      "triangles": int((part == k).sum())})
+    materials = [{"path": m.path, "scattering": m.scattering, "reflectance": m.reflectance,
+                  "specularReflectance": m.specular_reflectance,
+                  "transmittance": m.transmittance, "ior": m.ior, "roughness": m.roughness,
+                  "editable": not m.path.startswith("<")}
+                 for m in scene.materials]
+    ranges = {name.split(":", 1)[1]: list(r) for name, r in schema.MATERIAL_RANGES.items()}
+    ranges["ior"] = [schema.IOR_EXCLUSIVE_MIN, None]
+    return {"revision": revision, "parts": parts, "materials": materials,
+            "emitters": [{"path": e.path, "kind": e.kind, "flux": e.flux,
+                          "editable": "[" not in e.path} for e in scene.emitters],
+            "properties": {"scattering": schema.SCATTERING, "reflectance": schema.REFLECTANCE,
+                           "specularReflectance": schema.SPECULAR_REFLECTANCE,
+                           "transmittance": schema.TRANSMITTANCE, "ior": schema.IOR,
+                           "roughness": schema.ROUGHNESS, "flux": schema.LUMINOUS_FLUX},
+            "scattering_models": list(schema.SCATTERING_TOKENS), "ranges": ranges,
+            "ior_exclusive_min": schema.IOR_EXCLUSIVE_MIN}
