@@ -98,3 +98,71 @@ def test_saves_timed_into_result_writes_are_never_lost(stage):
         assert [e.data["source"] for e in revisions[1:]] == ["file"] * 40
         rc, verdict = _check(stage)
         assert rc == 0 and verdict["status"] == "current", verdict
+
+
+# ------------------------------------------------------------------------------------------
+# A stage that vanishes and comes back
+# ------------------------------------------------------------------------------------------
+
+def _outages(stage: Path):
+    """Ways for the stage file to go away, each with the way it comes back."""
+    text = stage.read_text()
+    moved = stage.with_name("downlight.moved.usda")
+
+    def restore() -> None:
+        if stage.is_symlink() or stage.exists():
+            stage.unlink()
+        stage.write_text(text)
+
+    def unreadable() -> None:
+        if os.geteuid() == 0:  # permissions do not stop root: a link to nothing does
+            stage.unlink()
+            stage.symlink_to(stage.with_name("nothing.usda"))
+        else:
+            stage.chmod(0)
+
+    def readable() -> None:
+        if stage.is_symlink():
+            restore()
+        else:
+            stage.chmod(0o644)
+    return {
+        "deleted": (stage.unlink, restore),
+        "renamed": (lambda: stage.rename(moved), lambda: moved.rename(stage)),
+        "unreadable": (unreadable, readable),
+        "garbage": (lambda: stage.write_text("this is no stage\n"), restore),
+    }
+
+
+def test_a_stage_that_comes_back_is_recovered_without_another_edit(stage):
+    """The stage deleted, renamed away, made unreadable or saved as garbage: an ``error``
+    event and ``last_error`` (the last revision stays); a delta accepted meanwhile cannot
+    be written to the missing stage. Once the stage is back, unchanged, the service reads
+    it again by itself: ``last_error`` clears and the newest revision is written."""
+    with Service(stage, *QUICK) as s:
+        s.wait_done(0)
+        for n, (name, (leave, come_back)) in enumerate(_outages(stage).items()):
+            seen = s.client.history(0)[-1].id
+            leave()
+            error = _wait_event(s, lambda e: e.id > seen and e.kind == "error")
+            assert str(stage) in error.data["message"] or name == "renamed", error.data
+            s.client.set(REFLECTOR, SPEC, 0.5 + 0.1 * n)  # its result cannot be sublayered
+            s.wait_status(lambda st: st["last_error"] is not None, timeout=30)
+            come_back()
+            status = s.wait_status(
+                lambda st: st["last_error"] is None and st["state"] == "done"
+                and st["written_revision"] == st["revision"] and st["written_pictures"],
+                timeout=30)
+            assert status["revision"] >= 2 * n + 2, (name, status)
+            assert s.client.results()["revision"] == status["revision"]
+
+
+def _wait_event(service: Service, predicate, timeout: float = 30.0):
+    """The first event the service keeps that matches ``predicate``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = [e for e in service.client.history(0) if predicate(e)]
+        if found:
+            return found[0]
+        time.sleep(0.1)
+    raise TimeoutError("no such event")

@@ -34,8 +34,13 @@ from ..trace.profiles import profile_table
 
 
 class LayerUnreadable(LumitraceError):
-    """A layer file could not be read (perhaps half-written by a program saving it): the
-    caller retries, and keeps the last good revision meanwhile."""
+    """A layer file could not be read (perhaps half-written by a program saving it, or
+    gone): the caller retries, and keeps the last good revision meanwhile. ``path`` is the
+    file."""
+
+    def __init__(self, message: str, path: Path):
+        super().__init__(message, str(path))
+        self.path = path
 
 
 @dataclass(frozen=True)
@@ -111,6 +116,9 @@ class LiveStage:
         self.scene = scene_from_stage(self.stage, self.luminaire)
         self.revision = revision_of(self.edits)
         self.known: dict[Path, str | None] = {}
+        #: watched files reported gone, unreadable or garbage: when one is back, it is
+        #: read again (and is a revision) even if it holds what it held before
+        self.troubled: set[Path] = set()
         self._remember_files()
 
     def _close(self) -> None:
@@ -206,15 +214,13 @@ class LiveStage:
 
     def reload(self, paths: set[Path]) -> Revision | None:
         """Reload the used layers among ``paths`` whose content changed (``force``: USD
-        compares modification times only) and read the new scene; None when nothing the
-        stage uses changed (our own writes, other files). Raises :class:`LayerUnreadable`
-        for a file that cannot be read now, :class:`StageError` for a bad new scene."""
+        compares modification times only), and those back after being reported gone or
+        unreadable (:meth:`trouble`), and read the new scene; None when nothing the stage
+        uses changed (our own writes, other files). Raises :class:`LayerUnreadable` for a
+        file that cannot be read now (or is gone), :class:`StageError` for a bad new
+        scene."""
         files = self.layer_files()
-        changed = []
-        for path in sorted({Path(p).absolute() for p in paths} & (files | self.asset_files())):
-            digest = file_digest(path)
-            if digest is not None and digest != self.known.get(path):
-                changed.append((path, digest))
+        changed = self._changed_files(paths, files | self.asset_files())
         if not changed:
             return None
         self.changes.take()
@@ -223,32 +229,61 @@ class LiveStage:
                 try:
                     validate.check_layer_file(path)
                 except StageError as exc:
-                    raise LayerUnreadable(exc.message, str(path)) from None
+                    raise LayerUnreadable(exc.message, path) from None
         self._check_saved_edits({p for p, _ in changed})
         for path, _ in changed:
-            if path not in files:
-                continue
-            layer = Sdf.Layer.Find(str(path))
-            if layer is None:
-                continue
-            try:
-                ok = layer.Reload(force=True)
-            except Tf.ErrorException as exc:
-                raise LayerUnreadable(f"cannot be read: {tf_message(exc)}", str(path)) from None
-            if not ok:
-                raise LayerUnreadable("cannot be read", str(path))
+            if path in files:
+                self._reload_layer(path)
         for path, digest in changed:
             self.known[path] = digest
         if self.edits_path in {p for p, _ in changed}:
             self.revision = max(self.revision, revision_of(self.edits))
         scene = scene_from_stage(self.stage, self.luminaire)
         check_profiles(scene)
+        self.troubled.difference_update(p for p, _ in changed)
         effect = classify(self.scene, scene, self.changes.take())
         self.revision += 1
         self.scene = scene
         self._remember_files()  # new sublayers, references or light files are watched now
         return Revision(self.revision, scene, effect, "file",
                         tuple(str(p) for p, _ in changed))
+
+    def _changed_files(self, paths: set[Path], watched: set[Path]) -> list[tuple[Path, str]]:
+        """The watched files among ``paths`` (all of them once one was in trouble) whose
+        content is new or that are back from trouble, with their digests. Raises
+        :class:`LayerUnreadable` for a watched file that is gone or cannot be read."""
+        asked = {Path(p).absolute() for p in paths}
+        if self.troubled & watched:
+            asked |= watched  # edits that came while one was gone are not missed
+        changed, gone = [], []
+        for path in sorted(asked & watched):
+            digest = file_digest(path)
+            if digest is None:
+                if self.known.get(path) is not None or path in self.troubled:
+                    gone.append(path)
+            elif digest != self.known.get(path) or path in self.troubled:
+                changed.append((path, digest))
+        if gone and not changed:
+            raise LayerUnreadable("is gone or cannot be read", gone[0])
+        return changed
+
+    def _reload_layer(self, path: Path) -> None:
+        """Reload one used layer from its file (:class:`LayerUnreadable` if it cannot)."""
+        layer = Sdf.Layer.Find(str(path))
+        if layer is None:
+            return
+        try:
+            ok = layer.Reload(force=True)
+        except Tf.ErrorException as exc:
+            raise LayerUnreadable(f"cannot be read: {tf_message(exc)}", path) from None
+        if not ok:
+            raise LayerUnreadable("cannot be read", path)
+
+    def trouble(self, path: Path) -> None:
+        """Note a watched file reported gone, unreadable or garbage: once it is readable
+        again, it is read anew and makes a revision, even with its old content, so that
+        the results and ``last_error`` recover without another edit."""
+        self.troubled.add(Path(path).absolute())
 
     def write(self, write: Callable[[], Any]) -> Any:
         """Run ``write`` (publishing outputs, which may add the result sublayer to the root

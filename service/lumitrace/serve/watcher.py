@@ -2,8 +2,9 @@
 
 The watcher follows the folders of every layer the stage uses; a change to a file that is
 not one of them, or to one whose content is what the service last read or wrote, is
-ignored. A file that cannot be read (a program half-way through saving it) is retried for
-:data:`RETRY_SECONDS`, then reported, and the last good revision stays.
+ignored. A file that cannot be read (a program half-way through saving it) or is gone is
+retried for :data:`RETRY_SECONDS`, then reported, and the last good revision stays; when
+it is back, even unchanged, it is a revision (the results and ``last_error`` recover).
 """
 from __future__ import annotations
 
@@ -60,6 +61,7 @@ async def _reload(live: LiveStage, paths: set[Path], submit, events: _Errors) ->
             revision = await live.acall(live.reload, paths)
         except LayerUnreadable as exc:
             if waited >= RETRY_SECONDS:
+                await live.acall(live.trouble, exc.path)  # its return is a revision
                 events.publish("error", message=f"{exc} (keeping revision {live.revision})",
                                where=exc.where)
                 return
