@@ -1,7 +1,8 @@
 #!/bin/sh
 # Install lumitrace into ./.venv (created if missing). With --test, also the test
-# dependencies: the Python ones, and the OpenEXR C++ headers the cube-map tests compile
-# OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++).
+# dependencies: the Python ones, the OpenEXR C++ headers the cube-map tests compile
+# OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
+# the headless Chromium the live view tests drive (chromium, chromium-driver).
 set -e
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -12,13 +13,24 @@ if [ "$1" = "--test" ]; then
     # the EULUMDAT cross-check reader may need a Rust toolchain to build: optional
     .venv/bin/python -m pip install -q -e '.[crosscheck]' 2>/dev/null ||
         echo "note: the eulumdat cross-check reader did not install; its tests are skipped" >&2
+    # system packages: OpenEXR's headers and a compiler (the ImfEnvmap oracle tests),
+    # headless Chromium and its driver (the live view tests)
+    need=""
     if ! pkg-config --exists OpenEXR 2>/dev/null || ! command -v g++ >/dev/null 2>&1; then
+        need="$need libopenexr-dev pkg-config g++"
+    fi
+    if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+        need="$need chromium chromium-driver"
+    fi
+    if [ -n "$need" ]; then
         if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
-            echo "installing libopenexr-dev, pkg-config and g++ for the ImfEnvmap oracle tests"
+            echo "installing$need for the tests"
             apt-get update -qq >/dev/null
-            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libopenexr-dev pkg-config g++ >/dev/null
+            # shellcheck disable=SC2086
+            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $need >/dev/null
         else
-            echo "note: install libopenexr-dev, pkg-config and g++ (or set LUMITRACE_SKIP_NATIVE=1)" >&2
+            echo "note: install$need (the tests that need them are skipped, saying why;" \
+                 "LUMITRACE_SKIP_NATIVE=1 skips the OpenEXR oracle)" >&2
         fi
     fi
 else

@@ -406,7 +406,7 @@ function drawFigures() {
 // ---- the 3D view (WebGL2) -------------------------------------------------------------------
 
 const gl = document.getElementById("view3d").getContext("webgl2", { antialias: true, preserveDrawingBuffer: true });
-const cam = { theta: -0.9, phi: 0.35, dist: 0.6, target: [0, 0, 0] };
+const cam = { theta: -0.9, phi: -0.3, dist: 0.6, target: [0, 0, 0] };  // from below: the light side
 const meshes = { parts: null, solid: null };
 
 function shader(type, src) {
