@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.mounts import tmpfs
 from helpers.paths import ROOT
 
 DISC = ROOT / "stages" / "reference" / "lambertian_disc.usda"
@@ -144,20 +145,9 @@ def test_time_is_a_deadline_counted_from_the_start(tmp_path):
 @pytest.fixture
 def read_only_folder(tmp_path):
     """A real read-only file system holding the stage (a tmpfs remounted read-only)."""
-    mount = tmp_path / "ro"
-    mount.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("a read-only file system needs root and mount(8)")
-    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(mount)],
-                       capture_output=True, text=True)
-    if p.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {p.stderr.strip()}")
-    try:
-        shutil.copy(DISC, mount / "dl.usda")
-        subprocess.run(["mount", "-o", "remount,ro", str(mount)], check=True)
+    with tmpfs(tmp_path / "ro", "4m", lambda m: shutil.copy(DISC, m / "dl.usda"),
+               read_only=True) as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], capture_output=True)
 
 
 def test_a_stage_in_a_read_only_folder_traces_to_an_out_folder(read_only_folder, tmp_path):
@@ -256,20 +246,6 @@ def test_a_ray_file_with_a_bad_ray_is_one_line_naming_the_ray(tmp_path, flaw, wo
     stage.Save()
     code, _, err = trace(path)
     assert code == 2 and words in err and "ray 5" in err and "Traceback" not in err, err
-
-
-@pytest.mark.parametrize("delay", [0.15, 0.3, 0.4])
-def test_ctrl_c_through_python_m_lumitrace_stops_the_run(dl, delay):
-    p = subprocess.Popen([sys.executable, "-m", "lumitrace", "trace", str(dl), "--photons",
-                          "4000000", "--no-progress"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    time.sleep(delay)
-    p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=120)
-    assert p.returncode == 130, (out, err)
-    assert err.strip().splitlines() == [
-        "lumitrace: SIGINT: interrupted; nothing was written, earlier outputs are unchanged"]
-    assert sorted(q.name for q in dl.parent.iterdir()) == ["dl.usda"]
 
 
 # -- 16. the polar curve of a luminaire no light leaves -------------------------------------

@@ -79,7 +79,7 @@ def main(argv=None) -> int:
             index = driver.execute_script(
                 "return lumitrace.scene.parts.findIndex(p => p.path.endsWith('Reflector'))")
             driver.execute_script(f"selectPart({index})")
-            latencies = []
+            latencies, phases = [], []
             for k in range(args.edits):
                 value = 0.9 - 0.05 * (k % 8)
                 n = driver.execute_script("return lumitrace.timings.length")
@@ -90,11 +90,14 @@ def main(argv=None) -> int:
                                       el, str(value))
                 until(driver, f"lumitrace.timings.length > {n} && "
                               f"lumitrace.timings[{n}].drawn != null")
-                latencies.append(driver.execute_script(f"return lumitrace.timings[{n}].drawn"))
+                t = driver.execute_script(f"return lumitrace.timings[{n}]")
+                latencies.append(t["drawn"])
+                phases.append({k: t.get(k) for k in ("posted", "evented", "asked", "fetched",
+                                                     "drawn")})
                 time.sleep(0.5)
             out["edit_to_preview_ms"] = {"median": statistics.median(latencies),
                                          "min": min(latencies), "max": max(latencies),
-                                         "all": latencies}
+                                         "all": latencies, "phases": phases}
             if args.screenshot:
                 time.sleep(2.0)
                 driver.save_screenshot(str(args.screenshot))

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers.mounts import tmpfs
 from helpers.paths import ROOT
 
 DISC = ROOT / "stages" / "reference" / "lambertian_disc.usda"
@@ -275,18 +276,8 @@ def test_summary_names_the_run_outputs(disc):
 @pytest.fixture
 def small_disk(tmp_path):
     """A real 6 MiB tmpfs (needs root and mount; skipped with the reason otherwise)."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("a size-limited file system needs root and mount(8)")
-    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mount)],
-                       capture_output=True, text=True)
-    if p.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {p.stderr.strip()}")
-    try:
+    with tmpfs(tmp_path / "disk", "6m") as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], capture_output=True)
 
 
 def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
@@ -310,17 +301,21 @@ def test_a_full_disk_keeps_the_earlier_set_and_says_so(small_disk):
     assert not list(small_disk.glob(".disc.lumitrace-staging-*"))
 
 
+@pytest.mark.parametrize("launcher", ["lumitrace", "python -m lumitrace"])
 @pytest.mark.parametrize("delay", [0.05, 0.2, 0.4, 0.6])
-def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay):
+def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay, launcher):
     """SIGINT in the first moments (Python and USD loading their modules, which can swallow
-    a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs.
+    a KeyboardInterrupt) stops the run before it traces: one line, status 130, no outputs,
+    through the ``lumitrace`` entry point and through ``python -m lumitrace`` alike.
     (Enough photons that tracing still runs at the last delay: the outputs' write, once
     begun, is finished before a signal is taken.)"""
     # the delay counts from the interpreter being up (a signal during Python's own start-up,
     # before any of our code runs, is the interpreter's to handle)
+    start = ("import lumitrace_launch; sys.exit(lumitrace_launch.main())"
+             if launcher == "lumitrace" else "import runpy; sys.argv[0] = '-m'; "
+             "runpy.run_module('lumitrace', run_name='__main__', alter_sys=True)")
     p = subprocess.Popen([sys.executable, "-c",
-                          "import sys; print('up', flush=True); import lumitrace_launch; "
-                          "sys.exit(lumitrace_launch.main())",
+                          f"import sys; print('up', flush=True); {start}",
                           "trace", str(disc), "--photons", "4000000", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline() == "up\n"

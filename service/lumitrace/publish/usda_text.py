@@ -70,8 +70,9 @@ def _remove_entry(text: str, entry: str) -> str | None:
     return text[:at] + text[end:]
 
 
-def _header_start(text: str) -> int | None:
-    """Index of the ``(`` opening the layer metadata block (None: no block)."""
+def _after_header_line(text: str) -> tuple[int, int] | None:
+    """(the index after the ``#usda`` line, the index of the first character after it
+    that is not blank or a comment line); None for text of one line."""
     end = text.find("\n")
     if end < 0:
         return None
@@ -84,25 +85,21 @@ def _header_start(text: str) -> int | None:
             i = len(text) if j < 0 else j + 1
         else:
             break
-    return i if i < len(text) and text[i] == "(" else None
+    return end + 1, i
+
+
+def _header_start(text: str) -> int | None:
+    """Index of the ``(`` opening the layer metadata block (None: no block)."""
+    at = _after_header_line(text)
+    return at[1] if at is not None and at[1] < len(text) and text[at[1]] == "(" else None
 
 
 def _edit_header(text: str, entry: str) -> str | None:
     nl = "\r\n" if "\r\n" in text else "\n"
-    end = text.find("\n")
-    if end < 0:
+    at = _after_header_line(text)
+    if at is None:
         return None
-    pos = end + 1
-    # skip blank and comment lines between the header and the metadata block
-    i = pos
-    while i < len(text):
-        if text[i] in " \t\r\n":
-            i += 1
-        elif text[i] == "#":
-            j = text.find("\n", i)
-            i = len(text) if j < 0 else j + 1
-        else:
-            break
+    pos, i = at  # blank and comment lines between the header and the metadata block
     item = f"@{entry}@"
     if i >= len(text) or text[i] != "(":
         block = f"({nl}    subLayers = [{nl}        {item}{nl}    ]{nl}){nl}"

@@ -8,6 +8,7 @@ photometric frame: x along C0, y along C90, z up (nadir is -z), metres and cande
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import numbers
@@ -21,7 +22,7 @@ import numpy as np
 
 from .. import schema
 from ..film.convergence import estimate
-from ..film.cubemap import sample_map
+from ..film.cubemap import bilinear_taps, face_size, sample_map
 from ..photometry import frame
 from ..photometry.distribution import photometry_of
 from ..publish.record import defined
@@ -121,6 +122,21 @@ class PreviewCache:
         return data
 
 
+@functools.lru_cache(maxsize=8)
+def _latlong_taps_of(up_axis: str, rotation: tuple, res: int):
+    cc, gg = np.meshgrid(LATLONG_C, LATLONG_GAMMA)
+    turn = np.asarray(rotation).reshape(3, 3) if rotation else ()
+    dirs = frame.directions(cc, gg, up_axis, turn).reshape(-1, 3)
+    return bilinear_taps(dirs, res)
+
+
+def _latlong_taps(scene: Scene, res: int):
+    """The cube-map lookups of the lat-long view's directions (made once per frame)."""
+    rotation = frame.luminaire_rotation(scene)
+    key = tuple(np.asarray(rotation, np.float64).ravel().tolist()) if len(rotation) else ()
+    return _latlong_taps_of(scene.up_axis, key, res)
+
+
 def preview_frame(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
                   converged: bool, seconds: float) -> bytes:
@@ -131,12 +147,10 @@ def preview_frame(scene: Scene, accumulator, estimate_, revision: int, photons: 
         else estimate(accumulator, threshold)
     ph = photometry_of(scene, accumulator)
     full = ph.grid.full()
-    cc, gg = np.meshgrid(LATLONG_C, LATLONG_GAMMA)
-    dirs = frame.directions(cc, gg, scene.up_axis, frame.luminaire_rotation(scene))
-    flat = dirs.reshape(-1, 3)
-    shape = cc.shape
-    filtered = sample_map(est.filtered, flat).reshape(shape)
-    raw = sample_map(est.raw, flat).reshape(shape)
+    taps = _latlong_taps(scene, face_size(est.filtered.shape[0]))
+    shape = (len(LATLONG_GAMMA), len(LATLONG_C))
+    both = np.stack([est.filtered, est.raw], axis=-1)
+    filtered, raw = (m.reshape(shape) for m in sample_map(both, None, taps).T)
     fig = ph.figures.as_dict()
     header = {
         "revision": revision, "photons": photons, "iterations": iteration,

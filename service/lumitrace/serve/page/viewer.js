@@ -131,6 +131,11 @@ function handleBlock(block) {
 
 function onEvent(kind, e) {
   LT.events.push({ kind, ...e });
+  if (kind === "iteration" || kind === "retrace" || kind === "written") {
+    for (const t of LT.timings) {
+      if (t.evented == null && e.revision >= t.revision) t.evented = performance.now() - t.sent;
+    }
+  }
   logEvent(kind, e);
   if (kind === "iteration" || kind === "written" || kind === "done" || kind === "retrace" ||
       kind === "settings") refresh();
@@ -168,8 +173,15 @@ async function refresh() {
   if (inFlight) { again = true; return; }
   inFlight = true;
   try {
+    const asked = performance.now();
     const frame = await getFrame("/preview");
     if (frame) {
+      for (const t of LT.timings) {
+        if (t.fetched == null && frame.header.revision >= t.revision) {
+          t.asked = asked - t.sent;
+          t.fetched = performance.now() - t.sent;
+        }
+      }
       LT.preview = frame;
       drawPreview();
     }
@@ -742,7 +754,8 @@ async function edit(deltas, inverse, control) {
     problemOf(find()).textContent = why;
     return;
   }
-  LT.timings.push({ revision: r.body.revision, sent, drawn: null, effect: r.body.effect });
+  LT.timings.push({ revision: r.body.revision, sent, drawn: null, effect: r.body.effect,
+                    posted: performance.now() - sent });
   if (inverse) LT.undo.push(inverse);
   document.getElementById("undo").disabled = LT.undo.length === 0;
   await refreshStatus();
