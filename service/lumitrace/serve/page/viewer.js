@@ -408,8 +408,9 @@ function drawFigures() {
     ["files' error", pct(f.photometry_error)],
     ["CIE flux code", f.cie_flux_code || "-"],
   ];
-  if (LT.results && LT.results.cct_K != null) {
-    rows.push(["CCT", `${LT.results.cct_K.toFixed(0)} K`], ["Duv", LT.results.duv.toFixed(4)]);
+  const col = LT.results ? (LT.results.colour || LT.results) : null;
+  if (col && col.cct_K != null) {
+    rows.push(["CCT", `${Number(col.cct_K).toFixed(0)} K`], ["Duv", Number(col.duv).toFixed(4)]);
   }
   document.getElementById("figures").innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
   LT.figures = f;
