@@ -103,6 +103,15 @@ ILLUMINANT = "lumitrace:illuminant"
 BODY = "lumitrace:body"
 
 # -- LumitraceLuminaireAPI and the result record ---------------------------------------
+#: The luminaire's own data, written into the photometric files: text attributes, and the
+#: input power (W, at least 0) and colour rendering index (Ra, at most 100).
+MANUFACTURER = "lumitrace:manufacturer"
+LUMINAIRE_NAME = "lumitrace:luminaireName"
+CATALOGUE_NUMBER = "lumitrace:catalogueNumber"
+LAMP_DESCRIPTION = "lumitrace:lampDescription"
+INPUT_POWER = "lumitrace:inputPower"
+COLOUR_RENDERING_INDEX = "lumitrace:colourRenderingIndex"
+LUMINAIRE_TEXT = (MANUFACTURER, LUMINAIRE_NAME, CATALOGUE_NUMBER, LAMP_DESCRIPTION)
 RESULT_PREFIX = "lumitrace:result:"
 
 

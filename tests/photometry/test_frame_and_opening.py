@@ -75,5 +75,6 @@ def test_the_downlight_opening_is_its_diffuser_not_its_flange(tmp_path):
     assert height == 0.0
     from lumitrace.photometry.lm63 import read_ies
     ies = read_ies(record["ies"])
-    assert ies.length == pytest.approx(length, abs=5e-4)  # the file holds mm
-    assert ies.width == pytest.approx(width, abs=5e-4)
+    # a round opening: LM-63's circle, width = length < 0 (the file holds mm)
+    assert ies.length == pytest.approx(-length, abs=5e-4)
+    assert ies.width == pytest.approx(-width, abs=5e-4)

@@ -55,7 +55,13 @@ def test_emitter_and_luminaire_api_properties():
     assert (emitter.GetSchemaAttributeSpec(schema.RAY_FILE).typeName
             == Sdf.ValueTypeNames.Asset)
     luminaire = registry.FindAppliedAPIPrimDefinition(schema.LUMINAIRE_API)
-    assert set(luminaire.GetPropertyNames()) == set(schema.RESULT_ATTRIBUTES)
+    info = {schema.MANUFACTURER: "string", schema.LUMINAIRE_NAME: "string",
+            schema.CATALOGUE_NUMBER: "string", schema.LAMP_DESCRIPTION: "string",
+            schema.INPUT_POWER: "double", schema.COLOUR_RENDERING_INDEX: "double"}
+    assert set(luminaire.GetPropertyNames()) == set(schema.RESULT_ATTRIBUTES) | set(info)
+    for name, type_name in info.items():
+        assert luminaire.GetSchemaAttributeSpec(name).typeName == \
+            Sdf.ValueTypeNames.Find(type_name), name
     for name, type_name in schema.RESULT_ATTRIBUTES.items():
         spec = luminaire.GetSchemaAttributeSpec(name)
         assert spec.typeName == Sdf.ValueTypeNames.Find(type_name), name

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from ..film.accumulate import Accumulator
@@ -37,6 +39,16 @@ class LuminousOpening:
     width: float
     height: float
     centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: the opening is round (a circle where length equals width, else an ellipse): the
+    #: light leaves its face within the ellipse inscribed in the extents
+    round: bool = False
+    #: the luminaire's own extents (m) along C0, C90 and vertical (its bounding box)
+    box: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def area(self) -> float:
+        """The luminous area (m^2) of the flat opening: an ellipse's or a rectangle's."""
+        return (math.pi / 4.0 if self.round else 1.0) * self.length * self.width
 
 
 def _extent(marginal: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
@@ -49,6 +61,12 @@ def _extent(marginal: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     edges = np.linspace(lo, hi, len(marginal) + 1)
     return (float(np.interp(OPENING_TAIL, cum, edges)),
             float(np.interp(1.0 - OPENING_TAIL, cum, edges)))
+
+
+#: A flat opening is round when at most this share of the light leaving its face leaves
+#: through bins wholly outside the ellipse inscribed in its extents (a square opening sends
+#: about a fifth of its light through the corners; the bins' size blurs a circle's edge).
+ROUND_OPENING_OUTSIDE = 0.02
 
 
 def luminous_opening(acc: Accumulator) -> LuminousOpening:
@@ -67,9 +85,10 @@ def luminous_opening(acc: Accumulator) -> LuminousOpening:
             flux[idx[keep] - N_CELLS] += w * values[keep]
     flux = flux.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE)
     lo, hi = np.array(g.lo), np.array(g.hi)
+    box = tuple(float(x) for x in hi - lo)
     total = float(flux.sum())
     if total <= 0:
-        return LuminousOpening(*(hi - lo), tuple(0.5 * (lo + hi)))
+        return LuminousOpening(*(hi - lo), tuple(0.5 * (lo + hi)), box=box)
     face = 0 if flux[0].sum() >= flux[1].sum() else 1
     level = lo[2] if face == 0 else hi[2]
     f = flux[face]  # rows along C90, columns along C0
@@ -83,7 +102,28 @@ def luminous_opening(acc: Accumulator) -> LuminousOpening:
     if sides.sum() >= SIDE_SHARE * total:
         a2, b2 = _extent(sides.sum(axis=(0, 2)), lo[2], hi[2])
         height = b2 - a2
-    return LuminousOpening(b0 - a0, b1 - a1, height, (0.5 * (a0 + b0), 0.5 * (a1 + b1), level))
+    round_ = f.sum() >= SIDE_SHARE * total and \
+        _outside_ellipse(f, (a0, b0, a1, b1), lo, hi) <= ROUND_OPENING_OUTSIDE
+    return LuminousOpening(b0 - a0, b1 - a1, height, (0.5 * (a0 + b0), 0.5 * (a1 + b1), level),
+                           round=bool(round_), box=box)
+
+
+def _outside_ellipse(face: np.ndarray, extents, lo, hi) -> float:
+    """Share of a face's exit flux (bins: rows along C90, columns along C0) whose bin lies
+    wholly outside the ellipse inscribed in ``extents`` (a0, b0, a1, b1)."""
+    a0, b0, a1, b1 = extents
+    n = face.shape[0]
+    e0, e1 = np.linspace(lo[0], hi[0], n + 1), np.linspace(lo[1], hi[1], n + 1)
+    c0, r0 = 0.5 * (a0 + b0), 0.5 * (b0 - a0)
+    c1, r1 = 0.5 * (a1 + b1), 0.5 * (b1 - a1)
+    if r0 <= 0 or r1 <= 0:
+        return 1.0
+    # the bin's point nearest the ellipse's centre
+    near0 = np.clip(c0, e0[:-1], e0[1:])
+    near1 = np.clip(c1, e1[:-1], e1[1:])
+    outside = ((near1[:, None] - c1) / r1) ** 2 + ((near0[None, :] - c0) / r0) ** 2 > 1.0
+    total = float(face.sum())
+    return float(face[outside].sum()) / total if total > 0 else 1.0
 
 
 @dataclass(frozen=True)

@@ -70,10 +70,15 @@ def direct_ratios(grid: CGammaGrid) -> list[float]:
 
 def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
                dff: float, lor: float, company: str = "lumitrace", report: str = "",
-               dc: float = 5.0) -> str:
+               dc: float = 5.0, number: str = "", file_name: str = "",
+               lamp_type: str = "lumitrace emitters", colour: str = "", cri: str = "",
+               watts: float = 0.0) -> str:
     """EULUMDAT text of a grid (cd) for lamps of ``lamp_lumens`` lm. ``dims_mm`` holds
     luminaire ``length``, ``width``, ``height`` and luminous area ``lum_length``,
-    ``lum_width``, ``lum_height`` in mm; ``dff`` and ``lor`` are fractions."""
+    ``lum_width``, ``lum_height`` in mm (a width of 0: circular, the length its
+    diameter); ``dff`` and ``lor`` are fractions; ``number`` the luminaire number,
+    ``lamp_type``, ``colour`` (appearance, say "3000 K"), ``cri`` (colour rendering) and
+    ``watts`` (wattage including ballast) the lamp set's data."""
     isym = ISYM[grid.symmetry]
     mc = int(round(360.0 / dc))
     cs = plane_angles(isym, mc, dc)
@@ -84,12 +89,13 @@ def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
     dg = float(steps[0]) if steps.size and np.allclose(steps, steps[0]) else 0.0
     f = lambda x: f"{x:.6g}"  # noqa: E731
     lines = [company[:78], "1" if isym == 1 else "3", str(isym), str(mc), f(dc), str(ng), f(dg),
-             report[:78], name[:78], "", "", f"{_dt.date.today().isoformat()} lumitrace"[:78],
+             report[:78], name[:78], number[:78], file_name[:78],
+             f"{_dt.date.today().isoformat()} lumitrace"[:78],
              f(dims_mm["length"]), f(dims_mm["width"]), f(dims_mm["height"]),
              f(dims_mm["lum_length"]), f(dims_mm["lum_width"])]
     lines += [f(dims_mm["lum_height"])] * 4
     lines += [f"{100.0 * dff:.2f}", f"{100.0 * lor:.2f}", "1", "0", "1", "1",
-              "lumitrace emitters", f(lamp_lumens), "", "", "0"]
+              lamp_type[:24], f(lamp_lumens), colour[:16], cri[:6], f(watts)]
     lines += [f"{v:.3f}" for v in direct_ratios(grid)]
     lines += [f(c) for c in np.arange(mc) * dc]
     lines += [f(g) for g in grid.gamma]

@@ -108,9 +108,12 @@ def _clean(text: str) -> str:
 
 
 def format_ies(grid: CGammaGrid, lamp_lumens: float, width: float, length: float,
-               height: float, keywords: dict[str, str] | None = None) -> str:
+               height: float, keywords: dict[str, str] | None = None,
+               input_watts: float = 0.0) -> str:
     """LM-63-2019 text of a type C grid (cd for lamps of ``lamp_lumens`` lm in total);
-    luminous opening ``width`` (along C90), ``length`` (along C0), ``height`` in metres."""
+    luminous opening ``width`` (along C90), ``length`` (along C0), ``height`` in metres
+    (negative width and length: a circular or elliptical opening, LM-63's Table 1);
+    ``input_watts`` the luminaire's input power (W)."""
     today = _dt.date.today().isoformat()
     kw = {"TEST": "lumitrace photon tracing", "TESTLAB": "lumitrace (computer simulation)",
           "ISSUEDATE": today, "MANUFAC": "unknown"}
@@ -120,7 +123,7 @@ def format_ies(grid: CGammaGrid, lamp_lumens: float, width: float, length: float
     out.append("TILT=NONE")
     out.append(f"1 {lamp_lumens:.6g} 1 {len(grid.gamma)} {len(grid.c)} 1 2 "
                f"{width:.4f} {length:.4f} {height:.4f}")
-    out.append(f"1.0 {FILE_GENERATION_SIMULATION:.5f} 0")
+    out.append(f"1.0 {FILE_GENERATION_SIMULATION:.5f} {input_watts:.6g}")
     out += _numbers(grid.gamma, "{:.6g}")
     out += _numbers(grid.c, "{:.6g}")
     for row in grid.candela:
@@ -129,9 +132,11 @@ def format_ies(grid: CGammaGrid, lamp_lumens: float, width: float, length: float
 
 
 def write_ies(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float, width: float,
-              length: float, height: float, keywords: dict[str, str] | None = None) -> Path:
+              length: float, height: float, keywords: dict[str, str] | None = None,
+              input_watts: float = 0.0) -> Path:
     """Write an LM-63-2019 file atomically; see :func:`format_ies`."""
-    write_text(path, format_ies(grid, lamp_lumens, width, length, height, keywords))
+    write_text(path, format_ies(grid, lamp_lumens, width, length, height, keywords,
+                                input_watts))
     return Path(path)
 
 

@@ -41,15 +41,16 @@ MAX_TEXEL_ERROR = 100.0
 
 def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: Path) -> dict:
     """The UsdLux light standing in for the luminaire, a child of the luminaire prim: an
-    IES-shaped disk the size of its measured luminous opening (equal area), at the
-    opening's centre (luminaire space, stage units), with the luminaire's flux."""
+    IES-shaped disk of the measured luminous opening's area (an ellipse's where it is
+    round), at the opening's centre (luminaire space, stage units), with the luminaire's
+    flux."""
     opening = ph.opening
     centre = np.asarray(scene.photometric_axes).T @ np.asarray(opening.centre)  # world m
     m = np.asarray(scene.luminaire_to_world) if scene.luminaire_to_world else \
         np.diag([scene.meters_per_unit] * 3 + [1.0])
     local = np.linalg.solve(m, np.append(centre, 1.0))[:3]
     scale = float(np.cbrt(abs(np.linalg.det(m[:3, :3])))) or scene.meters_per_unit
-    radius = float(np.sqrt(max(opening.length * opening.width, 1e-12) / np.pi))
+    radius = float(np.sqrt(max(opening.area, 1e-12) / np.pi))
     return {"ies": os.path.relpath(ies_path, layer_dir),
             "flux": ph.figures.luminous_flux, "radius": radius / scale,
             "position": tuple(float(x) for x in local), "up_axis": scene.up_axis,
@@ -185,7 +186,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         tx = Transaction(name, layer_dir, removals=list(claim.dropped))
         try:
             staged = {k: tx.staged(v) for k, v in paths.items()}
-            write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id)
+            write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id,
+                                    cct_K=col.total["cct_K"] if col is not None else None)
             if col is not None:
                 write_colour_files(col, staged, name, pictures, run_id=tx.run_id)
             acc = result.accumulator

@@ -54,28 +54,54 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
 
 
 def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path], name: str,
-                            pictures: bool = True, run_id: str = "") -> None:
+                            pictures: bool = True, run_id: str = "",
+                            cct_K: float | None = None) -> None:
     """Write the IES and LDT files, the JSON of the grid and figures with their errors
     (and, with ``pictures``, the polar curve and the photometric solid) of ``ph`` to
-    ``paths`` (see :func:`photometric_paths`)."""
+    ``paths`` (see :func:`photometric_paths`). The luminaire's own data (``scene.info``)
+    and ``cct_K`` (the traced colour's CCT, where the stage has colour) go into both
+    files; a round opening is written as round."""
     fig, opening, grid, lamp = ph.figures, ph.opening, ph.grid, ph.lamp_flux
+    info = scene.info
     luminaire = scene.luminaire_path.rsplit("/", 1)[-1] or name
     err = fig.photometry_error
-    keywords = {"LUMCAT": name, "LUMINAIRE": f"{luminaire} ({Path(scene.stage_path).name})",
-                "LAMP": f"{len(scene.emitters)} UsdLux emitter(s), {lamp:.6g} lm",
+    lamps = info.lamp or f"{len(scene.emitters)} UsdLux emitter(s), {lamp:.6g} lm"
+    keywords = {"MANUFAC": info.manufacturer,
+                "LUMCAT": info.catalogue_number or name,
+                "LUMINAIRE": info.name or f"{luminaire} ({Path(scene.stage_path).name})",
+                "LAMP": lamps,
                 "FILEGENINFO": "computed by photon tracing from the USD stage; cell means "
                                "from photon counts, relative RMS standard error "
                                f"{'n/a' if err is None else f'{err:.2%}'} (per value in "
                                f"{paths['photometry_data'].name}); "
                                f"symmetry {grid.symmetry}",
                 "_LUMITRACE_RUN": run_id}
+    if cct_K is not None:
+        keywords["_CCT"] = f"{cct_K:.0f} K"
+    if info.colour_rendering_index is not None:
+        keywords["_CRI"] = f"{info.colour_rendering_index:g}"
     write_text(paths["photometry_data"], photometry_json(ph, run_id))
-    write_ies(paths["ies"], grid, lamp, opening.width, opening.length, opening.height, keywords)
-    mm = {"length": 1000 * opening.length, "width": 1000 * opening.width,
-          "height": 1000 * opening.height, "lum_length": 1000 * opening.length,
-          "lum_width": 1000 * opening.width, "lum_height": 1000 * opening.height}
-    write_ldt(paths["ldt"], grid, lamp, luminaire, mm, fig.downward_flux_fraction,
-              fig.light_output_ratio, report=f"lumitrace {name} run {run_id}".strip())
+    sign = -1.0 if opening.round else 1.0  # LM-63: negative width and length, round
+    write_ies(paths["ies"], grid, lamp, sign * opening.width, sign * opening.length,
+              opening.height, keywords, info.input_power_w or 0.0)
+    box = opening.box
+    round_area = opening.round and abs(opening.length - opening.width) <= \
+        0.02 * max(opening.length, opening.width)  # a circle: its diameter and width 0
+    mm = {"length": 1000 * box[0], "width": 1000 * box[1], "height": 1000 * box[2],
+          "lum_length": 1000 * (0.5 * (opening.length + opening.width) if round_area
+                                else opening.length),
+          "lum_width": 0.0 if round_area else 1000 * opening.width,
+          "lum_height": 1000 * opening.height}
+    write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
+              fig.downward_flux_fraction, fig.light_output_ratio,
+              company=info.manufacturer or "lumitrace",
+              report=f"lumitrace {name} run {run_id}".strip(),
+              number=info.catalogue_number, file_name=paths["ldt"].name,
+              lamp_type=info.lamp or "lumitrace emitters",
+              colour="" if cct_K is None else f"{cct_K:.0f} K",
+              cri="" if info.colour_rendering_index is None
+              else f"{info.colour_rendering_index:g}",
+              watts=info.input_power_w or 0.0)
     if pictures:
         title = f"{luminaire}: {fig.luminous_flux:.0f} lm, LOR {fig.light_output_ratio:.2f}"
         polar_diagram(paths["polar_diagram"], grid, lamp, title)

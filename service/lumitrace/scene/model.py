@@ -206,6 +206,19 @@ class Emitter:
 
 
 @dataclass(frozen=True)
+class LuminaireInfo:
+    """What the user says of the luminaire (LumitraceLuminaireAPI): written into the
+    photometric files, never traced. Empty text and None where not authored."""
+
+    manufacturer: str = ""
+    name: str = ""
+    catalogue_number: str = ""
+    lamp: str = ""
+    input_power_w: float | None = None
+    colour_rendering_index: float | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     """A luminaire as flat arrays, ready to trace.
 
@@ -234,6 +247,8 @@ class Scene:
     #: the files the stage was read from (its layers, real paths), which no output may
     #: replace; the emitters' IES and ray files are in :meth:`input_files`
     layer_files: tuple[str, ...] = field(default=(), compare=False)
+    #: the luminaire's manufacturer, names, lamp, power and colour rendering
+    info: LuminaireInfo = field(default_factory=LuminaireInfo, compare=False)
 
     @property
     def photometric_axes(self) -> np.ndarray:

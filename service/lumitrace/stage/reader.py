@@ -52,7 +52,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux
 
 from .. import schema
 from ..errors import StageError
-from ..scene import Emitter, Scene
+from ..scene import Emitter, LuminaireInfo, Scene
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
@@ -228,7 +228,37 @@ class _Reader:
             luminaire_to_world=self._luminaire_to_world(root),
             layer_files=tuple(layer.realPath for layer in self.stage.GetUsedLayers()
                               if layer.realPath),
+            info=self._luminaire_info(root),
         )
+
+    def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
+        """The luminaire's own data (manufacturer, names, lamp, power, colour rendering),
+        checked: text must be text without NUL, the power finite and at least 0, the
+        colour rendering index finite and at most 100."""
+        where = str(root.GetPath())
+
+        def authored(name: str):
+            attr = root.GetAttribute(name)
+            return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+
+        text = {}
+        for name in schema.LUMINAIRE_TEXT:
+            value = authored(name)
+            if value is not None and (not isinstance(value, str) or "\x00" in value):
+                raise StageError(f"must be text, got {value!r}", where, name)
+            text[name] = (value or "").strip()
+        power = authored(schema.INPUT_POWER)
+        power = None if power is None else validate.check_non_negative(
+            power, where, schema.INPUT_POWER)
+        cri = authored(schema.COLOUR_RENDERING_INDEX)
+        if cri is not None:
+            cri = validate.check_finite(cri, where, schema.COLOUR_RENDERING_INDEX)
+            if cri > 100.0:
+                raise StageError(f"must be at most 100, got {cri:g}", where,
+                                 schema.COLOUR_RENDERING_INDEX)
+        return LuminaireInfo(text[schema.MANUFACTURER], text[schema.LUMINAIRE_NAME],
+                             text[schema.CATALOGUE_NUMBER], text[schema.LAMP_DESCRIPTION],
+                             power, cri)
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
         """The luminaire prim's local-to-world transform (local stage units to world m),
