@@ -149,6 +149,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
     v.add_argument("--out", type=Path, default=None, help="output folder (default: beside "
                                                            "the stage)")
+    v.add_argument("--no-sublayer", action="store_true",
+                   help="write the outputs and the result layer, but leave the stage file "
+                        "untouched (the result layer is not sublayered into it)")
+    v.add_argument("--quiet", action="store_true",
+                   help="no line per event on stderr (revisions, retraces, restarts, "
+                        "writes, warnings, errors)")
 
     e = sub.add_parser("edits", help="keep or drop the deltas a service accepted",
                        description="merge: fold NAME.lumitrace-edits.usda into the stage's "
@@ -440,7 +446,8 @@ def cmd_serve(args) -> int:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
     return serve(args.stage, settings, args.host, args.port, token, args.out,
-                 viewer=not args.no_viewer)
+                 viewer=not args.no_viewer, quiet=args.quiet,
+                 sublayer=not args.no_sublayer)
 
 
 def cmd_edits(args) -> int:

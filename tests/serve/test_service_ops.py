@@ -94,8 +94,9 @@ def test_saves_timed_into_result_writes_are_never_lost(stage):
         status = s.wait_done(40)
         assert status["revision"] == 40 and status["last_error"] is None
         assert s.client.results()["emitted_lm"] == pytest.approx(1339.0)
-        revisions = [e for e in s.client.history(0) if e.kind == "revision"]
-        assert [e.data["source"] for e in revisions[1:]] == ["file"] * 40
+        revisions = [e.data for e in s.client.history(0) if e.kind == "revision"]
+        assert {r["source"] for r in revisions[1:]} == {"file"}  # a burst's newest is
+        assert revisions[-1]["revision"] == 40  # traced, those before it may be skipped
         rc, verdict = _check(stage)
         assert rc == 0 and verdict["status"] == "current", verdict
 
@@ -166,3 +167,121 @@ def _wait_event(service: Service, predicate, timeout: float = 30.0):
             return found[0]
         time.sleep(0.1)
     raise TimeoutError("no such event")
+
+
+# ------------------------------------------------------------------------------------------
+# Restarts: revisions only grow, a resuming client learns of the restart
+# ------------------------------------------------------------------------------------------
+
+def _flux(stage: Path, lumens: int) -> None:
+    text = stage.read_text()
+    old = text[text.index("lumitrace:luminousFlux = "):].split("\n", 1)[0]
+    _save(stage, text.replace(old, f"lumitrace:luminousFlux = {lumens}"))
+
+
+def _first_events(service: Service, last_id: int, n: int = 2) -> list:
+    """The first ``n`` events of a stream resumed after ``last_id``."""
+    got = []
+    for event in service.client.events(last_id=last_id, timeout=30):
+        got.append(event)
+        if len(got) == n:
+            return got
+    return got
+
+
+def test_revisions_only_grow_across_restarts_and_a_resuming_client_learns_of_them(stage):
+    """Revisions by deltas and by files saved on disk, a kill -9, a restart: the counter
+    goes on from the last one handed out (file-edit revisions included), a stage edited
+    while no service ran starts one revision higher, event ids go on above the old ones,
+    and a client resuming with an old ``Last-Event-ID`` first gets a ``gap`` event that
+    says the service restarted."""
+    with Service(stage, *QUICK) as s:
+        s.wait_done(0)
+        assert s.client.set(REFLECTOR, SPEC, 0.5)["revision"] == 1
+        _flux(stage, 1300)
+        s.wait_status(lambda st: st["revision"] == 2)
+        assert s.client.set(REFLECTOR, SPEC, 0.6)["revision"] == 3
+        _flux(stage, 1400)
+        s.wait_done(4)
+        last_id = s.client.history(0)[-1].id
+        s.proc.kill()
+        s.proc.wait(30)
+    with Service(stage, *QUICK) as s:
+        assert s.client.status()["revision"] == 4  # the same scene: the same revision
+        gap, started = _first_events(s, last_id)
+        assert gap.kind == "gap" and gap.data["restart"] is True, gap
+        assert started.kind == "started" and started.id > last_id, started
+        _flux(stage, 1500)
+        s.wait_done(5)
+        last_id = s.client.history(0)[-1].id
+        assert _first_events(s, last_id - 1, 1)[0].id == last_id  # no gap within a run
+        rc, _ = s.stop()
+        assert rc == 0
+    _flux(stage, 1600)  # edited while no service runs: revision 5 is another scene
+    with Service(stage, *QUICK) as s:
+        status = s.wait_done(6)
+        assert status["revision"] == 6
+        assert s.client.history(0)[0].id > last_id
+
+
+# ------------------------------------------------------------------------------------------
+# What the service says on stderr; --quiet; --no-sublayer
+# ------------------------------------------------------------------------------------------
+
+def _stderr(service: Service, wanted: str, timeout: float = 20.0) -> str:
+    """The service's stderr so far, once it holds ``wanted``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        text = "".join(service.stderr)
+        if wanted in text:
+            return text
+        time.sleep(0.05)
+    raise AssertionError(f"{wanted!r} never said on stderr:\n" + "".join(service.stderr))
+
+
+def test_the_service_says_each_event_on_stderr_unless_quiet(stage):
+    """One line per event: the revision and its source, the retrace share or the restart
+    and why, each result written, done, and errors; ``--quiet`` says nothing."""
+    with Service(stage, *QUICK) as s:
+        s.wait_done(0)
+        s.client.set(REFLECTOR, SPEC, 0.5)
+        s.wait_done(1)
+        _flux(stage, 1300)
+        s.wait_done(2)
+        _flux(stage, -5)  # a stage that cannot be traced
+        text = _stderr(s, "error: ")
+        rc, _ = s.stop()
+        assert rc == 0
+        text = "".join(s.stderr)
+    lines = text.splitlines()
+    assert any(" started at revision 0, http://" in line for line in lines), text
+    assert any("revision 1 from delta: effect material (" + REFLECTOR in line
+               for line in lines), text
+    assert any(("revision 1: retraced " in line and " photons (" in line)
+               or "revision 1: traced afresh: " in line for line in lines), text
+    assert any("revision 2 from file: downlight.usda: effect flux" in line
+               for line in lines), text
+    assert any("revision 2: written with pictures (" in line for line in lines), text
+    assert any("revision 1: done, " in line for line in lines), text
+    assert any(" error: " in line and "cannot be traced" in line for line in lines), text
+    assert any(" stopping at revision 2" in line for line in lines), text
+    assert all(line[:2].isdigit() and line[2] == ":" for line in lines), text
+    _flux(stage, 1300)
+    with Service(stage, *QUICK, "--quiet") as s:
+        s.client.set(REFLECTOR, SPEC, 0.6)
+        s.wait_done(3)
+        rc, _ = s.stop()
+        assert rc == 0 and "".join(s.stderr) == ""
+
+
+def test_no_sublayer_leaves_the_stage_file_untouched(stage):
+    """``serve --no-sublayer``, as ``trace`` has: the results and the result layer are
+    written, the stage file is not edited."""
+    before = stage.read_bytes()
+    with Service(stage, *QUICK, "--no-sublayer", "--quiet") as s:
+        s.wait_done(0)
+        s.client.set(REFLECTOR, SPEC, 0.5)
+        s.wait_done(1)
+        assert (stage.parent / "downlight.lumitrace.usda").exists()
+        assert stage.read_bytes() == before
+        assert s.client.status()["revision"] == 1

@@ -112,16 +112,16 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             last_id = max(0, int(last))
         except ValueError:
             return _problem(400, f"Last-Event-ID must be an event id, got {last!r}")
+        last_id, gap = events.resume(last_id)
         if request.query.get("format") == "json":  # the history so far, not a stream
             return _json({"events": [e.as_dict() for e in events.since(last_id)],
-                          "oldest_id": events.oldest_id()})
+                          "oldest_id": events.oldest_id(), "first_id": events.first_id,
+                          "gap": gap})
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream",
                                                "Cache-Control": "no-cache"})
         await response.prepare(request)
-        oldest = events.oldest_id()
-        if last_id and oldest > last_id + 1:
-            await response.write(f"event: gap\ndata: {json.dumps({'missed_before': oldest})}"
-                                 "\n\n".encode())
+        if gap is not None:
+            await response.write(f"event: gap\ndata: {json.dumps(gap)}\n\n".encode())
         try:
             while not events.closed:
                 batch = await events.wait(last_id, KEEPALIVE_SECONDS)

@@ -52,11 +52,14 @@ class Engine:
     """Refines :attr:`revision` in a thread; :meth:`submit` hands it a newer one."""
 
     def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
-                 out_dir: Path | None = None, records_cap: int = RECORDS_CAP):
+                 out_dir: Path | None = None, records_cap: int = RECORDS_CAP,
+                 sublayer: bool = True):
         self.live = live
         self.settings = replace(settings, workers="threads")
         self.events = events
         self.out_dir = out_dir
+        #: False: the result layer is written but not sublayered into the stage file
+        self.sublayer = sublayer
         self._cv = threading.Condition()
         self._pending: Revision | None = None
         self._arrivals: list[float] = [0.0, 0.0]  # the last two submit times
@@ -411,6 +414,7 @@ class Engine:
         t0 = time.perf_counter()
         try:
             record = write_outputs(result, self.out_dir, pictures=pictures, extra=extra,
+                                   sublayer=self.sublayer,
                                    on_stage=lambda step: self.live.call(self.live.write, step))
         except LumitraceError as exc:
             if pictures:

@@ -9,7 +9,7 @@ import json
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 #: Events kept for clients that reconnect (older ones are gone: the stream says so).
 EVENT_HISTORY = 4096
@@ -46,11 +46,19 @@ def _json_default(obj):
 
 
 class EventLog:
-    """Thread-safe publishing; asyncio waiting on the loop given to :meth:`bind`."""
+    """Thread-safe publishing; asyncio waiting on the loop given to :meth:`bind`.
 
-    def __init__(self, history: int = EVENT_HISTORY):
+    Ids start at ``first_id`` (above every id an earlier service of the stage used);
+    ``reserve(upto)`` is called, before ids up to ``upto`` are used, once per ``block``
+    of them, so that the next service can start above them even after a kill -9."""
+
+    def __init__(self, history: int = EVENT_HISTORY, first_id: int = 1,
+                 reserve: Callable[[int], None] | None = None, block: int = 1024):
         self._events: collections.deque[Event] = collections.deque(maxlen=history)
-        self._ids = itertools.count(1)
+        self.first_id = first_id
+        self._ids = itertools.count(first_id)
+        self._reserve, self._block = reserve, block
+        self._reserved = first_id - 1
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed: asyncio.Condition | None = None
@@ -63,7 +71,11 @@ class EventLog:
     def publish(self, kind: str, **data: Any) -> Event:
         """Add an event (from any thread) and wake the streams."""
         with self._lock:
-            event = Event(next(self._ids), kind, data, time.time())
+            number = next(self._ids)
+            if self._reserve is not None and number > self._reserved:
+                self._reserved = number - 1 + self._block
+                self._reserve(self._reserved)
+            event = Event(number, kind, data, time.time())
             self._events.append(event)
         self._wake()
         return event
@@ -93,6 +105,24 @@ class EventLog:
     def oldest_id(self) -> int:
         with self._lock:
             return self._events[0].id if self._events else 0
+
+    def resume(self, last_id: int) -> tuple[int, dict[str, Any] | None]:
+        """Where a client resuming after ``last_id`` goes on from, and the ``gap`` it must
+        be told of (None: none): events it missed that are no longer kept, or a restart
+        of the service since (an id from before this service's first, or one it never
+        handed out). After a restart it gets everything this service kept."""
+        with self._lock:
+            oldest = self._events[0].id if self._events else self.first_id
+            newest = self._events[-1].id if self._events else self.first_id - 1
+        if not last_id:
+            return 0, None
+        if last_id < self.first_id or last_id > newest:
+            return 0, {"missed_before": oldest, "restart": True, "first_id": self.first_id,
+                       "reason": f"the service restarted: its events start at "
+                                 f"{self.first_id}, event {last_id} is of an earlier one"}
+        if oldest > last_id + 1:
+            return last_id, {"missed_before": oldest, "restart": False}
+        return last_id, None
 
     async def wait(self, last_id: int, timeout: float) -> list[Event]:
         """Events after ``last_id``; waits up to ``timeout`` s for one."""

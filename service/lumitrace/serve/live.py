@@ -31,6 +31,7 @@ from ..stage import validate
 from ..stage.diagnostics import tf_message
 from ..stage.reader import scene_from_stage
 from ..trace.profiles import profile_table
+from .state import ServiceState
 
 
 class LayerUnreadable(LumitraceError):
@@ -79,10 +80,13 @@ def check_profiles(scene: Scene) -> None:
 class LiveStage:
     """The service's stage; see the module docstring for the threading rule."""
 
-    def __init__(self, stage_path: str | Path, luminaire: str | None = None):
+    def __init__(self, stage_path: str | Path, luminaire: str | None = None,
+                 state: ServiceState | None = None):
         self.stage_path = Path(stage_path).absolute()
         self.edits_path = edits_layer_path(self.stage_path)
         self.luminaire = luminaire
+        #: where each revision handed out is recorded, so that revisions only grow
+        self.state = state
         self._usd = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lumitrace-usd")
         self.call(self._open)
 
@@ -115,6 +119,10 @@ class LiveStage:
         self.changes = ChangedPaths(self.stage)
         self.scene = scene_from_stage(self.stage, self.luminaire)
         self.revision = revision_of(self.edits)
+        if self.state is not None:
+            self.revision = self.state.start_revision(self.revision,
+                                                      self.scene.content_hash())
+            self._record(self.revision, self.scene)
         self.known: dict[Path, str | None] = {}
         #: watched files reported gone, unreadable or garbage: when one is back, it is
         #: read again (and is a revision) even if it holds what it held before
@@ -206,6 +214,7 @@ class LiveStage:
             raise DeltaError([Problem(str(self.edits_path), f"cannot save the edits layer: "
                                       f"{exc.strerror or exc}")], 507) from None
         self.known[self.edits_path] = file_digest(self.edits_path)
+        self._record(revision, scene)
         effect = classify(self.scene, scene, self.changes.take())
         self.scene, self.revision = scene, revision
         for path in self.asset_files():  # a light's file a delta named: watched from now on
@@ -243,10 +252,16 @@ class LiveStage:
         self.troubled.difference_update(p for p, _ in changed)
         effect = classify(self.scene, scene, self.changes.take())
         self.revision += 1
+        self._record(self.revision, scene)
         self.scene = scene
         self._remember_files()  # new sublayers, references or light files are watched now
         return Revision(self.revision, scene, effect, "file",
                         tuple(str(p) for p, _ in changed))
+
+    def _record(self, revision: int, scene: Scene) -> None:
+        """Record a revision handed out (a restarted service goes on above it)."""
+        if self.state is not None:
+            self.state.record_revision(revision, scene.content_hash())
 
     def _changed_files(self, paths: set[Path], watched: set[Path]) -> list[tuple[Path, str]]:
         """The watched files among ``paths`` (all of them once one was in trouble) whose

@@ -6,7 +6,6 @@ import asyncio
 import ipaddress
 import signal
 import socket
-import sys
 import warnings
 from pathlib import Path
 
@@ -19,6 +18,8 @@ from .engine import Engine
 from .events import EventLog
 from .live import LiveStage
 from .lock import StageLock
+from .log import echo_events
+from .state import EVENT_BLOCK, ServiceState
 from .watcher import watch_layers
 
 DEFAULT_HOST = "127.0.0.1"
@@ -45,17 +46,21 @@ def check_binding(host: str, token: str | None) -> None:
 
 def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           port: int = DEFAULT_PORT, token: str | None = None,
-          out_dir: Path | None = None, viewer: bool = True) -> int:
+          out_dir: Path | None = None, viewer: bool = True, quiet: bool = False,
+          sublayer: bool = True) -> int:
     """Run the service until a signal; return the exit status (0). ``viewer`` serves the
-    live view page at ``/``."""
+    live view page at ``/``; ``quiet`` says nothing on stderr but the fatal; ``sublayer``
+    False leaves the stage file untouched (the result layer is not sublayered into it)."""
     check_binding(host, token)
     lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
-        events = EventLog()
-        live = LiveStage(stage)
-        engine = Engine(live, settings, events, out_dir)
+        state = ServiceState.of(stage)  # revisions and event ids go on from the last run
+        events = EventLog(first_id=state.first_event_id(), reserve=state.reserve_events,
+                          block=EVENT_BLOCK)
+        live = LiveStage(stage, state=state)
+        engine = Engine(live, settings, events, out_dir, sublayer=sublayer)
         try:
-            asyncio.run(_main(live, engine, events, host, port, token, lock, viewer))
+            asyncio.run(_main(live, engine, events, host, port, token, lock, viewer, quiet))
         finally:
             live.close()
     finally:
@@ -64,13 +69,13 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
 
 
 def _route_warnings(events: EventLog) -> None:
-    """lumitrace warnings become events (and lines on stderr), each time they happen."""
+    """lumitrace warnings become events (lines on stderr with the others), each time they
+    happen."""
     shown = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, LumitraceWarning):
             events.publish("warning", message=str(message))
-            print(f"warning: {message}", file=sys.stderr, flush=True)
         else:
             shown(message, category, filename, lineno, file, line)
     warnings.showwarning = show
@@ -78,9 +83,11 @@ def _route_warnings(events: EventLog) -> None:
 
 
 async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
-                token: str | None, lock: StageLock, viewer: bool = True) -> None:
+                token: str | None, lock: StageLock, viewer: bool = True,
+                quiet: bool = False) -> None:
     loop = asyncio.get_running_loop()
     events.bind(loop)
+    echo = None if quiet else asyncio.create_task(echo_events(events))
     _route_warnings(events)
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
@@ -106,6 +113,8 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
     events.publish("stopping", revision=live.revision)
     await loop.run_in_executor(None, engine.stop)
     events.close()
+    if echo is not None:
+        await echo  # the last events' lines
     watcher.cancel()
     try:
         await watcher
