@@ -136,9 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     vstop = v.add_mutually_exclusive_group()
     vstop.add_argument("--photons", type=_positive_int,
                        help="photons per revision (default: trace to --target-error)")
-    vstop.add_argument("--target-error", type=_positive_float, metavar="E",
-                       help="estimated relative RMS error at which a revision is done "
-                            "(default 0.02)")
+    vstop.add_argument("--target-error", type=_positive_float, metavar="E", help="estimated "
+                       "relative RMS error at which a revision is done (default 0.02)")
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
@@ -147,14 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="do not serve the live view page at / (the JSON API only)")
     v.add_argument("--token", default=None,
                    help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
-    v.add_argument("--out", type=Path, default=None, help="output folder (default: beside "
-                                                           "the stage)")
-    v.add_argument("--no-sublayer", action="store_true",
-                   help="write the outputs and the result layer, but leave the stage file "
-                        "untouched (the result layer is not sublayered into it)")
-    v.add_argument("--quiet", action="store_true",
-                   help="no line per event on stderr (revisions, retraces, restarts, "
-                        "writes, warnings, errors)")
+    v.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: beside the stage)")
+    v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
+                   "untouched (the result layer is written but not sublayered into it)")
+    v.add_argument("--quiet", action="store_true", help="no line per event on stderr")
 
     e = sub.add_parser("edits", help="keep or drop the deltas a service accepted",
                        description="merge: fold NAME.lumitrace-edits.usda into the stage's "
@@ -434,10 +430,9 @@ def cmd_serve(args) -> int:
     from .run.settings import DEFAULT_TARGET_ERROR, TraceSettings, default_threads
     from .serve.server import serve
 
-    target = args.target_error if args.photons is None else None
-    settings = TraceSettings(photons=args.photons,
-                             target_error=target if target is not None or args.photons
-                             else DEFAULT_TARGET_ERROR,
+    target = args.target_error if args.target_error is not None else \
+        None if args.photons else DEFAULT_TARGET_ERROR
+    settings = TraceSettings(photons=args.photons, target_error=target,
                              resolution=args.resolution, threshold=args.threshold,
                              seed=args.seed, threads=args.threads or default_threads(),
                              workers="threads")
@@ -445,9 +440,8 @@ def cmd_serve(args) -> int:
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
-    return serve(args.stage, settings, args.host, args.port, token, args.out,
-                 viewer=not args.no_viewer, quiet=args.quiet,
-                 sublayer=not args.no_sublayer)
+    return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
+                 viewer=not args.no_viewer, sublayer=not args.no_sublayer)
 
 
 def cmd_edits(args) -> int:

@@ -285,3 +285,37 @@ def test_no_sublayer_leaves_the_stage_file_untouched(stage):
         assert (stage.parent / "downlight.lumitrace.usda").exists()
         assert stage.read_bytes() == before
         assert s.client.status()["revision"] == 1
+
+
+# ------------------------------------------------------------------------------------------
+# The edits commands while a service holds the stage
+# ------------------------------------------------------------------------------------------
+
+def _edits(action: str, stage: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lumitrace.cli", "edits", action,
+                           str(stage)], capture_output=True, text=True, timeout=120)
+
+
+def test_edits_merge_and_discard_are_refused_while_a_service_holds_the_stage(stage):
+    """``edits discard`` and ``edits merge`` while the stage is served would be undone by
+    the service's next delta: each exits 2 naming the service's process and port, and
+    changes nothing; once the service stops, the merge goes through."""
+    edits = stage.parent / "downlight.lumitrace-edits.usda"
+    with Service(stage, *QUICK, "--quiet") as s:
+        s.wait_done(0)
+        s.client.set(REFLECTOR, SPEC, 0.5)
+        root, layer = stage.read_bytes(), edits.read_bytes()
+        port = s.url.rstrip("/").rsplit(":", 1)[1]
+        for action in ("discard", "merge"):
+            run = _edits(action, stage)
+            lines = run.stderr.strip().splitlines()
+            assert run.returncode == 2 and len(lines) == 1, (action, run)
+            assert f"process {s.proc.pid}" in lines[0] and f"port {port}" in lines[0], lines
+            assert stage.read_bytes() == root and edits.read_bytes() == layer, action
+        s.client.set("/Luminaire/LED", "lumitrace:luminousFlux", 1500)
+        assert f"float {SPEC} = 0.5" in edits.read_text()  # the first delta is kept
+        rc, _ = s.stop()
+        assert rc == 0
+    run = _edits("merge", stage)
+    assert run.returncode == 0, run.stderr
+    assert not edits.exists() and f"{SPEC} = 0.5" in stage.read_text()

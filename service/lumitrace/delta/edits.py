@@ -17,6 +17,7 @@ from ..atomic import atomic_path, fsync_path, write_text_durably
 from ..errors import StageError
 from ..filenames import edits_layer_path
 from ..stage.diagnostics import tf_message
+from .lock import StageLock
 
 #: customLayerData key holding the last accepted revision.
 REVISION_KEY = "lumitrace:revision"
@@ -92,8 +93,16 @@ def save_edits(layer: Sdf.Layer, revision: int) -> None:
 
 def merge_edits(stage_path: str | os.PathLike) -> Path:
     """Fold the stage's edits layer into its root layer (the edits win), then remove the
-    edits layer. Returns the root layer's path."""
-    stage_path = Path(stage_path).absolute()
+    edits layer. Returns the root layer's path. Refused (:class:`LumitraceError` naming
+    it) while a service holds the stage: it would write its edits back."""
+    lock = StageLock.acquire(stage_path, "merging its edits")
+    try:
+        return _merge_edits(Path(stage_path).absolute())
+    finally:
+        lock.release()
+
+
+def _merge_edits(stage_path: Path) -> Path:
     path = edits_layer_path(stage_path)
     if not path.exists():
         raise StageError("no edits layer to merge", str(path))
@@ -118,7 +127,7 @@ def merge_edits(stage_path: str | os.PathLike) -> Path:
         fsync_path(tmp)
     fsync_path(stage_path.parent)
     root.Reload(force=True)
-    discard_edits(stage_path)
+    _discard_edits(stage_path)
     return stage_path
 
 
@@ -142,7 +151,17 @@ def _keep_child_order(layer: Sdf.Layer, like: Sdf.Layer, parent: Sdf.Path) -> No
 
 
 def discard_edits(stage_path: str | os.PathLike) -> bool:
-    """Remove the stage's edits layer; True when there was one."""
+    """Remove the stage's edits layer; True when there was one. Refused
+    (:class:`LumitraceError` naming it) while a service holds the stage: it would write
+    its edits back with the next delta."""
+    lock = StageLock.acquire(stage_path, "discarding its edits")
+    try:
+        return _discard_edits(stage_path)
+    finally:
+        lock.release()
+
+
+def _discard_edits(stage_path: str | os.PathLike) -> bool:
     path = edits_layer_path(stage_path)
     try:
         path.unlink()
