@@ -4,7 +4,11 @@ done on the counts.
 
 A grid value is the photon flux through its cell (C +- half the C step, gamma between the
 midpoints to its neighbours) over the cell's solid angle: an unbiased estimate of the mean
-intensity over the cell, with the exact binomial variance of analog photons. Nothing is
+intensity over the cell, with the exact binomial variance of analog photons. The poles,
+gamma 0 and 180, are directions, not planes: their value, the same in every plane, is the
+mean over the whole polar cap (gamma up to the midpoint to the next gamma, all C), which
+holds n/8 times a neighbouring cell's solid angle with n planes all round (3 times with
+the files' 15 deg planes), so no pole value is noisier than the values next to it. Nothing is
 interpolated or filtered, so the files carry no bias the stated errors do not cover, beyond
 the averaging over each cell (second order in the cell size where the distribution is
 smooth; at a kink, such as the horizon of a one-sided disc, the cell's mean).
@@ -147,6 +151,8 @@ def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
         folds[name] = (kept, fold)
     sums = {(name, h): [np.zeros((len(kept), len(gammas))) for _ in range(2)]
             for name, (kept, _) in folds.items() for h in HALVES}
+    # the poles: one cap each, all C planes pooled (flux and variance, per half)
+    caps = {h: [np.zeros(2), np.zeros(2)] for h in HALVES}
     halves = [list(acc.emitter_cells(h)) for h in (0, 1)]
     for (w2, n2, v0, i0), (_, _, v1, i1) in zip(*halves):
         k_half = [grid_counts(v0, i0, c_step, gammas), grid_counts(v1, i1, c_step, gammas)]
@@ -157,11 +163,19 @@ def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
                 f, v = sums[name, h]
                 f += w * k
                 v += w * w * k * np.maximum(1.0 - k / total, 0.0)
+            pole = k_all[:, [0, -1]].sum(axis=0)
+            caps[h][0] += w * pole
+            caps[h][1] += w * w * pole * np.maximum(1.0 - pole / total, 0.0)
+    cap_omega = omega_grid[:, [0, -1]].sum(axis=0)
     out = {}
     for (name, h), (flux, var) in sums.items():
         kept, fold = folds[name]
         omega = fold @ omega_grid
         cd, sigma = flux / omega, np.sqrt(var) / omega
+        # gamma 0 and 180 are directions, not planes: one value each, shared by every
+        # plane, from the whole polar cap (all planes' counts pooled)
+        cd[:, [0, -1]] = caps[h][0] / cap_omega
+        sigma[:, [0, -1]] = np.sqrt(caps[h][1]) / cap_omega
         c = kept * c_step
         if name == "none":  # the 360 plane repeats 0, as the files list it
             c = np.append(c, 360.0)

@@ -177,6 +177,11 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         paths.pop("photometric_solid")
     record = build_record(result, ph, paths, col)
     folders = [layer_dir]
+    try:
+        layer_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder: {exc.strerror}",
+                          str(layer_dir)) from exc
     with locked(folders, name, wait):
         for note in recover(folders, name, [p.name for p in paths.values()]):
             warn(note, OutputWarning)
