@@ -6,14 +6,21 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import shutil
 import subprocess
 import sys
+import threading
 import time
+import urllib.error
+import urllib.request
 from pathlib import Path
 
 import pytest
+from pxr import Usd
 from service_process import Service
+
+from lumitrace.delta.protocol import MAX_ARRAY_VALUES
 
 from helpers.paths import ROOT
 
@@ -319,3 +326,62 @@ def test_edits_merge_and_discard_are_refused_while_a_service_holds_the_stage(sta
     run = _edits("merge", stage)
     assert run.returncode == 0, run.stderr
     assert not edits.exists() and f"{SPEC} = 0.5" in stage.read_text()
+
+
+# ------------------------------------------------------------------------------------------
+# A heavy delta
+# ------------------------------------------------------------------------------------------
+
+def _post_raw(url: str, raw: bytes, timeout: float = 120.0) -> tuple[int, dict]:
+    """POST raw bytes to /deltas; (status, JSON answer), 4xx answers included."""
+    req = urllib.request.Request(url.rstrip("/") + "/deltas", data=raw, method="POST",
+                                 headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as response:
+            return response.status, json.loads(response.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+def _poll_status(url: str, stop: threading.Event, latencies: list[float]) -> None:
+    """GET /status every 20 ms until ``stop``, noting how long each answer took."""
+    while not stop.is_set():
+        start = time.monotonic()
+        with urllib.request.urlopen(url.rstrip("/") + "/status", timeout=60) as response:
+            response.read()
+        latencies.append(time.monotonic() - start)
+        time.sleep(0.02)
+
+
+def test_a_7_mib_delta_leaves_status_answering_and_a_larger_one_is_refused(stage):
+    """One legal 7 MiB delta (a mesh's points: 200,000 of them, those its faces use kept)
+    is accepted while another client polls /status, every answer within 1 s; a batch of
+    more array values than the documented limit is 422 naming it, nothing changed."""
+    rng = random.Random(3)
+    with Service(stage, *QUICK, "--quiet") as s:
+        s.wait_done(0)
+        usd = Usd.Stage.Open(str(stage))
+        kept = [list(p) for p in usd.GetPrimAtPath("/Luminaire/Reflector")
+                .GetAttribute("points").Get()]
+        points = kept + [[round(rng.uniform(-60, 60), 6) for _ in range(3)]
+                         for _ in range(200_000 - len(kept))]
+        raw = json.dumps({"deltas": [{"op": "set", "path": "/Luminaire/Reflector",
+                                      "property": "points", "value": points}]}).encode()
+        assert 6.5 * 2**20 < len(raw) < 8 * 2**20
+        stop, latencies = threading.Event(), []
+        poller = threading.Thread(target=_poll_status, args=(s.url, stop, latencies))
+        poller.start()
+        try:
+            time.sleep(0.2)
+            code, answer = _post_raw(s.url, raw)
+            time.sleep(1.0)  # the engine takes the new revision meanwhile
+        finally:
+            stop.set()
+            poller.join(60)
+        assert code == 200 and answer["revision"] == 1, answer
+        assert len(latencies) > 10 and max(latencies) < 1.0, sorted(latencies)[-5:]
+        over = {"deltas": [{"op": "set", "path": "/Luminaire/Reflector", "property": "points",
+                            "value": [[0, 0, 0]] * (MAX_ARRAY_VALUES // 3 + 1)}]}
+        code, answer = _post_raw(s.url, json.dumps(over).encode())
+        assert code == 422 and str(MAX_ARRAY_VALUES) in answer["error"], answer
+        assert s.client.status()["revision"] == 1

@@ -15,6 +15,16 @@ DELTA_SCHEMA_PATH = SCHEMA_DIR / "scene-delta.schema.json"
 #: Deepest nesting of arrays and objects a request may have (a delta needs five levels:
 #: a matrix in a delta in the list in the body); deeper is refused before it is checked.
 MAX_DEPTH = 32
+#: Most values a request's deltas may hold in arrays, all deltas together (the numbers of a
+#: mesh's points: 349,525 points of 3): beyond it the batch is refused (422) before it is
+#: checked or applied, so that no one request holds the service for long (one of this
+#: size applies in about 2 s, on the thread that edits the stage, not the event loop).
+MAX_ARRAY_VALUES = 1 << 20
+#: Arrays holding more values than this are checked against the schema's ``value``
+#: definition by :func:`_value_problems` instead of the (much slower) validator.
+_FAST_CHECK_VALUES = 256
+#: Most items of one array (the schema's ``maxItems`` of ``value``).
+_MAX_ITEMS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -70,13 +80,92 @@ def _leaf_errors(error):
         yield error
 
 
+def _value_slots(body: Any):
+    """Each place in a request that holds a delta's ``value`` (a ``set``'s value, an
+    ``add``'s property values): yields (JSON pointer, delta index, property name or None
+    for a ``set``'s value, the value)."""
+    deltas = body.get("deltas") if isinstance(body, dict) else None
+    if not isinstance(deltas, list):
+        return
+    for i, delta in enumerate(deltas):
+        if not isinstance(delta, dict):
+            continue
+        if "value" in delta:
+            yield f"/deltas/{i}/value", i, None, delta["value"]
+        props = delta.get("properties")
+        if isinstance(props, dict):
+            for name, value in props.items():
+                yield f"/deltas/{i}/properties/{name}", i, name, value
+
+
+def _array_values(value: Any) -> int:
+    """How many values (leaves) the arrays of ``value`` hold; 0 for a scalar. Iterative:
+    no nesting can exhaust the stack."""
+    if not isinstance(value, list):
+        return 0
+    count, stack = 0, [value]
+    while stack:
+        items = stack.pop()
+        for item in items:
+            if isinstance(item, list):
+                stack.append(item)
+            else:
+                count += 1
+    return count
+
+
+def _value_problems(value: Any, where: str) -> list[Problem]:
+    """What the schema's ``value`` definition says of ``value`` (a number, boolean or string,
+    or an array of at most a million of them, nested), found without the validator: it
+    takes seconds over a mesh's points."""
+    stack = [(value, where)]
+    while stack:
+        item, at = stack.pop()
+        if isinstance(item, list):
+            if len(item) > _MAX_ITEMS:
+                return [Problem(at, f"array of {len(item)} items is too long (at most "
+                                    f"{_MAX_ITEMS})")]
+            stack.extend((v, f"{at}/{k}") for k, v in enumerate(item)
+                         if not isinstance(v, (int, float, str)))  # bool is an int
+        elif not isinstance(item, (int, float, str)):
+            return [Problem(at, f"{json.dumps(item)[:80]} is not valid under any of the "
+                                "given schemas")]
+    return []
+
+
+def _skeleton(body: Any) -> tuple[Any, list[Problem]]:
+    """The request with every large array value replaced by 0 for the validator, and the
+    problems :func:`_value_problems` found in those arrays. Raises :class:`DeltaError`
+    (422) when the arrays hold more than :data:`MAX_ARRAY_VALUES` values in all."""
+    slots = list(_value_slots(body))
+    sizes = [_array_values(value) for *_, value in slots]
+    if sum(sizes) > MAX_ARRAY_VALUES:
+        raise DeltaError([Problem("/deltas", f"the deltas hold {sum(sizes)} array values, "
+                                  f"more than the limit of {MAX_ARRAY_VALUES} array values "
+                                  f"a request ({MAX_ARRAY_VALUES // 3} points of 3); send "
+                                  "them in several requests")], 422)
+    big = [slot for slot, n in zip(slots, sizes) if n > _FAST_CHECK_VALUES]
+    if not big:
+        return body, []
+    problems = [p for where, _, _, value in big for p in _value_problems(value, where)]
+    deltas = [dict(d) if isinstance(d, dict) else d for d in body["deltas"]]
+    for _, i, name, _ in big:
+        if name is None:
+            deltas[i]["value"] = 0
+        else:
+            deltas[i]["properties"] = {**deltas[i]["properties"], name: 0}
+    return {**body, "deltas": deltas}, problems
+
+
 def check_request(body: Any) -> dict[str, Any]:
     """Validate a decoded request body against the schema; raise :class:`DeltaError` (422)
-    listing every violation, ordered by where it is."""
-    errors = sorted(_validator().iter_errors(body), key=lambda e: list(map(str, e.path)))
-    if not errors:
+    listing every violation, ordered by where it is. Large arrays are counted first (at
+    most :data:`MAX_ARRAY_VALUES` values) and checked without the validator."""
+    checked, fast = _skeleton(body)
+    errors = sorted(_validator().iter_errors(checked), key=lambda e: list(map(str, e.path)))
+    if not errors and not fast:
         return body
-    problems, seen = [], set()
+    problems, seen = list(fast), set(fast)
     for error in errors:
         for leaf in _leaf_errors(error):
             p = Problem(_pointer(leaf.absolute_path), leaf.message[:300])

@@ -84,8 +84,8 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             raw = await request.read()
         except web.HTTPRequestEntityTooLarge:
             return _problem(413, f"request body larger than {MAX_BODY_BYTES} bytes")
-        try:
-            body = parse_request(raw)
+        try:  # decoding and checking a mesh's points take a second: not on the event loop
+            body = await asyncio.get_running_loop().run_in_executor(None, parse_request, raw)
             revision = await live.acall(live.apply, body["deltas"], body.get("base_revision"))
         except DeltaError as exc:
             return _problem(exc.status, str(exc), exc.problems)
