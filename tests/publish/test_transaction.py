@@ -316,7 +316,7 @@ def test_ctrl_c_while_lumitrace_loads_stops_the_run(disc, delay, launcher):
              "runpy.run_module('lumitrace', run_name='__main__', alter_sys=True)")
     p = subprocess.Popen([sys.executable, "-c",
                           f"import sys; print('up', flush=True); {start}",
-                          "trace", str(disc), "--photons", "4000000", "--no-progress"],
+                          "trace", str(disc), "--photons", "40000000", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline() == "up\n"
     time.sleep(delay)
