@@ -28,7 +28,8 @@ def main(argv=None) -> int:
     if args.roughness is not None:
         deltas.append({"op": "set", "path": REFLECTOR, "property": "lumitrace:roughness",
                        "value": args.roughness})
-    last = client.history()[-1].id if client.history() else 0
+    history = client.history()
+    last = history[-1].id if history else 0
     answer = client.send(deltas)
     revision = answer["revision"]
     print(f"revision {revision}: {answer['effect']['kind']} edit of "
@@ -41,10 +42,12 @@ def main(argv=None) -> int:
             if r["revision"] != revision:
                 continue
             beam = r["photometry"]["beam_angle_c0_c180"]
+            peak = r["photometry"]["peak_intensity"]
             err = r["relative_error"]
             print(f"  {r['photons']:>10,} photons  error "
                   f"{'-' if err is None else f'{err:6.2%}'}  beam angle "
-                  f"{'-' if beam is None else f'{beam:5.1f} deg'}  peak {r['peak_cd']:8.1f} cd"
+                  f"{'-' if beam is None else f'{beam:5.1f} deg'}  peak "
+                  f"{'-' if peak is None else f'{peak:8.1f} cd'}"
                   f"{'  (with pictures)' if event.data.get('pictures') else ''}")
             if event.data.get("pictures"):
                 return 0

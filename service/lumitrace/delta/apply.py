@@ -6,6 +6,7 @@ folder) is collected, and any problem restores the layer exactly as it was.
 """
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from pathlib import Path
@@ -171,6 +172,8 @@ def _attribute(ctx: _Context, prim: Usd.Prim, name: str, type_hint: str | None,
             return attr
     if prim.HasRelationship(name):
         raise _Bad("is a relationship, not an attribute (bind materials with 'bind')", where)
+    if name.startswith("lumitrace:"):  # ours: a misspelt name would be traced as nothing
+        raise _Bad(_unknown_lumitrace(name), where)
     if not type_hint:
         raise _Bad("the prim has no such attribute: give 'type' (an Sdf value type such as "
                    "float or color3f) to create one", where)
@@ -180,16 +183,35 @@ def _attribute(ctx: _Context, prim: Usd.Prim, name: str, type_hint: str | None,
     return prim.CreateAttribute(name, type_name, custom=True)
 
 
+#: The API schemas whose attributes a delta may set (they are applied for it).
+_DELTA_APIS = ("LumitraceMaterialAPI", "LumitraceEmitterAPI", "LumitraceLuminaireAPI")
+
+
+def _api_names(api: str) -> list[str]:
+    """The attributes a delta may set of one of our API schemas (results left out)."""
+    definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(api)
+    names = definition.GetPropertyNames() if definition is not None else []
+    return [n for n in names if not n.startswith("lumitrace:result:")]
+
+
 def _api_defining(name: str) -> str | None:
     """The lumitrace API schema whose definition holds property ``name``, if any."""
     if not name.startswith("lumitrace:") or name.startswith("lumitrace:result:"):
         return None
-    registry = Usd.SchemaRegistry()
-    for api in ("LumitraceMaterialAPI", "LumitraceEmitterAPI"):
-        definition = registry.FindAppliedAPIPrimDefinition(api)
-        if definition is not None and name in definition.GetPropertyNames():
+    for api in _DELTA_APIS:
+        if name in _api_names(api):
             return api
     return None
+
+
+def _unknown_lumitrace(name: str) -> str:
+    """Why a ``lumitrace:`` name no schema of ours defines is refused (even with a
+    'type': the tracer would never read it), with the names nearest to it."""
+    known = sorted({n for api in _DELTA_APIS for n in _api_names(api)})
+    near = difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    hint = f"did you mean {' or '.join(near)}? " if near else ""
+    return (f"no lumitrace schema defines {name}: {hint}the attributes are "
+            f"{', '.join(known)}")
 
 
 def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
