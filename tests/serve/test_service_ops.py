@@ -4,6 +4,7 @@ and comes back, restarts (revisions and event ids), what it says on stderr, the 
 commands while it serves, heavy deltas, and the scripts in ``tools/``."""
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import random
@@ -385,3 +386,38 @@ def test_a_7_mib_delta_leaves_status_answering_and_a_larger_one_is_refused(stage
         code, answer = _post_raw(s.url, json.dumps(over).encode())
         assert code == 422 and str(MAX_ARRAY_VALUES) in answer["error"], answer
         assert s.client.status()["revision"] == 1
+
+
+def test_edits_merge_keeps_the_stage_files_comments_and_prim_order(stage):
+    """Deltas accepted by a service, then ``edits merge`` once it stops: the .usda file is
+    edited as text, only the lines of the properties the deltas set (and a prim they
+    added) change; its comments (one on the changed line too), formatting and prim order
+    survive, no ``reorder`` is added, and the stage composes with the new values."""
+    text = stage.read_text().replace(
+        'def Xform "Luminaire" (', '# a comment above the luminaire\ndef Xform "Luminaire" (')
+    text = text.replace(f"float {SPEC} = 0.92", f"float {SPEC} = 0.92  # measured 2024")
+    stage.write_text(text)
+    with Service(stage, *QUICK, "--quiet", "--no-sublayer") as s:
+        s.wait_done(0)
+        s.client.set(REFLECTOR, SPEC, 0.5)
+        s.client.send([{"op": "add", "path": "/Luminaire/Baffle", "type": "Cylinder",
+                        "properties": {"radius": 30, "height": 5}}])
+        assert s.stop()[0] == 0
+    assert stage.read_text() == text  # the service never edits it
+    run = _edits("merge", stage)
+    assert run.returncode == 0, run.stderr
+    merged = stage.read_text()
+    assert "reorder" not in merged and "# a comment above the luminaire" in merged
+    old, new = text.splitlines(), merged.splitlines()
+    changes = [(op, [line.strip() for line in old[i1:i2]], [line.strip() for line in new[j1:j2]])
+               for op, i1, i2, j1, j2 in difflib.SequenceMatcher(None, old, new).get_opcodes()
+               if op != "equal"]
+    assert changes == [
+        ("replace", [f"float {SPEC} = 0.92  # measured 2024"], [f"float {SPEC} = 0.5  # measured 2024"]),
+        ("insert", [], ["", 'def Cylinder "Baffle"', "{", "double height = 5",
+                        "double radius = 30", "}"])], changes
+    usd = Usd.Stage.Open(str(stage))
+    assert usd.GetPrimAtPath(REFLECTOR).GetAttribute(SPEC).Get() == pytest.approx(0.5)
+    order = [p.GetName() for p in usd.GetPrimAtPath("/Luminaire").GetChildren()]
+    assert order == ["Materials", "LED", "Board", "Reflector", "Diffuser", "Housing",
+                     "Baffle"]

@@ -18,6 +18,7 @@ from ..errors import StageError
 from ..filenames import edits_layer_path
 from ..stage.diagnostics import tf_message
 from .lock import StageLock
+from .usda_merge import merge_text
 
 #: customLayerData key holding the last accepted revision.
 REVISION_KEY = "lumitrace:revision"
@@ -111,7 +112,6 @@ def _merge_edits(stage_path: Path) -> Path:
     strong = Sdf.Layer.CreateAnonymous(".usda")
     strong.TransferContent(edits)
     UsdUtils.StitchLayers(strong, root)  # strong's opinions win, root's fill in
-    _keep_child_order(strong, root, Sdf.Path.absoluteRootPath)
     # the root keeps its own layer metadata (sublayers, units, default prim, its data)
     strong.subLayerPaths[:] = list(root.subLayerPaths)
     strong.defaultPrim = root.defaultPrim
@@ -121,6 +121,11 @@ def _merge_edits(stage_path: Path) -> Path:
                 "timeCodesPerSecond"):
         if root.pseudoRoot.HasInfo(key):
             strong.pseudoRoot.SetInfo(key, root.pseudoRoot.GetInfo(key))
+    if _merge_as_text(stage_path, edits, strong):
+        root.Reload(force=True)
+        _discard_edits(stage_path)
+        return stage_path
+    _keep_child_order(strong, root, Sdf.Path.absoluteRootPath)
     with atomic_path(stage_path) as tmp:  # keeps the suffix: .usda text, .usdc binary
         if not strong.Export(str(tmp)):
             raise StageError("cannot write the merged stage", str(stage_path))
@@ -129,6 +134,25 @@ def _merge_edits(stage_path: Path) -> Path:
     root.Reload(force=True)
     _discard_edits(stage_path)
     return stage_path
+
+
+def _merge_as_text(stage_path: Path, edits: Sdf.Layer, merged: Sdf.Layer) -> bool:
+    """Write a ``.usda`` stage merged with its edits as a text edit of the file (comments,
+    formatting and prim order kept: :mod:`lumitrace.delta.usda_merge`); False where the
+    file is not ``.usda`` text or the edit cannot be certain to equal ``merged``."""
+    if stage_path.suffix != ".usda":
+        return False
+    try:
+        text = stage_path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    if not text.startswith("#usda"):
+        return False
+    edited = merge_text(text, edits, merged)
+    if edited is None:
+        return False
+    write_text_durably(stage_path, edited)
+    return True
 
 
 def _keep_child_order(layer: Sdf.Layer, like: Sdf.Layer, parent: Sdf.Path) -> None:
