@@ -36,7 +36,6 @@ RUNS: dict[str, tuple[str, ...]] = {
     "profile_run.py": ("--photons", "20000"),
     "publish_stress.py": ("--runs", "1", "--bursts", "1", "--seconds", "1"),
     "retrace_bench.py": ("--photons", "20000", "--stages", "downlight", "--threads", "1"),
-    "service_load.py": ("--only", "load", "--clients", "2", "--deltas", "3"),
     "side_by_side.py": ("--photons", "20000", "--repeats", "1", "--max-photons", "20000",
                         "--resolution", "8", "--scenes", "isotropic", "--peer", "none"),
     "startup.py": ("--photons", "10000", "--repeats", "1"),
@@ -47,8 +46,8 @@ RUNS: dict[str, tuple[str, ...]] = {
 SILENT = ("generate_schema.py", "make_stages.py")
 #: Modules other scripts and the tests import: importing them is their run.
 MODULES = ("service_process.py", "stress_cases.py")
-#: Run against a live service below (it needs one).
-SERVED = ("edit_reflector.py",)
+#: Run against a live service below (it needs one), or with its output checked below.
+SERVED = ("edit_reflector.py", "service_load.py")
 #: Not run here, with the reason.
 SKIPPED = {
     "peer": "a C++/Rust peer tracer built with an external toolchain (side_by_side.py "
@@ -98,6 +97,24 @@ def test_setup_script_parses():
 @pytest.mark.skip(reason=SKIPPED["peer"])
 def test_peer_tracer():
     """tools/peer: built and run by side_by_side.py where its toolchain is installed."""
+
+
+def test_service_load_loses_no_delta_beside_hostile_clients(tmp_path):
+    """tools/service_load.py's load run, alone and beside its hostile clients (200 event
+    streams, slow readers, bodies at and over the size limit): every delta answered 200
+    is kept, bodies at the limit are accepted and those over it refused with 413."""
+    run = _run([str(TOOLS / "service_load.py"), "--only", "load", "--clients", "2",
+                "--deltas", "3"], tmp_path, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
+    report = json.loads(run.stdout)
+    for name in ("load", "load_hostile"):
+        load = report[name]
+        assert load["accepted"] == 6 and load["failures"] == 0, load
+        assert load["accepted_deltas_lost"] == 0 and load["revisions_unique_and_contiguous"]
+    hostile = report["load_hostile"]["hostile"]
+    assert hostile["streams_open"] == 200 and hostile["stream_bytes"] > 0, hostile
+    assert hostile["big_accepted"] >= 1 and hostile["big_413"] >= 1, hostile
+    assert not hostile["big_other"], hostile
 
 
 # ------------------------------------------------------------------------------------------

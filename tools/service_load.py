@@ -1,6 +1,6 @@
 """Load and latency of ``lumitrace serve`` on the demo stage, on loopback only.
 
-    python tools/service_load.py [--clients 4] [--deltas 25] [--seconds 60] [--json]
+    python tools/service_load.py [--clients 4] [--deltas 25] [--only load] [--json]
 
 Three measurements, each against a real server process on a free loopback port, on a copy
 of ``stages/downlight.usda`` in a temporary folder:
@@ -10,6 +10,10 @@ of ``stages/downlight.usda`` in a temporary folder:
 2. load: N concurrent clients posting deltas and reading status; requests per second,
    latency percentiles, and the proof that no accepted delta was lost (the final edits
    layer holds the value of the highest accepted revision; revisions are 1..N unique);
+   then the same beside hostile clients: 200 event streams held open, 8 slow readers of
+   /events (4 KiB receive buffers, 64 bytes read a second) and a client posting bodies of
+   exactly the size limit (accepted, counted among the deltas that must not be lost) and
+   one byte over it (413);
 3. events: how many events per second one event stream delivers (events published as
    fast as the service can, read by the stdlib client).
 """
@@ -86,14 +90,25 @@ def measure_latency(folder: Path, repeats: int) -> dict:
     return {k: statistics.median(v) for k, v in out.items()} | {"repeats": repeats}
 
 
-def measure_load(folder: Path, clients: int, deltas: int) -> dict:
-    """N clients, each posting ``deltas`` deltas with a status read after each."""
+#: The hostile clients beside the normal load: event streams held open and read as they
+#: come, slow readers of /events, and a client posting bodies at the size limit.
+STREAMS = 200
+SLOW_READERS = 8
+#: Most big bodies the hostile poster sends (each one at the limit, then one over it).
+BIG_BODIES = 40
+HOUSING = "/Luminaire/Materials/HousingPaint/PreviewSurface"
+
+
+def measure_load(folder: Path, clients: int, deltas: int, hostile: bool = False) -> dict:
+    """N clients, each posting ``deltas`` deltas with a status read after each; with
+    ``hostile``, :data:`STREAMS` event streams, :data:`SLOW_READERS` slow readers and a
+    poster of bodies at the size limit run beside them the whole time."""
     latencies = {"delta": [], "status": []}
     accepted: list[tuple[int, float]] = []
     failures: list[str] = []
     lock = threading.Lock()
     stage = _stage(folder)
-    with Service(stage, "--photons", 200_000, "--resolution", 16) as s:
+    with Service(stage, "--photons", 200_000, "--resolution", 16, "--quiet") as s:
         def client(k: int) -> None:
             for i in range(deltas):
                 value = round(0.05 + 0.9 * (k * deltas + i) / (clients * deltas), 6)
@@ -111,6 +126,8 @@ def measure_load(folder: Path, clients: int, deltas: int) -> dict:
                     latencies["delta"].append(t1 - t0)
                     latencies["status"].append(t2 - t1)
                     accepted.append((r["revision"], value))
+        stop = threading.Event()
+        hostiles = _start_hostile(s.url, stop) if hostile else None
         threads = [threading.Thread(target=client, args=(k,)) for k in range(clients)]
         t0 = time.perf_counter()
         for t in threads:
@@ -118,25 +135,145 @@ def measure_load(folder: Path, clients: int, deltas: int) -> dict:
         for t in threads:
             t.join()
         wall = time.perf_counter() - t0
-        final = s.wait_status(lambda st: st["traced_revision"] == max(accepted)[0]
-                              and st["written_revision"] == max(accepted)[0], 300)
+        stop.set()
+        extra = hostiles.finish() if hostiles else {}
+        revisions_all = sorted([r for r, _ in accepted] + extra.get("revisions", []))
+        final = s.wait_status(lambda st: st["traced_revision"] == revisions_all[-1]
+                              and st["written_revision"] == revisions_all[-1], 300)
         rc, _ = s.stop()
     from pxr import Sdf
 
     edits = Sdf.Layer.OpenAsAnonymous(str(folder / "downlight.lumitrace-edits.usda"))
     stored = edits.GetAttributeAtPath(f"{REFLECTOR}.{SPEC}").default
-    revisions = sorted(r for r, _ in accepted)
     expected = max(accepted)[1]
+    lost = int(abs(float(stored) - expected) > 1e-6)
+    if extra.get("last_value") is not None:
+        paint = edits.GetAttributeAtPath(f"{HOUSING}.inputs:diffuseColor").default
+        lost += int(abs(float(paint[0]) - extra["last_value"]) > 1e-6)
     requests = len(latencies["delta"]) + len(latencies["status"])
     return {
         "clients": clients, "deltas_per_client": deltas, "accepted": len(accepted),
         "failures": len(failures), "requests_per_second": requests / wall,
         "delta_ms": _percentiles(latencies["delta"]),
         "status_ms": _percentiles(latencies["status"]),
-        "revisions_unique_and_contiguous": revisions == list(range(1, len(accepted) + 1)),
-        "final_value_is_last_accepted": abs(float(stored) - expected) < 1e-6,
+        "revisions_unique_and_contiguous": revisions_all == list(
+            range(1, len(revisions_all) + 1)),
+        "final_value_is_last_accepted": lost == 0, "accepted_deltas_lost": lost,
         "final_revision": final["revision"], "exit_status": rc,
+        **({"hostile": {k: v for k, v in extra.items() if k != "revisions"}} if hostile
+           else {}),
     }
+
+
+class _Hostile:
+    """The hostile clients of :func:`measure_load`, each a thread with a bounded loop."""
+
+    def __init__(self, url: str, stop: threading.Event):
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(url)
+        self.address = (parts.hostname, parts.port)
+        self.url = url.rstrip("/")
+        self.stop = stop
+        self.stats = {"streams_open": 0, "stream_bytes": 0, "slow_bytes": 0,
+                      "big_accepted": 0, "big_413": 0, "big_other": [], "revisions": [],
+                      "last_value": None}
+        self.threads = [threading.Thread(target=self._streams, daemon=True),
+                        threading.Thread(target=self._slow, daemon=True),
+                        threading.Thread(target=self._big, daemon=True)]
+        for t in self.threads:
+            t.start()
+
+    def _open_stream(self, rcvbuf: int | None = None):
+        import socket
+
+        sock = socket.socket()
+        if rcvbuf:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        sock.connect(self.address)
+        sock.sendall(b"GET /events HTTP/1.1\r\nHost: load\r\nAccept: text/event-stream"
+                     b"\r\n\r\n")
+        return sock
+
+    def _streams(self) -> None:
+        """:data:`STREAMS` event streams, all read as the events come."""
+        import selectors
+
+        sel = selectors.DefaultSelector()
+        socks = [self._open_stream() for _ in range(STREAMS)]
+        self.stats["streams_open"] = len(socks)
+        for sock in socks:
+            sock.setblocking(False)
+            sel.register(sock, selectors.EVENT_READ)
+        deadline = time.monotonic() + 600
+        while not self.stop.is_set() and time.monotonic() < deadline:
+            for key, _ in sel.select(0.2):
+                try:
+                    self.stats["stream_bytes"] += len(key.fileobj.recv(65536))
+                except BlockingIOError:
+                    pass
+        for sock in socks:
+            sock.close()
+
+    def _slow(self) -> None:
+        """:data:`SLOW_READERS` streams with a 4 KiB receive buffer read 64 bytes a
+        second each: the service's writes to them back up."""
+        socks = [self._open_stream(rcvbuf=4096) for _ in range(SLOW_READERS)]
+        deadline = time.monotonic() + 600
+        while not self.stop.wait(1.0) and time.monotonic() < deadline:
+            for sock in socks:
+                sock.settimeout(0.01)
+                try:
+                    self.stats["slow_bytes"] += len(sock.recv(64))
+                except OSError:
+                    pass
+        for sock in socks:
+            sock.close()
+
+    def _big(self) -> None:
+        """Bodies at the size limit (a delta padded with spaces to exactly the limit:
+        accepted, and counted as any accepted delta) and one byte over it (413)."""
+        import urllib.error
+        import urllib.request
+
+        from lumitrace.serve.app import MAX_BODY_BYTES
+
+        for i in range(BIG_BODIES):
+            if self.stop.is_set():
+                break
+            value = round(0.1 + 0.8 * i / BIG_BODIES, 6)
+            body = json.dumps({"deltas": [{"op": "set", "path": HOUSING,
+                                           "property": "inputs:diffuseColor",
+                                           "value": [value] * 3}]}).encode()
+            for size, want in ((MAX_BODY_BYTES, 200), (MAX_BODY_BYTES + 1, 413)):
+                req = urllib.request.Request(self.url + "/deltas", method="POST",
+                                             data=body + b" " * (size - len(body)),
+                                             headers={"Content-Type": "application/json"})
+                try:
+                    with urllib.request.urlopen(req, timeout=60) as r:
+                        code, answer = r.status, json.loads(r.read())
+                except urllib.error.HTTPError as exc:
+                    code, answer = exc.code, {}
+                except OSError as exc:  # the server may close on an oversized body
+                    code, answer = (413 if want == 413 else repr(exc)), {}
+                if code == 200:
+                    self.stats["big_accepted"] += 1
+                    self.stats["revisions"].append(answer["revision"])
+                    if answer["revision"] == max(self.stats["revisions"]):
+                        self.stats["last_value"] = value
+                elif code == 413:
+                    self.stats["big_413"] += 1
+                else:
+                    self.stats["big_other"].append(code)
+
+    def finish(self) -> dict:
+        for t in self.threads:
+            t.join(120)
+        return dict(self.stats)
+
+
+def _start_hostile(url: str, stop: threading.Event) -> _Hostile:
+    return _Hostile(url, stop)
 
 
 def _percentiles(values: list[float]) -> dict:
@@ -192,6 +329,26 @@ def measure_events(count: int) -> dict:
             "events_per_second": result["received"] / result["seconds"]}
 
 
+def _print_load(name: str, load: dict) -> None:
+    """The lines of one load run."""
+    print(f"{name}: {load['clients']} clients x {load['deltas_per_client']} deltas "
+          "(+ a status read each)")
+    h = load.get("hostile")
+    if h:
+        print(f"  beside {h['streams_open']} event streams ({h['stream_bytes']:,} bytes read), "
+              f"{SLOW_READERS} slow readers ({h['slow_bytes']:,} bytes read), "
+              f"{h['big_accepted']} bodies at the limit accepted, {h['big_413']} over it "
+              f"refused (413){', others: ' + str(h['big_other']) if h['big_other'] else ''}")
+    print(f"  requests per second  {load['requests_per_second']:.1f}")
+    for k in ("delta_ms", "status_ms"):
+        q = load[k]
+        print(f"  {k[:-3]:6s} latency ms   p50 {q['p50']:.1f}  p90 {q['p90']:.1f}  "
+              f"p99 {q['p99']:.1f}  max {q['max']:.1f}")
+    print(f"  accepted {load['accepted']}, failed {load['failures']}; revisions 1..N unique: "
+          f"{load['revisions_unique_and_contiguous']}; accepted deltas lost: "
+          f"{load['accepted_deltas_lost']}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--clients", type=int, default=4)
@@ -207,32 +364,33 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         (tmp / "a").mkdir()
         (tmp / "b").mkdir()
+        (tmp / "c").mkdir()
         runs = {"latency_s": lambda: measure_latency(tmp / "a", args.repeats),
                 "load": lambda: measure_load(tmp / "b", args.clients, args.deltas),
+                "load_hostile": lambda: measure_load(tmp / "c", args.clients, args.deltas,
+                                                     hostile=True),
                 "event_stream": lambda: measure_events(args.events)}
         report = {k: f() for k, f in runs.items()
                   if args.only is None or k.startswith(args.only[:4])}
+    loads = [report[k] for k in ("load", "load_hostile") if k in report]
+    sound = all(run["failures"] == 0 and run["revisions_unique_and_contiguous"]
+                and run["accepted_deltas_lost"] == 0 for run in loads)
     if args.only or args.json:
         print(json.dumps(report, indent=2))
-        return 0
+        return 0 if sound else 1
     lat, load, ev = report["latency_s"], report["load"], report["event_stream"]
     print(f"latency (median of {lat['repeats']} edits, demo stage, 2 cores)")
     print(f"  material edit -> first refreshed result on disk  {1e3 * lat['material_first_write']:8.0f} ms")
     print(f"  flux-only edit -> refreshed result on disk        {1e3 * lat['flux_first_write']:8.0f} ms")
     print(f"  material edit -> 2% estimated error, written      {lat['material_to_2pct']:8.2f} s "
           f"({lat['photons_to_2pct']:,.0f} photons)")
-    print(f"load: {load['clients']} clients x {load['deltas_per_client']} deltas (+ a status read each)")
-    print(f"  requests per second  {load['requests_per_second']:.1f}")
-    for k in ("delta_ms", "status_ms"):
-        q = load[k]
-        print(f"  {k[:-3]:6s} latency ms   p50 {q['p50']:.1f}  p90 {q['p90']:.1f}  "
-              f"p99 {q['p99']:.1f}  max {q['max']:.1f}")
-    print(f"  accepted {load['accepted']}, failed {load['failures']}; revisions 1..N unique: "
-          f"{load['revisions_unique_and_contiguous']}; final stage value = last accepted: "
-          f"{load['final_value_is_last_accepted']}")
+    hostile = report["load_hostile"]
+    for name, run in (("load", load), ("load beside hostile clients", hostile)):
+        _print_load(name, run)
     print(f"event stream: {ev['received']:,} events at {ev['events_per_second']:,.0f} events/s")
-    ok = (load["failures"] == 0 and load["revisions_unique_and_contiguous"]
-          and load["final_value_is_last_accepted"] and ev["received"] == ev["events"])
+    ok = all(run["failures"] == 0 and run["revisions_unique_and_contiguous"]
+             and run["accepted_deltas_lost"] == 0 for run in (load, hostile)) \
+        and ev["received"] == ev["events"]
     return 0 if ok else 1
 
 
