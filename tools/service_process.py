@@ -58,6 +58,16 @@ class Service:
                 raise TimeoutError(f"status never matched: {status}")
             time.sleep(step)
 
+    def wait_event(self, predicate, timeout: float = 30.0):
+        """The first event the service keeps that matches ``predicate``."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = [e for e in self.client.history(0) if predicate(e)]
+            if found:
+                return found[0]
+            time.sleep(0.1)
+        raise TimeoutError("no such event")
+
     def wait_done(self, revision: int, pictures: bool = True, timeout: float = 120.0) -> dict:
         """Wait until ``revision`` is traced to its end and written."""
         return self.wait_status(lambda s: s["traced_revision"] == revision

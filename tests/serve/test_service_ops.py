@@ -153,7 +153,7 @@ def test_a_stage_that_comes_back_is_recovered_without_another_edit(stage):
         for n, (name, (leave, come_back)) in enumerate(_outages(stage).items()):
             seen = s.client.history(0)[-1].id
             leave()
-            error = _wait_event(s, lambda e: e.id > seen and e.kind == "error")
+            error = s.wait_event(lambda e: e.id > seen and e.kind == "error")
             assert str(stage) in error.data["message"] or name == "renamed", error.data
             s.client.set(REFLECTOR, SPEC, 0.5 + 0.1 * n)  # its result cannot be sublayered
             s.wait_status(lambda st: st["last_error"] is not None, timeout=30)
@@ -164,17 +164,6 @@ def test_a_stage_that_comes_back_is_recovered_without_another_edit(stage):
                 timeout=30)
             assert status["revision"] >= 2 * n + 2, (name, status)
             assert s.client.results()["revision"] == status["revision"]
-
-
-def _wait_event(service: Service, predicate, timeout: float = 30.0):
-    """The first event the service keeps that matches ``predicate``."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = [e for e in service.client.history(0) if predicate(e)]
-        if found:
-            return found[0]
-        time.sleep(0.1)
-    raise TimeoutError("no such event")
 
 
 # ------------------------------------------------------------------------------------------

@@ -296,17 +296,6 @@ def _shape(stage: Path, ies: str) -> None:
     stage.write_text(text)
 
 
-def _wait_event(service: Service, predicate, timeout: float = 30.0):
-    """The first event the service keeps that matches ``predicate``."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = [e for e in service.client.history(0) if predicate(e)]
-        if found:
-            return found[0]
-        time.sleep(0.1)
-    raise TimeoutError("no such event")
-
-
 def test_a_revision_the_engine_cannot_trace_is_an_error_and_the_next_one_traces(stage):
     """A stage whose light reads a garbage IES profile (as left in the edits layer, or on
     disk, before a restart): the engine reports it as an ``error`` event and in
@@ -315,7 +304,7 @@ def test_a_revision_the_engine_cannot_trace_is_an_error_and_the_next_one_traces(
     (stage.parent / "bad.ies").write_text("junk\n")
     _shape(stage, "./bad.ies")
     with Service(stage, *FAST) as s:
-        error = _wait_event(s, lambda e: e.kind == "error")
+        error = s.wait_event(lambda e: e.kind == "error")
         assert error.data["revision"] == 0 and "IES" in error.data["message"], error.data
         status = s.wait_status(lambda st: st["last_error"] is not None, timeout=30)
         assert status["state"] == "error" and "bad.ies" in status["last_error"], status
@@ -346,7 +335,7 @@ def test_a_garbage_ies_profile_is_refused_at_the_door_and_the_last_result_stays(
         assert "/Luminaire/Spot" in said and IES_FILE in said and "bad.ies" in said, said
         assert s.client.status()["revision"] == 0
         (stage.parent / "good.ies").write_text("IESNA:LM-63-2019\nTILT=NONE\n1 2 3\n")
-        error = _wait_event(s, lambda e: e.kind == "error")
+        error = s.wait_event(lambda e: e.kind == "error")
         assert "cannot be traced" in error.data["message"] and IES_FILE in \
             error.data["message"], error.data
         status = s.client.status()

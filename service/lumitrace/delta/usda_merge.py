@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pxr import Sdf, Tf
+from pxr import Sdf
+from ..stage.usda_scan import layer_of_text, skip_token
 
 #: Words that open a nested block statement (a prim, or a variant set) in a prim's body.
 _BLOCKS = ("def", "over", "class", "variantSet")
@@ -33,41 +34,11 @@ class Statement:
     body: tuple[int, int] | None = None
 
 
-def _skip(text: str, i: int) -> int:
-    """The index after a string, asset path, prim path or comment starting at ``i`` (``i``
-    itself when none starts there)."""
-    c = text[i]
-    if c in "\"'":
-        q3 = text[i:i + 3]
-        if q3 in ('"""', "'''"):
-            j = text.find(q3, i + 3)
-            if j < 0:
-                raise ValueError("unterminated string")
-            return j + 3
-        j = i + 1
-        while j < len(text) and text[j] != c:
-            if text[j] == "\n":
-                raise ValueError("unterminated string")
-            j += 2 if text[j] == "\\" else 1
-        return j + 1
-    if c == "@":
-        close = "@@@" if text.startswith("@@@", i) else "@"
-        j = text.find(close, i + len(close))
-        return len(text) if j < 0 else j + len(close)
-    if c == "<":
-        j = text.find(">", i + 1)
-        return len(text) if j < 0 else j + 1
-    if c == "#":
-        j = text.find("\n", i)
-        return len(text) if j < 0 else j
-    return i
-
-
 def _matching(text: str, i: int) -> int:
     """The index of the bracket closing the one at ``text[i]``."""
     depth = 0
     while i < len(text):
-        j = _skip(text, i)
+        j = skip_token(text, i)
         if j != i:
             i = j
             continue
@@ -90,7 +61,7 @@ def statements(text: str, start: int, end: int) -> list[Statement]:
             i += 1
             continue
         if text[i] == "#":
-            i = _skip(text, i)
+            i = skip_token(text, i)
             continue
         line_start = text.rfind("\n", 0, i) + 1
         word = text[i:i + 12].split(None, 1)[0] if text[i:i + 12].split() else ""
@@ -106,7 +77,7 @@ def _block(text: str, i: int, line_start: int, word: str) -> Statement:
     """A prim or variant set statement from its first word at ``i``."""
     j = i
     while text[j] != "{":
-        k = _skip(text, j)
+        k = skip_token(text, j)
         if k != j:
             j = k
         elif text[j] == "(":
@@ -127,7 +98,7 @@ def _property(text: str, i: int, line_start: int, limit: int) -> Statement:
     """A property (or other one-line-at-depth-0) statement from ``i`` to its line's end."""
     j, first = i, None
     while j < limit and text[j] != "\n":
-        k = _skip(text, j)
+        k = skip_token(text, j)
         if k != j:
             j = k
             continue
@@ -156,7 +127,7 @@ def _trailing_comment(text: str, statement: Statement) -> str | None:
     while i < line_end:
         if text[i] == "#":
             return text[i:line_end].rstrip("\r")
-        j = _skip(text, i)
+        j = skip_token(text, i)
         i = j if j != i else i + 1
     return None
 
@@ -165,7 +136,7 @@ def _layer_body(text: str) -> tuple[int, int]:
     """Where the root-level statements run: after the header line and metadata block."""
     i = text.find("\n") + 1
     while i < len(text) and (text[i] in " \t\r\n" or text[i] == "#"):
-        i = _skip(text, i) if text[i] == "#" else i + 1
+        i = skip_token(text, i) if text[i] == "#" else i + 1
     if i < len(text) and text[i] == "(":
         i = _matching(text, i) + 1
     return i, len(text)
@@ -304,11 +275,8 @@ def _canonical(layer: Sdf.Layer) -> dict:
 
 def _same(text: str, merged: Sdf.Layer) -> bool:
     """Whether ``text`` reads back as ``merged``."""
-    check = Sdf.Layer.CreateAnonymous(".usda")
-    try:
-        if not check.ImportFromString(text):
-            return False
-    except Tf.ErrorException:
+    check = layer_of_text(text)
+    if check is None:
         return False
     try:
         return _canonical(check) == _canonical(merged)

@@ -2,12 +2,15 @@
 every comment and all formatting, and check the edit against an Sdf round trip."""
 from __future__ import annotations
 
+from ..stage.usda_scan import layer_of_text, skip_token
+
+
 def insert_sublayer_text(text: str, entry: str | None, root, remove: tuple[str, ...] = ()
                          ) -> str | None:
     """``text`` with ``@entry@`` first in its ``subLayers`` (None: no entry added) and the
     entries ``remove`` taken out, or ``None`` when the edit is not certain to equal
     ``root`` (the layer as read by Sdf) so edited."""
-    from pxr import Sdf, Tf
+    from pxr import Sdf
 
     try:
         candidate = text
@@ -27,13 +30,8 @@ def insert_sublayer_text(text: str, entry: str | None, root, remove: tuple[str, 
         expected.subLayerPaths.remove(old)
     if entry is not None:
         expected.subLayerPaths.insert(0, entry)
-    check = Sdf.Layer.CreateAnonymous(".usda")
-    try:
-        if not check.ImportFromString(candidate):
-            return None
-    except Tf.ErrorException:
-        return None
-    if check.ExportToString() != expected.ExportToString():
+    check = layer_of_text(candidate)
+    if check is None or check.ExportToString() != expected.ExportToString():
         return None
     return candidate
 
@@ -131,38 +129,9 @@ def _scan_block(text: str, start: int) -> tuple[int, int | None]:
     n = len(text)
     while i < n:
         c = text[i]
-        if c in "\"'":
-            q3 = text[i:i + 3]
-            if q3 in ('"""', "'''"):
-                j = text.find(q3, i + 3)
-                if j < 0:
-                    raise ValueError("unterminated string")
-                i = j + 3
-                continue
-            j = i + 1
-            while j < n and text[j] != c:
-                if text[j] == "\\":
-                    j += 1
-                elif text[j] == "\n":
-                    raise ValueError("unterminated string")
-                j += 1
-            i = j + 1
-            continue
-        if c == "@":
-            if text.startswith("@@@", i):
-                j = text.find("@@@", i + 3)
-                i = j + 3 if j >= 0 else n
-            else:
-                j = text.find("@", i + 1)
-                i = j + 1 if j >= 0 else n
-            continue
-        if c == "<":
-            j = text.find(">", i + 1)
-            i = j + 1 if j >= 0 else n
-            continue
-        if c == "#":
-            j = text.find("\n", i)
-            i = n if j < 0 else j
+        j = skip_token(text, i)  # strings, asset paths, prim paths and comments
+        if j != i:
+            i = j
             continue
         if c in "([{":
             depth += 1
