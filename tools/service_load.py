@@ -205,8 +205,13 @@ class _Hostile:
         for sock in socks:
             sock.setblocking(False)
             sel.register(sock, selectors.EVENT_READ)
-        deadline = time.monotonic() + 600
-        while not self.stop.is_set() and time.monotonic() < deadline:
+        start = time.monotonic()
+        deadline = start + 600
+        # a short load can end before the streams are served: read on until they have
+        # their first bytes (at most 10 s), so every stream was really held open
+        while (not self.stop.is_set() or (not self.stats["stream_bytes"]
+                                          and time.monotonic() < start + 10.0)) \
+                and time.monotonic() < deadline:
             for key, _ in sel.select(0.2):
                 try:
                     self.stats["stream_bytes"] += len(key.fileobj.recv(65536))
