@@ -186,6 +186,18 @@ def _first_events(service: Service, last_id: int, n: int = 2) -> list:
     return got
 
 
+def test_a_save_at_the_moment_the_service_starts_is_not_lost(stage):
+    """A DCC saving the stage as the service comes up, before its file watch is running:
+    the watch compares the files with what the service read once it is up, so the save
+    becomes revision 1 all the same."""
+    for lumens in (1300, 1400):
+        with Service(stage, *QUICK) as s:
+            base = s.client.status()["revision"]
+            _flux(stage, lumens)  # at once: the watch may not be up yet
+            status = s.wait_status(lambda st: st["revision"] == base + 1, timeout=30)
+            assert status["revision"] == base + 1
+
+
 def test_revisions_only_grow_across_restarts_and_a_resuming_client_learns_of_them(stage):
     """Revisions by deltas and by files saved on disk, a kill -9, a restart: the counter
     goes on from the last one handed out (file-edit revisions included), a stage edited

@@ -18,6 +18,10 @@ from .live import LayerUnreadable, LiveStage, Revision
 
 #: Debounce of the file watcher (ms): saves closer together than this are one change.
 DEBOUNCE_MS = 30
+#: The watcher reports in after this long without a change (ms): its first report, once
+#: it watches, is when the files are compared with what the service read, so a save made
+#: between the service's start (or a new folder's) and the watch is not lost.
+WATCH_STARTED_MS = 200
 #: How long an unreadable layer file is retried before it is reported (s).
 RETRY_SECONDS = 3.0
 RETRY_STEP = 0.1
@@ -32,10 +36,17 @@ async def watch_layers(live: LiveStage, submit: Callable[[Revision], None],
 
     while not stop.is_set():
         folders = await live.acall(live.folders)
+        first = True
         async for changes in awatch(*sorted(map(str, folders)), stop_event=stop,
                                     debounce=DEBOUNCE_MS, step=10, recursive=False,
-                                    watch_filter=None, yield_on_timeout=False):
+                                    watch_filter=None, yield_on_timeout=True,
+                                    rust_timeout=WATCH_STARTED_MS):
             paths = {Path(p).absolute() for _, p in changes}
+            if first:  # the watch is up: a save made before it started is found by content
+                first = False
+                paths |= await live.acall(lambda: live.layer_files() | live.asset_files())
+            if not paths:
+                continue
             await _reload(live, paths, submit, _Errors(events, report))
             if await live.acall(live.folders) != folders:
                 break  # a layer in a new folder: watch it too
