@@ -471,8 +471,6 @@ def cmd_report(args) -> int:
                              f"{args.thresholds!r}")
     if not thresholds or min(thresholds) < 0:
         raise LumitraceError("--thresholds must be zero or positive")
-    if 0.0 not in thresholds:
-        thresholds = (0.0,) + thresholds
     seconds = args.time if args.time is not None else (None if args.photons else 30.0)
     settings = ReportSettings(photons=args.photons, seconds=seconds, resolution=args.resolution,
                               thresholds=thresholds, seed=args.seed,

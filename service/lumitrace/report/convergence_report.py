@@ -77,7 +77,7 @@ def exr_reference(path: str | os.PathLike, resolution: int) -> Reference:
 @dataclass
 class ReportSettings:
     """What the report traces: stop criteria, map resolution, the filter thresholds
-    compared (0 is the raw map), seed and threads."""
+    compared (0, the raw map, always among them: the baseline), seed and threads."""
 
     photons: int | None = None
     seconds: float | None = 30.0
@@ -85,6 +85,11 @@ class ReportSettings:
     thresholds: tuple[float, ...] = REPORT_THRESHOLDS
     seed: int = 0
     threads: int = field(default_factory=lambda: os.cpu_count() or 1)
+
+    def __post_init__(self) -> None:
+        # the raw map (threshold 0) is the baseline every filtered curve is compared with
+        object.__setattr__(self, "thresholds",
+                           tuple(sorted({0.0, *map(float, self.thresholds)})))
 
 
 def crossing_time(times, errors, level) -> float | None:
