@@ -7,13 +7,11 @@ result layer (not from stronger opinions left, say, by flattening a stage on pub
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..filenames import RESULT_LAYER_SUFFIX, result_layer_path
-from .ownership import STAGE_KEY
-from .runs import layer_data
+from .ownership import belongs_to, recorded_stage
 from ..schema import RESULT_PREFIX
 from .result_layer import REPRESENTATION
 
@@ -100,14 +98,10 @@ def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Ch
         if not layer.is_file():
             return Check("missing", f"no result layer {layer}: trace the stage with --out "
                          f"{results}", STALE, {"resultLayer": str(layer)})
-        reference = layer_data(layer).get(STAGE_KEY)
-        try:
-            ours = bool(reference) and os.path.samefile(layer.parent / reference, stage_path)
-        except OSError:
-            ours = False
-        if not ours:
+        if not belongs_to(layer, Path(stage_path)):
             return Check("stale", f"{layer} holds the results of another stage "
-                         f"({reference or 'unknown'})", STALE, {"resultLayer": str(layer)})
+                         f"({recorded_stage(layer) or 'unknown'})", STALE,
+                         {"resultLayer": str(layer)})
         stage.GetSessionLayer().subLayerPaths.append(str(layer.absolute()))
     prim = stage.GetPrimAtPath(scene.luminaire_path)
     names = ("sceneHash", "converged", "relativeError", "relativeErrorBound", "photons",

@@ -53,6 +53,19 @@ def ownership_record(stage_path: Path | None, layer_dir: Path,
             FILES_KEY: json.dumps(digests, sort_keys=True)}
 
 
+def recorded_stage(layer: Path) -> Path | None:
+    """The stage a result layer says it belongs to (its ``stage`` reference resolved
+    against the layer's folder); None where it names none."""
+    reference = layer_data(Path(layer)).get(STAGE_KEY)
+    return Path(layer).parent / reference if reference else None
+
+
+def belongs_to(layer: Path, stage: Path) -> bool:
+    """Whether the result layer ``layer`` records ``stage`` as its stage."""
+    recorded = recorded_stage(layer)
+    return recorded is not None and _same_file(recorded, Path(stage))
+
+
 @dataclass(frozen=True)
 class Claim:
     """What a run may do to the files already in its output folder: ``dropped`` are the

@@ -14,8 +14,7 @@ from pathlib import Path
 from ..errors import OutputError, OutputWarning
 from ..atomic import fsync_path
 from ..filenames import RESULT_LAYER_SUFFIX
-from .ownership import STAGE_KEY
-from .runs import layer_data
+from .ownership import belongs_to
 from .usda_text import insert_sublayer_text
 from ..stage.diagnostics import tf_message
 
@@ -199,13 +198,7 @@ def _other_result_of(entry: str, stage: Path, layer_path: Path) -> bool:
     path = Path(entry) if os.path.isabs(entry) else stage.parent / entry
     if not path.exists():
         return path.name == layer_path.name
-    reference = layer_data(path).get(STAGE_KEY)
-    if not reference:
-        return False
-    try:
-        return os.path.samefile(path.parent / reference, stage)
-    except OSError:
-        return False
+    return belongs_to(path, stage)
 
 
 @dataclass(frozen=True)

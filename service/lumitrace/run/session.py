@@ -121,18 +121,10 @@ class Refinement:
         self.records: list[PhotonRecords] | None = (
             [PhotonRecords.empty() for _ in scene.emitters] if records_cap else None)
         self.records_dropped = False
-        self.settings = settings
         self.accumulator = Accumulator(scene, settings.resolution, goniometer)
         fluxes = [e.flux for e in scene.emitters]
         self.shares = [f / sum(fluxes) for f in fluxes]
-        self.budget = settings.budget()
-        if self.budget is not None and self.budget < MIN_EMITTER_PHOTONS * len(fluxes):
-            raise LumitraceError(
-                f"{self.budget:,} photons are too few for {len(fluxes):,} emitters: each "
-                f"needs at least {MIN_EMITTER_PHOTONS} photon, so trace at least "
-                f"{MIN_EMITTER_PHOTONS * len(fluxes):,} (--photons)", scene.luminaire_path)
-        self.targets = (allocate(fluxes, self.budget, MIN_EMITTER_PHOTONS)
-                        if self.budget is not None else [math.inf] * len(fluxes))
+        self.retarget(settings)
         self.done = [0] * len(fluxes)
         threads = max(1, int(settings.threads))
         self.full_round = threads * settings.batch_size * 2
@@ -179,16 +171,20 @@ class Refinement:
             self.records, self.records_dropped = None, True
 
     def retarget(self, settings: TraceSettings) -> None:
-        """Take new stop criteria and threshold (a service's client changed them): the
-        photons traced stay, and the budget, if any, is shared out again."""
-        self.settings = settings
-        self.budget = settings.budget()
+        """Take stop criteria and threshold (at the start, or when a service's client
+        changes them): the photons traced stay, and the budget, if any, is shared among
+        the emitters, each getting at least :data:`MIN_EMITTER_PHOTONS`. A budget too
+        small for that is refused before anything changes."""
+        budget = settings.budget()
         fluxes = [e.flux for e in self.scene.emitters]
-        if self.budget is not None and self.budget < MIN_EMITTER_PHOTONS * len(fluxes):
-            raise LumitraceError(f"{self.budget:,} photons are too few for {len(fluxes):,} "
-                                 "emitters", "photons")
-        self.targets = (allocate(fluxes, self.budget, MIN_EMITTER_PHOTONS)
-                        if self.budget is not None else [math.inf] * len(fluxes))
+        if budget is not None and budget < MIN_EMITTER_PHOTONS * len(fluxes):
+            raise LumitraceError(
+                f"{budget:,} photons are too few for {len(fluxes):,} emitters: each "
+                f"needs at least {MIN_EMITTER_PHOTONS} photon, so trace at least "
+                f"{MIN_EMITTER_PHOTONS * len(fluxes):,} (--photons)", self.scene.luminaire_path)
+        self.targets = (allocate(fluxes, budget, MIN_EMITTER_PHOTONS)
+                        if budget is not None else [math.inf] * len(fluxes))
+        self.settings, self.budget = settings, budget
 
     def finished(self) -> bool:
         """Whether refining is over: the target reached, the budget spent, or no light

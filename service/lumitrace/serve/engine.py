@@ -146,12 +146,13 @@ class Engine:
         new = replace(self.settings, **knobs) if knobs else self.settings  # checks them
         with self._cv:
             refilter = new.threshold != self.settings.threshold
+            r = self.refinement
+            if r is not None and knobs:
+                r.retarget(new)  # first: a budget it refuses changes nothing
             self.settings = new
             if paused is not None:
                 self.paused = paused
-            r = self.refinement
             if r is not None and knobs:
-                r.retarget(new)
                 if refilter and r.accumulator.photons:
                     r.reestimate()
                 self.done = r.finished()

@@ -25,6 +25,7 @@ from ..delta.notices import ChangedPaths
 from ..delta.protocol import DeltaError, Problem
 from ..errors import LumitraceError, StageError
 from ..filenames import RESULT_LAYER_SUFFIX, edits_layer_path
+from ..publish.ownership import file_digest as digest_of_file
 from ..publish.sublayer import RootEdit
 from ..scene import Scene
 from ..stage import validate
@@ -58,7 +59,7 @@ class Revision:
 def file_digest(path: Path) -> str | None:
     """sha256 of a file's bytes (None when it cannot be read)."""
     try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()
+        return digest_of_file(path)
     except OSError:
         return None
 
