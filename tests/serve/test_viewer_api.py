@@ -83,6 +83,8 @@ def test_the_editable_scene_names_the_prims_a_delta_sets(served):
     assert mat["scattering"] in scene["scattering_models"]
     assert scene["ranges"]["reflectance"] == [0.0, 1.0]
     assert scene["emitters"][0]["flux"] == pytest.approx(1200.0)
+    assert all(m["editable"] == bool(m["path"]) for m in scene["materials"])
+    assert mat["editable"]
 
 
 def test_a_new_threshold_refilters_without_retracing_and_a_bad_one_is_refused(served):

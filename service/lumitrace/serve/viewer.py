@@ -193,7 +193,7 @@ def editable_scene(scene: Scene, revision: int) -> dict[str, Any]:
     materials = [{"path": m.path, "scattering": m.scattering, "reflectance": m.reflectance,
                   "specularReflectance": m.specular_reflectance,
                   "transmittance": m.transmittance, "ior": m.ior, "roughness": m.roughness,
-                  "editable": not m.path.startswith("<")}
+                  "editable": bool(m.path)}  # the fallback material has no prim
                  for m in scene.materials]
     ranges = {name.split(":", 1)[1]: list(r) for name, r in schema.MATERIAL_RANGES.items()}
     ranges["ior"] = [schema.IOR_EXCLUSIVE_MIN, None]
