@@ -28,6 +28,9 @@ class CGammaGrid:
     candela: np.ndarray
     symmetry: str = "none"
     sigma: np.ndarray | None = None  # standard error of each value (cd), where known
+    #: half-angles (deg) of the polar caps whose mean intensity the gamma 0 and 180 values
+    #: are (measured grids; None for a grid read from a file)
+    pole_caps: tuple[float, float] | None = None
 
     def full(self) -> "CGammaGrid":
         """The same distribution on planes all round (0 <= C < 360), unfolding symmetry."""
@@ -38,7 +41,8 @@ class CGammaGrid:
         step = _c_step(self.c)
         cs = np.arange(0.0, 360.0 - 1e-9, step)
         return CGammaGrid(cs, self.gamma, self.at(cs), "none",
-                          None if self.sigma is None else self.at(cs, self.sigma))
+                          None if self.sigma is None else self.at(cs, self.sigma),
+                          self.pole_caps)
 
     def at(self, c_deg: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
         """Intensity rows (len(c), len(gamma)) at any C angles, using the symmetry (or rows

@@ -6,9 +6,13 @@ A grid value is the photon flux through its cell (C +- half the C step, gamma be
 midpoints to its neighbours) over the cell's solid angle: an unbiased estimate of the mean
 intensity over the cell, with the exact binomial variance of analog photons. The poles,
 gamma 0 and 180, are directions, not planes: their value, the same in every plane, is the
-mean over the whole polar cap (gamma up to the midpoint to the next gamma, all C), which
-holds n/8 times a neighbouring cell's solid angle with n planes all round (3 times with
-the files' 15 deg planes), so no pole value is noisier than the values next to it. Nothing is
+mean over the whole polar cap (all C), from the pole to the midpoint to the next gamma or,
+where the pole is lit (at least :data:`LIT_SHARE` of the grid's largest value) and that cap
+is noisier than :data:`POLE_NOISE` times the median relative error of the grid's other lit
+values, as far as it takes to be no noisier than that (0.5 deg steps, at most
+:data:`POLE_CAP_MAX` deg). With planes every 15 deg all round the first cap already holds 3
+times a neighbouring cell's solid angle; a rotationally symmetric grid, whose other cells
+are whole rings, needs a wider one (the Lambertian disc's: about 6 deg). Nothing is
 interpolated or filtered, so the files carry no bias the stated errors do not cover, beyond
 the averaging over each cell (second order in the cell size where the distribution is
 smooth; at a kink, such as the horizon of a one-sided disc, the cell's mean).
@@ -16,6 +20,7 @@ smooth; at a kink, such as the horizon of a one-sided disc, the cell's mean).
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -26,6 +31,13 @@ from .grid import CGammaGrid
 
 #: Symmetries tried, strongest first.
 CANDIDATES = ("rotational", "quadrant", "C0-C180", "C90-C270")
+#: A value is lit at this share of the grid's largest value (the field angle's level).
+LIT_SHARE = 0.1
+#: A lit pole's relative error may be this many times the median of the other lit values'.
+POLE_NOISE = 1.5
+#: The widest polar cap (deg from the pole), and the steps it widens in (deg).
+POLE_CAP_MAX = 7.5
+POLE_CAP_STEP = 0.5
 
 
 def _plane_of_bin(c_step: float) -> tuple[np.ndarray, int]:
@@ -151,37 +163,106 @@ def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
         folds[name] = (kept, fold)
     sums = {(name, h): [np.zeros((len(kept), len(gammas))) for _ in range(2)]
             for name, (kept, _) in folds.items() for h in HALVES}
-    # the poles: one cap each, all C planes pooled (flux and variance, per half)
-    caps = {h: [np.zeros(2), np.zeros(2)] for h in HALVES}
+    # the poles: caps of every width tried, all C planes pooled (flux and variance per
+    # half; rows: the cap at gamma 0, at 180)
+    cap_bins, cap_omega, cap_angles = _cap_bins(gammas)
+    caps = {h: np.zeros((2, *cap_bins.shape)) for h in HALVES}
     halves = [list(acc.emitter_cells(h)) for h in (0, 1)]
     for (w2, n2, v0, i0), (_, _, v1, i1) in zip(*halves):
         k_half = [grid_counts(v0, i0, c_step, gammas), grid_counts(v1, i1, c_step, gammas)]
-        for h, k_all, w, total in ((0, k_half[0], w2, n2), (1, k_half[1], w2, n2),
-                                   (None, k_half[0] + k_half[1], 0.5 * w2, 2.0 * n2)):
+        r_half = [_cap_counts(ring_counts(v, i), cap_bins) for v, i in ((v0, i0), (v1, i1))]
+        for h, k_all, pole, w, total in (
+                (0, k_half[0], r_half[0], w2, n2), (1, k_half[1], r_half[1], w2, n2),
+                (None, k_half[0] + k_half[1], r_half[0] + r_half[1], 0.5 * w2, 2.0 * n2)):
             for name, (_, fold) in folds.items():
                 k = fold @ k_all
                 f, v = sums[name, h]
                 f += w * k
                 v += w * w * k * np.maximum(1.0 - k / total, 0.0)
-            pole = k_all[:, [0, -1]].sum(axis=0)
             caps[h][0] += w * pole
             caps[h][1] += w * w * pole * np.maximum(1.0 - pole / total, 0.0)
-    cap_omega = omega_grid[:, [0, -1]].sum(axis=0)
     out = {}
+    widths = {}
     for (name, h), (flux, var) in sums.items():
         kept, fold = folds[name]
         omega = fold @ omega_grid
         cd, sigma = flux / omega, np.sqrt(var) / omega
         # gamma 0 and 180 are directions, not planes: one value each, shared by every
-        # plane, from the whole polar cap (all planes' counts pooled)
-        cd[:, [0, -1]] = caps[h][0] / cap_omega
-        sigma[:, [0, -1]] = np.sqrt(caps[h][1]) / cap_omega
+        # plane, from the whole polar cap (all planes' counts pooled), as wide as the
+        # grid from all photons needs (the halves take the same caps)
+        pole_cd, pole_sigma = caps[h][0] / cap_omega, np.sqrt(caps[h][1]) / cap_omega
+        if name not in widths:
+            all_flux, all_var = sums[name, None]
+            widths[name] = pole_caps(all_flux / omega, np.sqrt(all_var) / omega,
+                                     caps[None][0] / cap_omega,
+                                     np.sqrt(caps[None][1]) / cap_omega)
+        pick = widths[name]
+        cd[:, [0, -1]] = pole_cd[[0, 1], pick]
+        sigma[:, [0, -1]] = pole_sigma[[0, 1], pick]
         c = kept * c_step
         if name == "none":  # the 360 plane repeats 0, as the files list it
             c = np.append(c, 360.0)
             cd, sigma = np.vstack([cd, cd[:1]]), np.vstack([sigma, sigma[:1]])
-        out[name, h] = CGammaGrid(c.astype(np.float64), gammas, cd, name, sigma)
+        half_angles = (float(cap_angles[0, pick[0]]), float(cap_angles[1, pick[1]]))
+        out[name, h] = CGammaGrid(c.astype(np.float64), gammas, cd, name, sigma, half_angles)
     return out
+
+
+@functools.lru_cache(maxsize=16)
+def _cap_bins_cached(gammas: tuple[float, ...]) -> tuple[np.ndarray, ...]:
+    first = 0.5 * gammas[1], 0.5 * (180.0 - gammas[-2])  # to the midpoints: the grid's zones
+    bins, omega, angles = [], [], []
+    cos_edges = np.cos(np.radians(GAMMA_EDGES))
+    for pole, start in enumerate(first):
+        stop = max(start, POLE_CAP_MAX)
+        half_angles = np.concatenate([[start], np.arange(
+            math.ceil(start / POLE_CAP_STEP + 1e-9) * POLE_CAP_STEP, stop + 1e-9,
+            POLE_CAP_STEP)])
+        edge = half_angles if pole == 0 else 180.0 - half_angles
+        b = np.searchsorted(GAMMA_EDGES, edge - 1e-9)
+        if not np.allclose(GAMMA_EDGES[b], edge, atol=1e-9):
+            raise LumitraceError("polar caps must end on goniometer gamma edges")
+        bins.append(b)
+        angles.append(half_angles)
+        omega.append(2.0 * math.pi * (1.0 - cos_edges[b]) if pole == 0
+                     else 2.0 * math.pi * (1.0 + cos_edges[b]))
+    n = min(len(b) for b in bins)
+    return tuple(np.array([a[:n] for a in x]) for x in (bins, omega, angles))
+
+
+def _cap_bins(gammas: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The polar caps tried for a grid's poles: (the goniometer gamma edge index each
+    ends at, their solid angles (sr), their half-angles (deg)), each (2, widths), row 0
+    around gamma 0, row 1 around 180; the first the grid's own pole zone (to the midpoint
+    to the next gamma)."""
+    return _cap_bins_cached(tuple(map(float, gammas)))
+
+
+def _cap_counts(ring: np.ndarray, cap_bins: np.ndarray) -> np.ndarray:
+    """Counts of a ring profile (per goniometer gamma bin) in each polar cap, (2, widths)."""
+    cum = np.concatenate([[0.0], np.cumsum(ring)])
+    return np.stack([cum[cap_bins[0]], cum[-1] - cum[cap_bins[1]]])
+
+
+def pole_caps(cd: np.ndarray, sigma: np.ndarray, cap_cd: np.ndarray, cap_sigma: np.ndarray
+              ) -> np.ndarray:
+    """Which polar cap each pole takes (index into the widths tried): the first unless the
+    pole is lit and its relative error above :data:`POLE_NOISE` times the median of the
+    grid's other lit values; then the first as quiet as that, or the widest."""
+    inner = cd[:, 1:-1]
+    top = max(float(inner.max(initial=0.0)), float(cap_cd[:, 0].max()))
+    lit = inner >= LIT_SHARE * top
+    if top <= 0 or not lit.any():
+        return np.zeros(2, np.int64)
+    limit = POLE_NOISE * float(np.median(sigma[:, 1:-1][lit] / inner[lit]))
+    pick = np.zeros(2, np.int64)
+    for p in (0, 1):
+        if cap_cd[p, 0] < LIT_SHARE * top:
+            continue
+        rel = cap_sigma[p] / np.maximum(cap_cd[p], 1e-300)
+        quiet = np.flatnonzero(rel <= limit)
+        pick[p] = quiet[0] if quiet.size else len(rel) - 1
+    return pick
 
 
 def measure(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,

@@ -35,14 +35,16 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
     g = ph.grid
     doc = {
         "definition": "each intensity is the photon flux through its cell (C +- half the C "
-                      "step, gamma between the midpoints to its neighbours) over the cell's "
-                      "solid angle: an unbiased estimate of the cell's mean intensity; "
-                      "sigma is its standard error (binomial, analog photons)",
+                      "step, gamma between the midpoints to its neighbours; at gamma 0 and "
+                      "180 the polar cap of poleCaps_deg, all C) over the cell's solid "
+                      "angle: an unbiased estimate of the cell's mean intensity; sigma is "
+                      "its standard error (binomial, analog photons)",
         "frame": "type C: gamma from nadir (the luminaire's -up), C counter-clockwise from "
                  "its +X seen from above",
         "runId": run_id,
         "units": {"c": "deg", "gamma": "deg", "candela": "cd", "sigma": "cd"},
         "symmetry": g.symmetry,
+        "poleCaps_deg": None if g.pole_caps is None else list(g.pole_caps),
         "symmetryDepartures": ph.departures,
         "c": g.c.tolist(), "gamma": g.gamma.tolist(),
         "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
