@@ -1,5 +1,5 @@
 """The intensity map as a lat-long environment texture: what renderers (a UsdLux DomeLight)
-and compositors read, written through OpenImageIO as a tiled, mip-mapped EXR.
+and compositors read, a tiled, mip-mapped EXR (:mod:`.exr_tiled`).
 
 OpenEXR's latitude-longitude layout: x is longitude, from +pi at the left edge to -pi at the
 right, y latitude, +pi/2 at the top; longitude 0 on the equator looks along +Z, pi/2 along
@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import OutputError
 from ..film.cubemap import sample_map
+from .exr_tiled import ENVMAP_LATLONG, write_tiled_exr
 
 #: Tile size (pixels) of the texture.
 TILE = 64
@@ -54,18 +55,15 @@ def latlong_image(intensity_map: np.ndarray, up_axis: str, width: int | None = N
 
 def write_latlong_texture(path: str | os.PathLike, intensity_map: np.ndarray,
                           up_axis: str) -> Path:
-    """Write the lat-long texture of a cube map (cd) at ``path`` (tiled, mip-mapped EXR,
-    through OpenImageIO's texture maker)."""
-    import OpenImageIO as oiio
-
+    """Write the lat-long texture of a cube map (cd) at ``path``: a tiled, mip-mapped EXR
+    with R, G and B the intensity, wrapping round in longitude and clamped at the poles."""
     img = latlong_image(intensity_map, up_axis)
-    buf = oiio.ImageBuf(np.repeat(img[..., None], 3, axis=2))
-    spec = oiio.ImageSpec()
-    spec.tile_width = spec.tile_height = TILE
-    spec.attribute("compression", "zip")
-    spec.attribute("oiio:ColorSpace", "lin_rec709")
-    spec.attribute("ImageDescription", "luminous intensity (cd) by direction, lat-long, "
-                   f"dome frame with its pole on the stage's +{up_axis}")
-    if not oiio.ImageBufAlgo.make_texture(oiio.MakeTxEnvLatl, buf, str(path), spec):
-        raise OutputError(f"cannot write the lat-long texture: {oiio.geterror()}", str(path))
-    return Path(path)
+    strings = {"ImageDescription": "luminous intensity (cd) by direction, lat-long, dome "
+               f"frame with its pole on the stage's +{up_axis}",
+               "wrapmodes": "periodic,clamp", "colorInteropID": "lin_rec709_scene",
+               "oiio:ColorSpace": "lin_rec709_scene"}
+    try:
+        return write_tiled_exr(path, {"R": img, "G": img, "B": img}, strings,
+                               envmap=ENVMAP_LATLONG, tile=TILE)
+    except OSError as exc:
+        raise OutputError(f"cannot write the lat-long texture: {exc}", str(path)) from exc
