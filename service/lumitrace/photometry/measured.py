@@ -244,6 +244,13 @@ def _cap_counts(ring: np.ndarray, cap_bins: np.ndarray) -> np.ndarray:
     return np.stack([cum[cap_bins[0]], cum[-1] - cum[cap_bins[1]]])
 
 
+def _median(x: np.ndarray) -> float:
+    """np.median of finite values, without the NaN check that loads numpy.ma (20 ms)."""
+    n = x.size
+    part = np.partition(x, [(n - 1) // 2, n // 2])
+    return float(np.mean(part[[(n - 1) // 2, n // 2]]))
+
+
 def pole_caps(cd: np.ndarray, sigma: np.ndarray, cap_cd: np.ndarray, cap_sigma: np.ndarray
               ) -> np.ndarray:
     """Which polar cap each pole takes (index into the widths tried): the first unless the
@@ -254,7 +261,7 @@ def pole_caps(cd: np.ndarray, sigma: np.ndarray, cap_cd: np.ndarray, cap_sigma: 
     lit = inner >= LIT_SHARE * top
     if top <= 0 or not lit.any():
         return np.zeros(2, np.int64)
-    limit = POLE_NOISE * float(np.median(sigma[:, 1:-1][lit] / inner[lit]))
+    limit = POLE_NOISE * _median(sigma[:, 1:-1][lit] / inner[lit])
     pick = np.zeros(2, np.int64)
     for p in (0, 1):
         if cap_cd[p, 0] < LIT_SHARE * top:
