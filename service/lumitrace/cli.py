@@ -12,7 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
-from .run.settings import DEFAULT_THRESHOLD
+from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
 from .trace.job import MAX_DEPTH
 
 
@@ -85,6 +85,12 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
+    t.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
+                        "the map does not depend on it); exit 4 if it goes away mid-run")
+    t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
+                   help="photons per batch job (default %(default)s; the map does not "
+                        "depend on it)")
     t.add_argument("--out", type=Path, default=None,
                    help="folder for every output, the result layer included (default: "
                         "beside the stage)")
@@ -325,7 +331,8 @@ def cmd_trace(args) -> int:
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed, max_depth=args.max_depth,
-                             threads=args.threads or default_threads(), workers=args.workers)
+                             threads=args.threads or default_threads(), workers=args.workers,
+                             scheduler=args.scheduler, batch_size=args.batch_size)
     check_interrupted(defer=True)
     preflight(args.stage, args.out)
     if args.edits is not None:
@@ -354,6 +361,7 @@ def cmd_trace(args) -> int:
     for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
+    from .run.cluster import ClusterLost
     from .run.session import run
     from .trace.compiled import note
 
@@ -362,10 +370,13 @@ def cmd_trace(args) -> int:
 
     bar, update = _progress_bar(settings.budget(), args.time,
                                 not (args.no_progress or args.json or args.quiet))
+    lost = None
     try:
         from . import STARTED
 
         result = run(scene, settings, progress=update, frame=args.frame, clock_start=STARTED)
+    except ClusterLost as exc:  # the batches that finished are written, then it is said
+        result, lost = exc.result, exc
     finally:
         if bar is not None:
             bar.close()
@@ -374,6 +385,8 @@ def cmd_trace(args) -> int:
 
     record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
                            pictures=not args.no_pictures)
+    if lost is not None:
+        raise lost.written(record["photons"])
     if _RECEIVED:  # a signal a library swallowed while the outputs were written
         stop = Interrupted(_RECEIVED[0])
         stop.published = True
@@ -508,25 +521,11 @@ def cmd_report(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .run.bench import run_benchmark
+    from .run.bench import run_benchmark, summary_text
 
     report = run_benchmark(stage=args.stage, seconds=args.seconds, threads=args.threads,
                            workers=args.workers)
-    if args.json:
-        print(json.dumps(report))
-    else:
-        print(f"stage                {report['stage']}")
-        print(f"triangles            {report['triangles']:,}")
-        print(f"photons              {report['photons']:,}")
-        print(f"workers              {report['threads']} {report['workers']}")
-        print("kernels              " + ("built ahead of time" if report["kernels"] == "aot"
-                                         else "numba's JIT") + ", Embree " +
-              ("through its C API, a geometry per part" if report["embree"] == "parts"
-               else "through embreex"))
-        print(f"tracer               {report['segments_per_second']:,.0f} segments/s "
-              f"({report['photons_per_second']:,.0f} photons/s)")
-        print(f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays")
-        print(f"ratio                {report['ratio']:.2f}")
+    print(json.dumps(report) if args.json else summary_text(report))
     return 0
 
 
@@ -656,7 +655,7 @@ def _failure(exc: BaseException) -> tuple[int, str]:
     """The exit status and the one line for a run that failed with ``exc``; None's
     status for an exception that is no user-facing failure."""
     if isinstance(exc, LumitraceError):
-        return 2, f"lumitrace: error: {exc}"
+        return getattr(exc, "exit_status", 2), f"lumitrace: error: {exc}"
     if isinstance(exc, Interrupted):
         return 128 + exc.signum, _interrupted_message(exc)
     if isinstance(exc, KeyboardInterrupt):

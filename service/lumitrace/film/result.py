@@ -23,6 +23,8 @@ class TraceResult:
     seconds: float
     prepare_seconds: float
     estimate: MapEstimate
+    #: batches traced again after a Dask worker was lost (their first tallies never came)
+    batches_redone: int = 0
 
     @property
     def photons(self) -> int:

@@ -119,4 +119,5 @@ def trace_figures(result: TraceResult) -> dict[str, Any]:
         "threshold": float(s.threshold), "resolution": acc.resolution, "seed": s.seed,
         "input_hash": input_hash(result), "scene_hash": result.scene.content_hash(),
         "photons_per_second": acc.photons / secs, "segments_per_second": acc.segments / secs,
+        "batches_redone": result.batches_redone,
     }

@@ -91,3 +91,20 @@ def run_benchmark(stage: str | os.PathLike | None = None, seconds: float = 10.0,
             "trace_seconds": t_trace, "raw_seconds": t_raw,
             "photons_per_second": photons / t_trace, "segments_per_second": segments / t_trace,
             "raw_rays_per_second": segments / t_raw, "ratio": t_raw / t_trace}
+
+
+def summary_text(report: dict) -> str:
+    """The benchmark's report as the command prints it, one figure a line."""
+    kernels = "built ahead of time" if report["kernels"] == "aot" else "numba's JIT"
+    embree = ("through its C API, a geometry per part" if report["embree"] == "parts"
+              else "through embreex")
+    return "\n".join([
+        f"stage                {report['stage']}",
+        f"triangles            {report['triangles']:,}",
+        f"photons              {report['photons']:,}",
+        f"workers              {report['threads']} {report['workers']}",
+        f"kernels              {kernels}, Embree {embree}",
+        f"tracer               {report['segments_per_second']:,.0f} segments/s "
+        f"({report['photons_per_second']:,.0f} photons/s)",
+        f"bare embreex run()   {report['raw_rays_per_second']:,.0f} rays/s on the same rays",
+        f"ratio                {report['ratio']:.2f}"])

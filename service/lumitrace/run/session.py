@@ -22,6 +22,7 @@ from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
 from ..trace.records import PhotonRecords
 from . import workers
+from .cluster import ClusterLost
 from .memory import check_memory
 from .settings import TraceSettings
 
@@ -245,8 +246,11 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     t_prep = time.perf_counter() - t0
     r = Refinement(scene, settings, goniometer=ps.goniometer)
     threads = max(1, int(settings.threads))
-    mode = workers.choose(settings.workers, threads, r.budget)
-    with workers.batch_runner(scene, ps, mode, threads) as trace_jobs:
+    mode = "dask" if settings.scheduler else workers.choose(settings.workers, threads, r.budget)
+    lost = None
+    with workers.batch_runner(scene, ps, mode, threads, settings.scheduler) as trace_jobs:
+        if mode == "dask":  # a full round keeps every thread of the cluster busy
+            r.full_round = trace_jobs.threads * settings.batch_size * 2
         start = time.perf_counter()
         deadline = None if settings.seconds is None else \
             (clock_start if clock_start is not None else start) + settings.seconds
@@ -264,7 +268,11 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
             jobs = r.next_jobs(most)
             if not jobs:
                 break
-            est = r.add_round(trace_jobs(jobs), estimated)
+            try:
+                est = r.add_round(trace_jobs(jobs), estimated)
+            except ClusterLost as exc:  # keep the batches that finished, then say so
+                est, lost = r.add_round(exc.tallies, True), exc
+                break
             elapsed = time.perf_counter() - start
             if progress is not None:
                 progress(Progress(r.iteration, r.accumulator.photons, elapsed, est.error,
@@ -279,4 +287,9 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 break
     _warn_cut(r.accumulator, settings)
     _warn_unreached(r.accumulator)
-    return r.result(time.perf_counter() - start, t_prep)
+    result = r.result(time.perf_counter() - start, t_prep)
+    result.batches_redone = getattr(trace_jobs, "redone", 0)
+    if lost is not None:
+        lost.result = result
+        raise lost
+    return result

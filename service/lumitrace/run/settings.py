@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import re
 from dataclasses import dataclass, field
 
 from ..errors import LumitraceError
@@ -87,6 +88,8 @@ class TraceSettings:
     batch_size: int = DEFAULT_BATCH_SIZE
     max_depth: int = MAX_DEPTH
     workers: str = "auto"
+    #: a Dask scheduler's address (tcp://HOST:PORT): batches run on its workers
+    scheduler: str | None = None
 
     def __post_init__(self) -> None:
         put = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731 (frozen)
@@ -106,6 +109,10 @@ class TraceSettings:
         if self.workers not in WORKER_MODES:
             raise SettingsError(f"must be one of {', '.join(WORKER_MODES)}, got "
                                 f"{self.workers!r}", prop="workers")
+        if self.scheduler is not None and not (isinstance(self.scheduler, str) and re.fullmatch(
+                r"([a-z]+://)?(\[[0-9a-fA-F:.]+\]|[^\s/:\[\]]+)(:\d+)?(/\S*)?", self.scheduler)):
+            raise SettingsError(f"must be a scheduler address like tcp://HOST:PORT, got "
+                                f"{self.scheduler!r}", prop="scheduler")
 
     def budget(self) -> int | None:
         """Total photons to trace, or None when only time or error stops the session."""

@@ -79,10 +79,20 @@ def choose(mode: str, threads: int, budget: int | None) -> str:
 
 
 @contextlib.contextmanager
-def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int
+def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int,
+                 scheduler: str | None = None
                  ) -> Iterator[Callable[[Iterable[BatchJob]], Iterator[BatchTally]]]:
-    """A function mapping jobs to their tallies, in job order, on ``threads`` workers."""
-    if mode == "processes":  # (multiprocessing loaded only here: 15 ms at every start)
+    """A function mapping jobs to their tallies, in job order, on ``threads`` workers (or
+    mode "dask": on the workers of the Dask ``scheduler``, see :mod:`.cluster`)."""
+    if mode == "dask":
+        from .cluster import cluster_runner
+
+        runner = cluster_runner(scheduler, scene, ps.frame)
+        try:
+            yield runner
+        finally:
+            runner.close()
+    elif mode == "processes":  # (multiprocessing loaded only here: 15 ms at every start)
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 

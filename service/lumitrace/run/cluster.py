@@ -1,0 +1,241 @@
+"""Photon batches on a Dask cluster: the same seam as the thread and process pools.
+
+The scene goes to every worker once (``scatter(broadcast=True)``); each worker prepares it
+once per scene hash and frame and keeps it, so a batch ships only its small job record and
+brings back its compacted tally. Tallies are handed back in job order, so a run on the
+cluster adds exactly what a local run adds. A worker lost mid-batch costs nothing but time:
+the scheduler runs its batches again elsewhere, and the run counts them (``redone``). A
+scheduler that goes away ends the run: the batches gathered until then are kept
+(:class:`ClusterLost`). Dask is imported only here, only when a scheduler is named.
+"""
+from __future__ import annotations
+
+import hashlib
+import threading
+import uuid
+from pathlib import Path
+from typing import Iterable, Iterator
+
+from ..errors import LumitraceError
+from ..film.tally import BatchTally
+from ..scene import Scene
+from ..trace.job import BatchJob
+
+#: The parts of the package whose code decides a batch's tally: a worker whose copy of
+#: them differs from the client's is refused (it could trace other photons).
+TRACER_PARTS = ("scene", "trace", "film")
+#: Seconds to wait for the scheduler and for at least one worker.
+CONNECT_SECONDS = 30.0
+
+_prepared: dict = {}
+_prepare_lock = threading.Lock()
+
+
+class ClusterLost(LumitraceError):
+    """The scheduler went away mid-run; ``tallies`` are the round's batches gathered
+    before it did (a prefix of the round's jobs, in job order)."""
+
+    #: the command line's exit status for it: the outputs hold the batches that finished
+    exit_status = 4
+
+    def __init__(self, message: str, where: str, tallies: list[BatchTally]):
+        super().__init__(message, where)
+        self.tallies = tallies
+        self.result = None  # the session's result of the batches that finished
+
+    def written(self, photons: int) -> "ClusterLost":
+        """This error, saying that the outputs of ``photons`` photons were written."""
+        self.message += (f" after {photons:,} photons: the outputs hold the batches that "
+                         "finished")
+        return self
+
+
+def identity() -> tuple[str, str]:
+    """(lumitrace version, hash of the tracer's code) of this process: what a worker must
+    share with the client to trace the same photons."""
+    from .. import __version__
+
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for part in TRACER_PARTS:
+        for path in sorted((root / part).glob("*.py")):
+            h.update(f"{part}/{path.name}".encode())
+            h.update(path.read_bytes())
+    return __version__, h.hexdigest()[:12]
+
+
+class WorkerMismatch(RuntimeError):
+    """Raised on a worker whose lumitrace is not the client's (one that joined late)."""
+
+
+def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJob
+               ) -> BatchTally:
+    """Trace one job on a worker, with the scene prepared once per worker (``key``: the
+    scene's hash and frame) and kept for the batches that follow."""
+    mine = identity()
+    if mine != expected:
+        raise WorkerMismatch(f"runs lumitrace {mine[0]} (tracer {mine[1]}), the client "
+                             f"{expected[0]} (tracer {expected[1]})")
+    ps = _prepared.get(key)
+    if ps is None:
+        from ..trace.prepared import prepare
+
+        with _prepare_lock:
+            ps = _prepared.get(key)
+            if ps is None:
+                scene, frame = scene_and_frame
+                ps = prepare(scene, frame)
+                _prepared.clear()  # one scene at a time: a sweep's next stage replaces it
+                _prepared[key] = ps
+    from ..film.accumulate import compact
+    from ..trace.tracer import trace_batch
+
+    tally = trace_batch(ps, job)  # compacted as the local pools do: only the texels hit
+    tally.counts, tally.cells = compact(tally.counts), compact(tally.cells)
+    return tally
+
+
+def _story_processing(dask_scheduler, keys: list) -> int:
+    """Times beyond the first that the scheduler sent these tasks to a worker (batches run
+    again after a worker was lost)."""
+    runs: dict = {}
+    for entry in dask_scheduler.story(*keys):
+        if entry[2] == "processing":
+            runs[entry[0]] = runs.get(entry[0], 0) + 1
+    return sum(max(0, n - 1) for n in runs.values())
+
+
+def connect(address: str, timeout: float = CONNECT_SECONDS):
+    """A Dask client on the scheduler at ``address``, with every worker checked to run
+    this lumitrace; a clear error when there is no scheduler, no worker or a mismatch."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise LumitraceError("--scheduler needs Dask: pip install 'lumitrace[dask]'",
+                             address) from None
+    _quiet_client_log()
+    try:
+        client = Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise LumitraceError(f"cannot reach the Dask scheduler: {exc}", address) from None
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+        check_workers(client)
+    except BaseException as exc:
+        client.close()
+        if isinstance(exc, TimeoutError):
+            raise LumitraceError(f"no Dask worker joined the scheduler in {timeout:g} s",
+                                 address) from None
+        raise
+    return client
+
+
+def _quiet_client_log() -> None:
+    """The client's own log of a lost scheduler (tracebacks of every reconnection try) is
+    not shown: the run ends with one line saying so (:class:`ClusterLost`)."""
+    import logging
+
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
+
+
+def check_workers(client) -> None:
+    """Refuse a cluster where any worker runs another lumitrace or tracer code."""
+    mine = identity()
+    try:
+        theirs = client.run(identity)
+    except ModuleNotFoundError:
+        raise LumitraceError("a Dask worker cannot import lumitrace: install the same "
+                             "lumitrace on every worker", client.scheduler.address) from None
+    bad = {w: v for w, v in theirs.items() if tuple(v) != mine}
+    if bad:
+        w, v = sorted(bad.items())[0]
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise LumitraceError(
+            f"Dask worker {w}{more} runs lumitrace {v[0]} (tracer {v[1]}), this run "
+            f"{mine[0]} (tracer {mine[1]}): install the same lumitrace on every worker",
+            client.scheduler.address)
+
+
+def total_threads(client) -> int:
+    """Threads of all the cluster's workers now."""
+    workers = client.scheduler_info(n_workers=-1)["workers"]
+    return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+
+
+class ClusterRunner:
+    """Maps jobs to their tallies, in job order, on the cluster's workers: the callable a
+    session traces its rounds with. ``threads``: the cluster's threads (a round's size);
+    ``redone``: batches run again after a worker was lost; ``batches``: batches traced."""
+
+    def __init__(self, client, scene: Scene, frame):
+        self.client = client
+        self.address = client.scheduler.address
+        self.expected = identity()
+        self.key = f"{scene.content_hash()}-{frame!r}"
+        self.scene = client.scatter((scene, frame), broadcast=True, hash=False)
+        self.threads = total_threads(client)
+        self.redone = 0
+        self.batches = 0
+        self._run = uuid.uuid4().hex[:12]
+
+    def __call__(self, jobs: Iterable[BatchJob]) -> Iterator[BatchTally]:
+        jobs = list(jobs)
+        keys = [f"lumitrace-batch-{self._run}-{self.batches + i}" for i in range(len(jobs))]
+        self.batches += len(jobs)
+        futures = [self.client.submit(_run_batch, self.expected, self.key, self.scene, job,
+                                      key=k, pure=False) for job, k in zip(jobs, keys)]
+        got: list[BatchTally] = []
+        try:
+            for f in futures:
+                got.append(self._result(f))
+        except ClusterLost as lost:
+            lost.tallies = got  # the batches that finished, a prefix of the round's jobs
+            raise
+        except BaseException:
+            self.client.cancel(futures)
+            raise
+        self.redone += self._count_redone(keys)
+        return iter(got)
+
+    def _result(self, future) -> BatchTally:
+        from distributed import KilledWorker
+        from distributed.client import FutureCancelledError
+
+        try:
+            return future.result()
+        except KilledWorker as exc:
+            raise LumitraceError(f"a batch lost its worker too often ({exc}): the batch "
+                                 "itself may crash workers", self.address) from None
+        except WorkerMismatch as exc:
+            raise LumitraceError(f"a Dask worker that joined during the run {exc}: install "
+                                 "the same lumitrace on every worker", self.address) from None
+        except (FutureCancelledError, OSError, TimeoutError) as exc:
+            if self.client.status in ("running", "connecting") and \
+                    not isinstance(exc, FutureCancelledError):
+                raise
+            raise ClusterLost("the Dask scheduler went away mid-run", self.address,
+                              []) from None
+
+    def _count_redone(self, keys: list) -> int:
+        try:
+            return int(self.client.run_on_scheduler(_story_processing, keys=keys))
+        except Exception:  # noqa: BLE001 - a count for the record, never a failure
+            return 0
+
+
+    def close(self) -> None:
+        """Leave the cluster (its workers stay for the next run)."""
+        import contextlib
+
+        with contextlib.suppress(Exception):
+            self.client.close(timeout=5)
+
+
+def cluster_runner(address: str, scene: Scene, frame):
+    """A :class:`ClusterRunner` on the scheduler at ``address`` and its client."""
+    client = connect(address)
+    try:
+        return ClusterRunner(client, scene, frame)
+    except BaseException:
+        client.close()
+        raise
