@@ -191,6 +191,7 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
        doc="hash of the scene content alone: results whose hash differs are stale"),
     _f("photons_per_second", "double", "1/s", doc="photons traced per second"),
     _f("segments_per_second", "double", "1/s", doc="path segments traced per second"),
+    _f("batches_redone", "int", "", doc="batches traced again after a Dask worker was lost"),
     _f("light_output_ratio_error", "double", "", exr="lightOutputRatioError",
        doc="standard error of the light output ratio"),
     _f("luminous_flux", "double", "lm", group="photometry",
