@@ -206,7 +206,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
     _f("upward_flux_fraction", "double", "", group="photometry",
        doc="share of the luminaire's flux above the horizon"),
     _f("peak_intensity", "double", "cd", "peakIntensity", group="photometry",
-       doc="peak of the C-gamma grid (split-sample estimate, no maximum bias)"),
+       doc="intensity at the top of the distribution (a local fit located by one half "
+           "of the photons, measured by the other: no maximum bias, no cell-mean bias)"),
     _f("peak_intensity_error", "double", "cd", "peakIntensityError", group="photometry",
        doc="standard error of the peak intensity"),
     _f("peak_c", "double", "deg", group="photometry", doc="C angle of the peak"),
@@ -229,6 +230,11 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
        doc="field (10%) angle in the C90-C270 plane"),
     _f("field_angle_c90_c270_error", "double", "deg", group="photometry",
        doc="its standard error"),
+    _f("beam_crossings_c0_c180", "list", "deg", group="photometry",
+       doc="every crossing of the beam's 50% level in the C0-C180 plane, signed from "
+           "nadir (negative toward C180): more than two where the profile has a shoulder"),
+    _f("beam_crossings_c90_c270", "list", "deg", group="photometry",
+       doc="every crossing of the beam's 50% level in the C90-C270 plane"),
     _f("cie_flux_code", "string", "", "cieFluxCode", group="photometry",
        doc="CIE flux code N1 N2 N3 N4 N5"),
     _f("cie_flux_code_values", "list", "%", group="photometry",

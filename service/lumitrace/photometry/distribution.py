@@ -160,7 +160,8 @@ def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
     and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
     deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
     rings = emitter_rings(acc)
-    grid, halves, departures = symmetric_grid(acc, default_gammas(beam_half_width(rings)),
+    half_width = beam_half_width(rings)
+    grid, halves, departures = symmetric_grid(acc, default_gammas(half_width),
                                               C_STEP, SYMMETRY_TOLERANCE)
-    fig = figures(acc, grid, halves, C_STEP, rings)
+    fig = figures(acc, grid, halves, C_STEP, rings, half_width)
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)

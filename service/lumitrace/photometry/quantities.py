@@ -7,10 +7,14 @@ luminaire flux, N5 the light output ratio, all in percent. The zones are whole g
 cells (their edges are cell edges), so these are exact photon counts, not integrals of a
 resampled grid.
 
-The peak is the largest value of the published grid, estimated without the upward bias of
-a maximum of noisy values: each half of the photons picks the cell, the other half measures
-it (the two estimates averaged). Beam (50%) and field (10%) angles are crossings of plane
-profiles with half (a tenth) of their largest value, on a grid of the published symmetry
+The peak is the intensity at the top of the distribution, estimated without the upward bias
+of a maximum of noisy values or the downward bias of a cell's mean over a curved top: each
+half of the photons locates the top by a local quadratic fit, the other half's fit measures
+it there (:mod:`lumitrace.photometry.peak`; where too little light lies near the top, each
+half picks a cell of the grid and the other half measures it). Beam (50%) and field (10%)
+angles are the outermost crossings of plane profiles with half (a tenth) of the peak (of
+the plane's own largest value where the peak lies out of the plane), on a grid of the
+published symmetry
 with gamma every 0.5 deg (the published grid's 2.5 deg would put a step of the
 distribution, such as a mirror's extra reflection, up to a degree off); their errors come
 from redrawing the profiles within their standard errors (a parametric bootstrap, fixed
@@ -27,6 +31,7 @@ from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
 from .measured import cell_solid_angle_grid, emitter_rings, measure_all
+from .peak import Peak, fitted_peak
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
 CIE_ZONES = tuple(float(np.degrees(np.arccos(c))) for c in CIE_COSINES) + (90.0,)
@@ -63,6 +68,9 @@ class PhotometricFigures:
     field_angle_c0_c180_error: float | None
     field_angle_c90_c270: float | None
     field_angle_c90_c270_error: float | None
+    #: every crossing of the beam's level (deg from nadir, negative toward C180 or C270)
+    beam_crossings_c0_c180: tuple[float, ...]
+    beam_crossings_c90_c270: tuple[float, ...]
     cie_flux_code: str
     cie_flux_code_values: tuple[float, ...]
     cie_flux_code_errors: tuple[float, ...]
@@ -144,18 +152,37 @@ def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float) -> float | Non
     return float(cross(inside[-1], inside[-1] + 1) - cross(inside[0], inside[0] - 1))
 
 
+def crossings(ang: np.ndarray, prof: np.ndarray, level: float) -> tuple[float, ...]:
+    """Every angle (deg, signed from nadir) at which a profile crosses ``level`` (linear
+    between samples), in order."""
+    above = prof >= level
+    i = np.flatnonzero(above[1:] != above[:-1])
+    t = (prof[i] - level) / (prof[i] - prof[i + 1])
+    return tuple(float(a) for a in ang[i] + t * (ang[i + 1] - ang[i]))
+
+
 def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float,
-                  fraction: float, rng: np.random.Generator) -> tuple[float | None, float | None]:
-    """The beam (``fraction`` 0.5) or field (0.1) angle in the plane through ``c_deg`` and
-    its standard error."""
+                  fraction: float, rng: np.random.Generator, peak: Peak | None = None
+                  ) -> tuple[float | None, float | None, tuple[float, ...]]:
+    """The beam (``fraction`` 0.5) or field (0.1) angle in the plane through ``c_deg``, its
+    standard error, and every crossing of the level (deg from nadir, negative toward
+    C + 180: a profile with a shoulder near the level crosses it more than twice; the
+    angle is between the outermost two, as CIE and IES read it). The level is ``fraction``
+    of ``peak`` where the peak lies in the plane (within its fit's reach), else of the
+    plane's own largest value."""
     ang, prof = _plane_profile(grid, c_deg)
     _, sig = _plane_profile(grid, c_deg, grid.sigma)
-    p0 = _plane_profile(halves[0], c_deg)[1], _plane_profile(halves[0], c_deg, halves[0].sigma)[1]
-    p1 = _plane_profile(halves[1], c_deg)[1], _plane_profile(halves[1], c_deg, halves[1].sigma)[1]
-    top, top_err, _, _ = split_peak(p0[0], p0[1], p1[0], p1[1])
+    if peak is not None and _in_plane(peak, c_deg):
+        top, top_err = peak.value, peak.error
+    else:
+        p0 = (_plane_profile(halves[0], c_deg)[1],
+              _plane_profile(halves[0], c_deg, halves[0].sigma)[1])
+        p1 = (_plane_profile(halves[1], c_deg)[1],
+              _plane_profile(halves[1], c_deg, halves[1].sigma)[1])
+        top, top_err, _, _ = split_peak(p0[0], p0[1], p1[0], p1[1])
     angle = spread_angle(ang, prof, fraction * top)
     if angle is None:
-        return None, None
+        return None, None, ()
     draws = []
     for _ in range(BOOTSTRAP_DRAWS):
         a = spread_angle(ang, prof + sig * rng.standard_normal(len(prof)),
@@ -163,7 +190,22 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg
         if a is not None:
             draws.append(a)
     err = float(np.std(draws, ddof=1)) if len(draws) > 1 else None
-    return angle, err
+    return angle, err, crossings(ang, prof, fraction * top)
+
+
+def _in_plane(peak: Peak, c_deg: float) -> bool:
+    """Whether the peak's direction lies in the vertical plane through ``c_deg`` (within
+    :data:`IN_PLANE_DEG`; every plane holds a peak at a pole)."""
+    if peak.gamma <= IN_PLANE_DEG or peak.gamma >= 180.0 - IN_PLANE_DEG:
+        return True
+    off = math.radians(peak.c - c_deg)
+    # angular distance of the direction from the plane: asin(sin gamma |sin(C - C_plane)|)
+    return math.degrees(math.asin(min(1.0, math.sin(math.radians(peak.gamma))
+                                      * abs(math.sin(off))))) <= IN_PLANE_DEG
+
+
+#: A peak this close (deg) to a vertical plane is that plane's top.
+IN_PLANE_DEG = 2.5
 
 
 def relative_error(grid: CGammaGrid, c_step: float) -> float | None:
@@ -180,20 +222,26 @@ PROFILE_GAMMAS = np.arange(0.0, 180.0 + 1e-9, 0.5)
 
 
 def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
-            c_step: float, rings: list | None = None) -> PhotometricFigures:
+            c_step: float, rings: list | None = None, half_width: float | None = None
+            ) -> PhotometricFigures:
     """The datasheet figures of the goniophotometer's counts and the published ``grid``
     and the same grid from each half of the photons (with standard errors, measured by
     :func:`~lumitrace.photometry.measured.measure_all`); ``rings``: the emitters' rings
-    when the caller has them."""
+    when the caller has them; ``half_width``: the beam's half width (deg, None where it
+    never halves), which sizes the peak's fit."""
     z = zone_figures(acc, rings if rings is not None else emitter_rings(acc))
     fine = measure_all(acc, PROFILE_GAMMAS, c_step, (grid.symmetry,))
     profiles = fine[grid.symmetry, None], (fine[grid.symmetry, 0], fine[grid.symmetry, 1])
     peak, peak_err, a0, a1 = split_peak(halves[0].candela, halves[0].sigma,
                                         halves[1].candela, halves[1].sigma)
-    at = a0 if grid.candela.flat[a0] >= grid.candela.flat[a1] else a1
-    i, j = np.unravel_index(at, grid.candela.shape)
+    picks = [np.unravel_index(a, grid.candela.shape) for a in (a0, a1)]
+    top = fitted_peak(acc, tuple((float(grid.c[i]), float(grid.gamma[j])) for i, j in picks),
+                      half_width) if grid.candela.max() > 0 else None
+    if top is None:  # too little light near the top for a fit: the cells' split estimate
+        i, j = picks[0] if grid.candela.flat[a0] >= grid.candela.flat[a1] else picks[1]
+        top = Peak(peak, peak_err, float(grid.c[i]), float(grid.gamma[j]))
     rng = np.random.default_rng(0)
-    spreads = {(c, f): plane_spreads(*profiles, c, f, rng)
+    spreads = {(c, f): plane_spreads(*profiles, c, f, rng, top)
                for f in (0.5, 0.1) for c in (0.0, 90.0)}
     values, errors = z["cie"]
     code = " ".join(str(int(round(v))) for v in values)
@@ -203,8 +251,8 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         light_output_ratio=z["lor"][0], light_output_ratio_error=z["lor"][1],
         downward_flux_fraction=dff, downward_flux_fraction_error=dff_err,
         upward_flux_fraction=1.0 - dff if z["flux"] > 0 else 0.0,
-        peak_intensity=peak, peak_intensity_error=peak_err,
-        peak_c=float(grid.c[i]), peak_gamma=float(grid.gamma[j]),
+        peak_intensity=top.value, peak_intensity_error=top.error,
+        peak_c=top.c, peak_gamma=top.gamma,
         beam_angle_c0_c180=spreads[0.0, 0.5][0], beam_angle_c0_c180_error=spreads[0.0, 0.5][1],
         beam_angle_c90_c270=spreads[90.0, 0.5][0],
         beam_angle_c90_c270_error=spreads[90.0, 0.5][1],
@@ -212,5 +260,7 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         field_angle_c0_c180_error=spreads[0.0, 0.1][1],
         field_angle_c90_c270=spreads[90.0, 0.1][0],
         field_angle_c90_c270_error=spreads[90.0, 0.1][1],
+        beam_crossings_c0_c180=spreads[0.0, 0.5][2],
+        beam_crossings_c90_c270=spreads[90.0, 0.5][2],
         cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
         photometry_error=relative_error(grid, c_step) if acc.spread_known else None)

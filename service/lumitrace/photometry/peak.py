@@ -1,0 +1,196 @@
+"""The peak intensity without the bias of a maximum or of a cell's averaging: a local fit of
+the top, located by one half of the photons and measured by the other.
+
+The largest cell of a noisy grid is biased up (the maximum of noise) and the mean over a
+cell around a maximum is biased down (by the curvature across it): on a flat top the two
+need not cancel. Here each half of the photons fits a quadratic surface (in tangent-plane
+coordinates, deg) to the goniometer's fine cells within a radius of its own pick of the
+top, and takes the fit's stationary point (kept within the radius) as the peak's
+direction; the other half's fit there, an unbiased estimate of the intensity at a point
+chosen independently of it, is the value (the pick itself, the top cell of the published
+grid, where the fit's maximum is not clearly elsewhere). The two halves' values are averaged. The fit's
+standard error is the least-squares sandwich with each cell's binomial variance. What is
+left is second order: the spread of the located direction times the top's curvature, and
+the surface's departure from a quadratic within the radius.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..film.accumulate import Accumulator
+from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA, cell_solid_angles
+
+#: Radius (deg) of the fit: this share of the beam's half width (to where it halves), within
+#: the bounds below; the widest for a distribution that never halves.
+FIT_SHARE = 0.5
+FIT_RADIUS_MIN = 1.5
+FIT_RADIUS_MAX = 10.0
+#: A half moves its pick of the top to its fit's maximum when that lies this many of its
+#: standard errors away (Mahalanobis distance), else keeps the pick.
+LOCATE_SIGMAS = 2.0
+#: Moves a half makes toward its fit's maximum before it stops.
+LOCATE_STEPS = 4
+#: The fit that locates the top reaches this many times the measuring fit's radius: a
+#: gentle top's slope is resolved over a wider field (a bias of the location's fit costs
+#: only the curvature times its square).
+LOCATE_RADIUS = 2.0
+
+
+@dataclass(frozen=True)
+class Peak:
+    """The peak intensity (cd), its standard error (cd) and direction (C, gamma, deg)."""
+
+    value: float
+    error: float
+    c: float
+    gamma: float
+
+
+@functools.lru_cache(maxsize=1)
+def _cell_directions() -> np.ndarray:
+    """Unit vectors of the goniometer cells' centres in the photometric frame (x = C0,
+    y = C90, z = up; gamma from nadir), (N_C * N_GAMMA, 3)."""
+    c = np.radians((np.arange(N_C) + 0.5) * C_STEP)
+    g = np.radians(0.5 * (GAMMA_EDGES[1:] + GAMMA_EDGES[:-1]))
+    sg = np.sin(g)
+    d = np.stack([np.cos(c)[:, None] * sg[None, :], np.sin(c)[:, None] * sg[None, :],
+                  np.broadcast_to(-np.cos(g), (N_C, N_GAMMA))], axis=-1)
+    return d.reshape(-1, 3)
+
+
+def _direction(c_deg: float, gamma_deg: float) -> np.ndarray:
+    c, g = math.radians(c_deg), math.radians(gamma_deg)
+    return np.array([math.cos(c) * math.sin(g), math.sin(c) * math.sin(g), -math.cos(g)])
+
+
+def _angles(d: np.ndarray) -> tuple[float, float]:
+    """(C, gamma) in degrees of a unit vector."""
+    gamma = math.degrees(math.acos(max(-1.0, min(1.0, -float(d[2])))))
+    c = math.degrees(math.atan2(float(d[1]), float(d[0]))) % 360.0
+    return c, gamma
+
+
+def half_cells(acc: Accumulator, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """One half's photon flux (lm) and its binomial variance (lm^2) in every goniometer
+    cell, flat (N_C * N_GAMMA,)."""
+    flux, var = np.zeros(N_CELLS), np.zeros(N_CELLS)
+    for w, total, values, idx in acc.emitter_cells(half):
+        if idx is None:
+            n = values[:N_CELLS].astype(np.float64)
+            flux += w * n
+            var += w * w * n * np.maximum(1.0 - n / total, 0.0)
+        else:
+            keep = idx < N_CELLS
+            n = values[keep].astype(np.float64)
+            np.add.at(flux, idx[keep], w * n)
+            np.add.at(var, idx[keep], w * w * n * np.maximum(1.0 - n / total, 0.0))
+    return flux, var
+
+
+def _tangent_basis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors orthogonal to ``p`` and to each other."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(p[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(p, a)
+    u /= np.linalg.norm(u)
+    return u, np.cross(p, u)
+
+
+def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg: float
+              ) -> tuple[float, float, np.ndarray] | None:
+    """Quadratic fit of the intensity (cd) over the cells within ``radius_deg`` of
+    ``centre`` (area-weighted least squares). Returns (value at ``centre``, its standard
+    error, the fit's stationary point as a unit vector, within the radius), or None where
+    too few cells hold light."""
+    dirs = _cell_directions()
+    cos_r = math.cos(math.radians(radius_deg))
+    near = np.flatnonzero(dirs @ centre >= cos_r)
+    if near.size < 12:
+        return None
+    omega = cell_solid_angles().reshape(-1)[near]
+    u, v = _tangent_basis(centre)
+    d = dirs[near]
+    x, y = np.degrees(d @ u), np.degrees(d @ v)  # gnomonic-like tangent coordinates (deg)
+    X = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y], axis=1)
+    cd = flux[near] / omega
+    sig2 = var[near] / omega ** 2
+    W = omega / omega.sum()
+    A = X.T @ (W[:, None] * X)
+    try:
+        Ainv = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return None
+    beta = Ainv @ (X.T @ (W * cd))
+    # the sandwich: Cov(beta) = A^-1 X^T W Sigma W X A^-1, Sigma the cells' variances
+    B = X.T @ ((W * W * sig2)[:, None] * X)
+    cov = Ainv @ B @ Ainv
+    value, error = float(beta[0]), math.sqrt(max(float(cov[0, 0]), 0.0))
+    # stationary point of b1 x + b2 y + b3 x^2 + b4 y^2 + b5 x y, where it is a maximum
+    H = np.array([[2 * beta[3], beta[5]], [beta[5], 2 * beta[4]]])
+    g = -np.array([beta[1], beta[2]])
+    # the fit's maximum, where it has one that stands out of the noise in the fit's
+    # gradient (a flat or saddle-shaped top, or a maximum within about two of its standard
+    # errors of the centre, keeps the centre: a noisy location on a curved top costs the
+    # value it measures there)
+    top = np.zeros(2)
+    if np.all(np.linalg.eigvalsh(H) < 0):
+        step = np.linalg.solve(H, g)
+        Hinv = np.linalg.inv(H)
+        spread = Hinv @ cov[1:3, 1:3] @ Hinv.T
+        try:
+            significance = float(step @ np.linalg.solve(spread, step))
+        except np.linalg.LinAlgError:
+            significance = 0.0
+        if significance > LOCATE_SIGMAS ** 2:
+            r = float(np.hypot(*step))
+            top = step * min(1.0, radius_deg / r)
+    p = centre + math.radians(top[0]) * u + math.radians(top[1]) * v
+    return value, error, p / np.linalg.norm(p)
+
+
+def locate(cells: tuple[np.ndarray, np.ndarray], start: np.ndarray, radius_deg: float
+           ) -> np.ndarray | None:
+    """One half's direction of the top: from ``start``, the fit's maximum while it lies
+    clearly elsewhere (at most :data:`LOCATE_STEPS` moves, each within the radius)."""
+    at = start
+    for _ in range(LOCATE_STEPS):
+        fit = local_fit(*cells, at, radius_deg)
+        if fit is None:
+            return None if at is start else at
+        if float(fit[2] @ at) > math.cos(math.radians(0.01 * radius_deg)):
+            break
+        at = fit[2]
+    return at
+
+
+def fit_radius(half_width_deg: float | None) -> float:
+    """The fit's radius (deg) for a beam of half width ``half_width_deg`` (None: no beam)."""
+    if half_width_deg is None:
+        return FIT_RADIUS_MAX
+    return min(FIT_RADIUS_MAX, max(FIT_RADIUS_MIN, FIT_SHARE * half_width_deg))
+
+
+def fitted_peak(acc: Accumulator, picks: tuple[tuple[float, float], tuple[float, float]],
+                half_width_deg: float | None) -> Peak | None:
+    """The peak from the two halves: ``picks`` are each half's (C, gamma) of its top cell;
+    each half locates the peak near its own pick and the other half measures it there.
+    None where a fit is not possible (too little light near the top)."""
+    radius = fit_radius(half_width_deg)
+    cells = [half_cells(acc, h) for h in (0, 1)]
+    values, errors, where = [], [], []
+    for h in (0, 1):
+        located = locate(cells[h], _direction(*picks[h]), LOCATE_RADIUS * radius)
+        if located is None:
+            return None
+        measured = local_fit(*cells[1 - h], located, radius)
+        if measured is None:
+            return None
+        values.append(measured[0])
+        errors.append(measured[1])
+        where.append(located)
+    mid = where[0] + where[1]
+    c, gamma = _angles(mid / np.linalg.norm(mid))
+    return Peak(0.5 * (values[0] + values[1]), 0.5 * math.hypot(*errors), c, gamma)
