@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
+from .report import sweep  # its command's arguments (the standard library only, at import)
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
 from .trace.job import MAX_DEPTH
 
@@ -215,6 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--max-rays", type=_positive_int, default=None,
                    help="refuse more photons than this (default 20e6: 560 MB)")
     y.add_argument("--luminaire", default=None, help="the luminaire prim (default: defaultPrim)")
+    sweep.add_parser(sub)
     return p
 
 
@@ -647,8 +649,8 @@ def _dispatch(args) -> int:
     if args.command == "trace":
         return cmd_trace(args)
     check_interrupted()  # the others have no USD-loading phase of their own
-    return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve,
-            "edits": cmd_edits, "check": cmd_check, "rays": cmd_rays}[args.command](args)
+    return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve, "edits": cmd_edits,
+            "check": cmd_check, "rays": cmd_rays, "sweep": sweep.command}[args.command](args)
 
 
 def _failure(exc: BaseException) -> tuple[int, str]:

@@ -1,0 +1,126 @@
+"""``lumitrace sweep``: three reference stages and the two variants of a stage's variant
+set give the table, the overview and per-variant outputs; a rerun traces nothing; a stage
+changed is the only one traced again."""
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+from helpers.paths import REFERENCE, ROOT, STAGES
+
+REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
+ARGS = ("--photons", "20000", "--resolution", "8", "--threads", "1", "--json")
+
+
+def _sweep(folder, *extra):
+    r = subprocess.run([sys.executable, "-m", "lumitrace", "sweep", str(folder), *ARGS,
+                        "--out", str(folder / "out"), *extra], capture_output=True,
+                       text=True, cwd=ROOT, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.splitlines()[-1])
+
+
+def _finishes(path):
+    """A copy of the demo with a variant set "finish" of two reflector roughnesses."""
+    import lumitrace  # noqa: F401  (registers the schema before USD composes a stage)
+    from pxr import Usd
+
+    shutil.copy(STAGES / "downlight.usda", path)
+    stage = Usd.Stage.Open(str(path))
+    stage.GetPrimAtPath(REFLECTOR).GetAttribute("lumitrace:roughness").Clear()  # the
+    # root layer's own opinion would be stronger than the variants'
+    vs = stage.GetDefaultPrim().GetVariantSets().AddVariantSet("finish")
+    for name, roughness in (("satin", 0.3), ("polished", 0.02)):
+        vs.AddVariant(name)
+        vs.SetVariantSelection(name)
+        with vs.GetVariantEditContext():
+            stage.GetPrimAtPath(REFLECTOR).GetAttribute("lumitrace:roughness").Set(roughness)
+    vs.SetVariantSelection("satin")
+    stage.GetRootLayer().Save()
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("sweep")
+    for name in ("isotropic", "lambertian_disc", "fresnel_slab"):
+        shutil.copy(REFERENCE / f"{name}.usda", folder)
+    _finishes(folder / "downlight.usda")
+    before = (folder / "downlight.usda").read_bytes()
+    first = _sweep(folder)
+    return folder, first, before
+
+
+def test_a_sweep_writes_the_table_the_overview_and_each_variants_outputs(swept):
+    from lumitrace.report.sweep import Case, read_case
+
+    folder, first, before = swept
+    out = folder / "out"
+    rows = {(os.path.basename(r["stage"]), r["variant"]): r for r in first["rows"]}
+    assert set(rows) == {("downlight.usda", "finish=satin"), ("downlight.usda",
+                         "finish=polished"), ("isotropic.usda", ""),
+                         ("lambertian_disc.usda", ""), ("fresnel_slab.usda", "")}
+    assert all(r["traced"] and r["photons"] == 20_000 for r in rows.values())
+    for sub in ("downlight/finish-satin", "downlight/finish-polished", "isotropic"):
+        name = sub.split("/")[0]
+        assert {f"{name}{s}" for s in (".ies", ".ldt", ".intensity.exr", ".lumitrace.usda")} \
+            <= set(os.listdir(out / sub))
+    assert (folder / "downlight.usda").read_bytes() == before  # never sublayered into
+    satin, polished = rows["downlight.usda", "finish=satin"], \
+        rows["downlight.usda", "finish=polished"]
+    assert satin["input_hash"] != polished["input_hash"]
+    assert satin["peak_intensity"] != polished["peak_intensity"]
+    # each variant's outputs are its own scene's: the result layer's hash is the variant's
+    scene = read_case(Case(folder / "downlight.usda", (("finish", "polished"),), out))
+    assert [a for a in REFLECTOR_ROUGHNESS(scene)] == [pytest.approx(0.02)]
+    layer = (out / "downlight" / "finish-polished" / "downlight.lumitrace.usda").read_text()
+    assert f'lumitrace:result:sceneHash = "{scene.content_hash()}"' in layer
+    with open(out / "sweep.csv") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == 5 and {r["variant"] for r in table} >= {"finish=satin"}
+    iso = next(r for r in table if r["stage"].endswith("isotropic.usda"))
+    assert float(iso["luminous_flux"]) == pytest.approx(1000.0)  # all of it leaves
+    assert float(iso["light_output_ratio"]) == 1.0 and iso["light_output_ratio_error"]
+    page = (out / "index.html").read_text()
+    assert page.count("<svg") == 5 and page.count("<polyline") == 10  # two planes each
+    assert "finish=polished" in page
+
+
+def REFLECTOR_ROUGHNESS(scene):
+    """Roughnesses of the scene's glossy materials."""
+    return [m.roughness for m in scene.materials if m.scattering == "glossy"]
+
+
+def test_a_rerun_traces_nothing_and_a_changed_stage_alone_is_traced_again(swept):
+    from pxr import Sdf
+
+    folder, first, _ = swept
+    again = _sweep(folder)
+    assert not any(r["traced"] for r in again["rows"])
+    strip = lambda rows: sorted((r["key"], r["input_hash"], r["photons"]) for r in rows)  # noqa
+    assert strip(again["rows"]) == strip(first["rows"])
+    layer = Sdf.Layer.FindOrOpen(str(folder / "isotropic.usda"))
+    layer.GetAttributeAtPath("/Luminaire/Source.lumitrace:luminousFlux").default = 900.0
+    layer.Save()
+    third = _sweep(folder)
+    traced = {os.path.basename(r["stage"]) for r in third["rows"] if r["traced"]}
+    assert traced == {"isotropic.usda"}
+    iso = next(r for r in third["rows"] if r["traced"])
+    assert iso["luminous_flux"] == pytest.approx(900.0)
+
+
+def test_variants_named_narrow_the_sweep(swept, tmp_path):
+    from lumitrace.errors import LumitraceError
+    from lumitrace.report.sweep import parse_variants, plan
+
+    folder, _, _ = swept
+    cases = plan([folder / "downlight.usda"], parse_variants(["finish=polished"]), tmp_path)
+    assert [(c.variants, c.folder.name) for c in cases] == [
+        ((("finish", "polished"),), "finish-polished")]
+    with pytest.raises(LumitraceError, match="has no variant 'matte' \\(it has "):
+        plan([folder / "downlight.usda"], parse_variants(["finish=matte"]), tmp_path)
+    with pytest.raises(LumitraceError, match="no stage of the sweep has a variant set 'lens'"):
+        plan([folder / "isotropic.usda"], parse_variants(["lens"]), tmp_path)
