@@ -66,6 +66,10 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "cct": 2890.5,
         "duv": -0.0009,
         "colourUniformity": 0.0012,
+        "ugr4H8H": 19.25,
+        "ugr4H8HError": 0.125,
+        "screenLuminanceMax": 1450.0,
+        "bugRating": "B1 U0 G1",
     }
 
 

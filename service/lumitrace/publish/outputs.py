@@ -21,6 +21,7 @@ from ..photometry import frame
 from ..film.convergence import colour_maps
 from ..photometry.colour import ColourOverAngle, colour_over_angle
 from ..photometry.distribution import Photometry, photometry_of
+from ..photometry.tables import application_figures
 from ..film.result import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
@@ -73,6 +74,7 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
     return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          "luminous_opening": (o.length, o.width, o.height),
+                         **application_figures(ph, result.accumulator),
                          **(col.as_dict() if col is not None else {}),
                          **{k: str(v) for k, v in paths.items()}})
 

@@ -1,0 +1,23 @@
+"""The figures a lighting engineer's datasheet and tender need beyond the files, all from the
+same counts and grid with their standard errors: the UGR table, the luminance table and the
+screen-work limits, the BUG rating and the cone diagram with isolux values. One dict, keyed
+as the result record is (:data:`lumitrace.schema.RESULT_FIELDS`)."""
+from __future__ import annotations
+
+from ..film.accumulate import Accumulator
+from .bug import bug_rating
+from .illuminance import cone_diagram, isolux
+from .luminance import luminance_table
+from .ugr import ugr_table
+
+
+def application_figures(ph, acc: Accumulator) -> dict:
+    """The record's UGR, luminance, BUG and illuminance fields of a
+    :class:`~lumitrace.photometry.distribution.Photometry` and its counts; the UGR and
+    luminance fields are None where the opening has no area or no light leaves."""
+    out = {**bug_rating(acc).as_dict(), "cone_diagram": cone_diagram(ph.grid, ph.figures),
+           "isolux": isolux(ph.grid)}
+    if (ph.opening.area > 0 or ph.opening.height > 0) and ph.figures.luminous_flux > 0:
+        out.update(ugr_table(ph.grid, ph.opening).as_dict())
+        out.update(luminance_table(ph.grid, ph.opening).as_dict())
+    return out

@@ -1,0 +1,257 @@
+"""The CIE unified glare rating table (CIE 117:1995, tabular method of CIE 190:2010), with a
+standard error for every cell.
+
+The 19 standard rooms (x across the line of sight by y along it, 2H x 2H to 12H x 8H), the
+five reflectance sets (ceiling / walls / floor cavity: 70/50/20 .. 30/30/20), luminaires
+every 0.25 H (H the height of the luminaire plane above the eye) from S/2 off the walls,
+the observer at the middle of a wall looking along y, crosswise (the luminaire's C90 axis
+across the line of sight, C0 toward the observer) and endwise (turned 90 deg):
+
+    UGR = 8 log10(0.25 / Lb * sum L^2 omega / p^2),   L^2 omega = I^2 / (A_p r^2)
+
+with I the intensity toward the eye, A_p the projected luminous area, r the distance, p
+Guth's position index (his formula, over the luminaires CIE 117 table 4.1 gives an index
+for: T/R <= 3, gamma <= 85 deg and H/R within the table). The background luminance is
+Lb = E_WID / pi, the indirect illuminance of the walls from a three-surface flux transfer
+(floor cavity, walls, ceiling; the exact form factor of opposed rectangles), which gives
+CIE 190's transfer factors (its table 5) to their rounding. The flux first reaching the
+floor is the share of the downward flux landing on it from the room's luminaires (their
+positions averaged, the distribution averaged over C), the rest of the downward flux on
+the walls, the upward flux on the ceiling. Errors: the table recomputed from the grid
+redrawn within its standard errors (a parametric bootstrap, fixed seed). UGR does not
+depend on H; H = 2 m.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .grid import CGammaGrid
+from .luminance import projected_area, taps
+
+#: Standard rooms: (x, y) in multiples of H, x across the line of sight.
+ROOMS = ((2, 2), (2, 3), (2, 4), (2, 6), (2, 8), (2, 12), (4, 2), (4, 3), (4, 4), (4, 6),
+         (4, 8), (4, 12), (8, 4), (8, 6), (8, 8), (8, 12), (12, 4), (12, 6), (12, 8))
+#: Reflectances (ceiling, walls, floor cavity).
+REFLECTANCES = ((0.7, 0.5, 0.2), (0.7, 0.3, 0.2), (0.5, 0.5, 0.2), (0.5, 0.3, 0.2),
+                (0.3, 0.3, 0.2))
+REFLECTANCE_NAMES = tuple("/".join(f"{round(100 * r)}" for r in refl) for refl in REFLECTANCES)
+#: Luminaire spacing (multiples of H) and the height H (m).
+SPACING = 0.25
+HEIGHT = 2.0
+#: The catalogue value's room and reflectances.
+CATALOGUE_ROOM, CATALOGUE_REFLECTANCE = (4, 8), 0
+#: Redraws of the grid for the errors.
+DRAWS = 64
+
+
+def guth_index(t: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
+    """Guth's position index of sources at T across and R along the line of sight, H above
+    the eye (m): ln p = (35.2 - 0.31889 tau - 1.22 exp(-2 tau / 9)) 1e-3 sigma + (21 +
+    0.26667 tau - 0.002963 tau^2) 1e-5 sigma^2, sigma the angle (deg) between the line of
+    sight and the source, tau the angle (deg) from vertical of the plane through both."""
+    t = np.abs(t)
+    sig = np.degrees(np.arctan2(np.hypot(t, h), r))
+    tau = np.degrees(np.arctan2(t, h))
+    a = (35.2 - 0.31889 * tau - 1.22 * np.exp(-2.0 * tau / 9.0)) * 1e-3
+    b = (21.0 + 0.26667 * tau - 0.002963 * tau ** 2) * 1e-5
+    return np.exp(a * sig + b * sig ** 2)
+
+
+def counted(t: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
+    """Which luminaires (T across, R along the line of sight, H above the eye) the sum
+    takes: those CIE 117 table 4.1 gives a position index for (T/R <= 3, H/R <= 1.7, or
+    H/R <= 1.8 from T/R 0.4, or H/R <= 1.9 from T/R 0.9) below gamma 85 deg."""
+    tr, hr = np.abs(t) / r, h / r
+    gamma = np.degrees(np.arctan2(np.hypot(t, r), h))
+    domain = (hr <= 1.7 + 1e-9) | ((hr <= 1.8 + 1e-9) & (tr >= 0.4 - 1e-9)) | \
+        ((hr <= 1.9 + 1e-9) & (tr >= 0.9 - 1e-9))
+    return (tr <= 3.0 + 1e-9) & (gamma <= 85.0 + 1e-9) & domain
+
+
+@dataclass(frozen=True)
+class Room:
+    """One standard room's luminaires that count: positions T (across), R (along the line
+    of sight) (m), their distance to the eye (m), gamma and C toward the eye (deg,
+    crosswise and endwise) and position index; and the room's luminaire count."""
+
+    x: float
+    y: float
+    n: int
+    t: np.ndarray
+    r: np.ndarray
+    distance: np.ndarray
+    gamma: np.ndarray
+    c_crosswise: np.ndarray
+    c_endwise: np.ndarray
+    p: np.ndarray
+
+
+@lru_cache(maxsize=32)
+def room(x: float, y: float, spacing: float = SPACING, h: float = HEIGHT) -> Room:
+    """The geometry of the room x H across by y H along the line of sight."""
+    s = spacing * h
+    n_t, n_r = int(round(x / spacing)), int(round(y / spacing))
+    ts = (np.arange(n_t) + 0.5) * s - 0.5 * n_t * s
+    rs = (np.arange(n_r) + 0.5) * s
+    t, r = (a.ravel() for a in np.meshgrid(ts, rs))
+    keep = counted(t, r, h)
+    t, r = t[keep], r[keep]
+    # crosswise: C0 points back at the observer (-y), C90 along +x; endwise: C0 along +x,
+    # C90 along +y; the eye lies at (-t, -r) horizontally from a luminaire
+    cross = np.degrees(np.arctan2(-t, r)) % 360.0
+    end = np.degrees(np.arctan2(-r, -t)) % 360.0
+    return Room(x, y, n_t * n_r, t, r, np.sqrt(t * t + r * r + h * h),
+                np.degrees(np.arctan2(np.hypot(t, r), h)), cross, end, guth_index(t, r, h))
+
+
+def _parallel_form_factor(a: float, b: float, c: float) -> float:
+    """Form factor between directly opposed parallel rectangles a x b, c apart."""
+    x, y = a / c, b / c
+    return float(2.0 / (np.pi * x * y) * (
+        0.5 * np.log((1 + x * x) * (1 + y * y) / (1 + x * x + y * y))
+        + x * np.sqrt(1 + y * y) * np.arctan(x / np.sqrt(1 + y * y))
+        + y * np.sqrt(1 + x * x) * np.arctan(y / np.sqrt(1 + x * x))
+        - x * np.arctan(x) - y * np.arctan(y)))
+
+
+def transfer_factors(x: float, y: float, reflectance) -> np.ndarray:
+    """The walls' indirect illuminance, per unit of initial flux on (floor, walls,
+    ceiling) spread over the walls' area: CIE 190's F_T (FW, WW - 1, CW), from the flux
+    transfer between the three surfaces of the room x H by y H, H high."""
+    rc, rw, rf = reflectance
+    area_f, area_w = float(x * y), 2.0 * (x + y)
+    f_fc = _parallel_form_factor(x, y, 1.0)
+    f_wf = (1.0 - f_fc) * area_f / area_w
+    form = np.array([[0.0, 1.0 - f_fc, f_fc], [f_wf, 1.0 - 2.0 * f_wf, f_wf],
+                     [f_fc, 1.0 - f_fc, 0.0]])  # from floor, walls, ceiling to each
+    rho = np.array([rf, rw, rc])
+    total = np.linalg.inv(np.eye(3) - form * rho[None, :])  # E = total @ E0
+    areas = np.array([area_f, area_w, area_f])
+    # first-reflection illuminance of the walls from unit flux on each surface, onward
+    return (total[1] - np.eye(3)[1]) / areas * area_w
+
+
+def _floor_share(gamma_deg: np.ndarray, x: float, y: float) -> np.ndarray:
+    """Share of the flux leaving at ``gamma`` (deg, below 90) that lands on the floor
+    cavity plane H below, averaged over C and over luminaire positions in the room (each
+    axis: 1 - |offset| / side)."""
+    phi = np.radians(np.arange(0.0, 360.0, 5.0) + 2.5)
+    d = np.tan(np.radians(np.minimum(gamma_deg, 89.999)))[:, None]
+    fx = np.clip(1.0 - np.abs(d * np.cos(phi)) / x, 0.0, None)
+    fy = np.clip(1.0 - np.abs(d * np.sin(phi)) / y, 0.0, None)
+    return (fx * fy).mean(axis=1)
+
+
+@dataclass(frozen=True)
+class UgrTable:
+    """UGR (19 rooms by 5 reflectances, crosswise and endwise) with standard errors."""
+
+    crosswise: np.ndarray
+    endwise: np.ndarray
+    crosswise_error: np.ndarray
+    endwise_error: np.ndarray
+
+    def catalogue(self, endwise: bool = False) -> tuple[float, float]:
+        """(UGR, error) for 4H x 8H, 70/50/20."""
+        i, j = ROOMS.index(CATALOGUE_ROOM), CATALOGUE_REFLECTANCE
+        if endwise:
+            return float(self.endwise[i, j]), float(self.endwise_error[i, j])
+        return float(self.crosswise[i, j]), float(self.crosswise_error[i, j])
+
+    def as_dict(self) -> dict:
+        """The record's fields."""
+        cu, ce = self.catalogue()
+        eu, ee = self.catalogue(endwise=True)
+        return {"ugr_table": {"rooms_h": [list(r) for r in ROOMS],
+                              "reflectances": list(REFLECTANCE_NAMES), "spacing_h": SPACING,
+                              "crosswise": _rows(self.crosswise),
+                              "endwise": _rows(self.endwise),
+                              "crosswise_error": _rows(self.crosswise_error),
+                              "endwise_error": _rows(self.endwise_error)},
+                "ugr_4h8h_70_50_20": cu, "ugr_4h8h_70_50_20_error": ce,
+                "ugr_4h8h_70_50_20_endwise": eu, "ugr_4h8h_70_50_20_endwise_error": ee}
+
+
+def _rows(a: np.ndarray) -> list:
+    return [[round(float(v), 4) if np.isfinite(v) else None for v in row] for row in a]
+
+
+class _Model:
+    """The table as a function of the full grid's values (flattened): the taps of every
+    room's luminaires and the linear maps to the background luminances."""
+
+    def __init__(self, grid: CGammaGrid, opening):
+        full = grid.full()
+        self.shape = full.candela.shape
+        gam = full.gamma
+        edges = np.concatenate([[0.0], 0.5 * (gam[1:] + gam[:-1]), [180.0]])
+        cos_e = np.cos(np.radians(edges))
+        dc = np.radians(360.0 / self.shape[0])
+        down_cos = np.clip(cos_e, 0.0, None)
+        omega_down = (down_cos[:-1] - down_cos[1:]) * dc  # each zone's part below 90
+        omega_up = (cos_e[:-1] - cos_e[1:]) * dc - omega_down
+        idx, w, weight, lbs = [], [], [], []
+        for x, y in ROOMS:
+            g = room(float(x), float(y))
+            for c in (g.c_crosswise, g.c_endwise):
+                i, wi = taps(grid, c, g.gamma)
+                idx.append(i)
+                w.append(wi)
+                weight.append(1.0 / (projected_area(opening, c, g.gamma) * g.distance ** 2
+                                     * g.p ** 2))
+            floor = omega_down * _floor_share(gam, x, y)
+            # flux (lm) to floor, walls, ceiling per unit intensity of each gamma (all C)
+            to = np.stack([floor, omega_down - floor, omega_up])
+            a_w = 2.0 * HEIGHT * HEIGHT * (x + y)
+            lbs.append(np.stack([g.n / a_w * transfer_factors(x, y, refl) @ to / np.pi
+                                 for refl in REFLECTANCES]))  # (reflectances, gammas)
+        self.idx, self.w = np.concatenate(idx), np.concatenate(w)
+        self.weight = np.concatenate(weight)
+        self.starts = np.cumsum([0] + [len(a) for a in weight[:-1]])
+        self.lb = np.stack(lbs)
+
+    def evaluate(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(crosswise, endwise) UGR, each (draws, rooms, reflectances), of grid values
+        (draws, cells)."""
+        cells = np.ascontiguousarray(values.T)  # (cells, draws): one gather per tap
+        i = np.einsum("pk,pkd->pd", self.w, cells[self.idx])
+        s = np.add.reduceat(i * i * self.weight[:, None], self.starts, axis=0)  # (sums, d)
+        rings = cells.reshape(self.shape + (-1,)).sum(axis=0)  # (gammas, draws)
+        back = np.einsum("rfg,gd->rfd", self.lb, rings)  # (rooms, reflectances, draws)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = 8.0 * np.log10(0.25 * s.reshape(len(ROOMS), 2, 1, -1) / back[:, None])
+        u = np.moveaxis(u, -1, 0)  # (draws, rooms, orientations, reflectances)
+        return u[:, :, 0], u[:, :, 1]
+
+
+def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> UgrTable:
+    """The UGR table of ``grid`` (cd, with sigma) with luminous area ``opening`` (a
+    :class:`~lumitrace.photometry.distribution.LuminousOpening`)."""
+    model = _Model(grid, opening)
+    full = grid.full()
+    cross, end = model.evaluate(full.candela.reshape(1, -1))
+    # redraw the published grid's own values (mirror images move together), then unfold
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((draws,) + grid.candela.shape)
+    noise[:, :, [0, -1]] = noise[:, :1, [0, -1]]  # the poles are one value each
+    noise *= grid.sigma[None]
+    unfold = _unfold_index(grid)
+    drawn = (grid.candela[None] + noise)[:, unfold].reshape(draws, -1)
+    dc, de = model.evaluate(drawn)
+    return UgrTable(cross[0], end[0], np.nanstd(dc, axis=0, ddof=1),
+                    np.nanstd(de, axis=0, ddof=1))
+
+
+def _unfold_index(grid: CGammaGrid) -> np.ndarray:
+    """For every plane of ``grid.full()``, the plane of ``grid`` it repeats."""
+    planes = np.arange(len(grid.c), dtype=np.float64)[:, None] * np.ones((1, len(grid.gamma)))
+    cs = np.arange(0.0, 360.0 - 1e-9, _step(grid))
+    return np.rint(grid.at(cs, planes)[:, 0]).astype(np.int64)
+
+
+def _step(grid: CGammaGrid) -> float:
+    d = np.diff(grid.c)
+    return float(d.min()) if d.size else 5.0

@@ -1,0 +1,91 @@
+"""The UGR table (CIE 117, CIE 190 tabular method): Guth's index and one room's geometry by
+hand, the rooms' flux transfer against CIE 190's own factors, and the table of traced
+stages against the third-party eulumdat-ugr reading the LDT lumitrace writes."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from lumitrace.photometry import ugr
+from helpers.traced import traced
+
+
+def test_guth_index_by_hand_and_against_cie_117_table():
+    # by hand: T = 0, H = R: sigma = 45 deg, tau = 0
+    # ln p = (35.2 - 1.22) 1e-3 * 45 + 21e-5 * 45^2 = 1.5291 + 0.42525
+    assert ugr.guth_index(np.array(0.0), np.array(1.0), 1.0) == pytest.approx(
+        math.exp(1.95435), rel=1e-6)
+    # T = R = H: sigma = atan(sqrt 2), tau = 45 deg
+    sig, tau = math.degrees(math.atan(math.sqrt(2.0))), 45.0
+    a = (35.2 - 0.31889 * tau - 1.22 * math.exp(-2.0 * tau / 9.0)) * 1e-3
+    b = (21.0 + 0.26667 * tau - 0.002963 * tau ** 2) * 1e-5
+    assert ugr.guth_index(np.array(1.0), np.array(1.0), 1.0) == pytest.approx(
+        math.exp(a * sig + b * sig * sig), rel=1e-9)
+    # CIE 117 table 4.1 (T/R, H/R, p): Guth's formula within 8 % of the tabulated values
+    for tr, hr, p in ((0.0, 1.0, 7.00), (1.0, 1.0, 7.00), (0.0, 0.5, 2.86), (0.5, 0.5, 2.91),
+                      (2.0, 0.5, 5.80), (1.5, 1.0, 8.20), (1.0, 1.6, 12.95), (2.0, 1.9, 16.0)):
+        assert ugr.guth_index(np.array(tr), np.array(1.0), hr) == pytest.approx(p, rel=0.08)
+
+
+def test_room_4h_by_8h_geometry_by_hand():
+    h = ugr.HEIGHT
+    room = ugr.room(4.0, 8.0)
+    assert room.n == 16 * 32  # 4H / 0.25H across, 8H / 0.25H along
+    # the rows at R = 0.25 and 0.75 m (H/R 8 and 2.7) are beyond the position index table;
+    # from R = 1.25 m (H/R 1.6) every luminaire counts (T/R at most 3.75 / 1.25 = 3)
+    assert len(room.t) == 30 * 16
+    assert room.r.min() == pytest.approx(1.25)
+    k = int(np.flatnonzero(np.isclose(room.t, 0.25) & np.isclose(room.r, 4.25))[0])
+    t, r = 0.25, 4.25
+    assert room.distance[k] == pytest.approx(math.sqrt(t * t + r * r + h * h), rel=1e-12)
+    assert room.gamma[k] == pytest.approx(math.degrees(math.atan(math.hypot(t, r) / h)))
+    # crosswise the eye is seen just off C0 (toward C360 - a), endwise off C270
+    a = math.degrees(math.atan(t / r))
+    assert room.c_crosswise[k] == pytest.approx(360.0 - a)
+    assert room.c_endwise[k] == pytest.approx(270.0 - a)
+
+
+def test_flux_transfer_gives_cie_190_table_5():
+    background = pytest.importorskip("eulumdat_ugr.background")
+    for i, (x, y) in enumerate(ugr.ROOMS):
+        for refl, name in zip(ugr.REFLECTANCES, ugr.REFLECTANCE_NAMES):
+            theirs = np.array(background._FT[name][i])  # CIE 190 table 5, as published
+            ours = ugr.transfer_factors(x, y, refl)
+            np.testing.assert_allclose(ours, theirs, atol=0.0015, err_msg=f"{x}x{y} {name}")
+
+
+def _their_table(ldt_path) -> np.ndarray:
+    pyldt = pytest.importorskip("pyldt")
+    calc = pytest.importorskip("eulumdat_ugr")
+    return calc.UgrCalculator.compute(pyldt.LdtReader.read(str(ldt_path))).values
+
+
+@pytest.mark.parametrize("name", ["demo", "louvre", "disc"])
+def test_table_against_eulumdat_ugr(name):
+    _, _, ph, ldt = traced(name)
+    theirs = _their_table(ldt)
+    # eulumdat-ugr takes the file's luminous length across C0 (the side seen from C0 is
+    # length wide), lumitrace writes the length along C0: the same opening, read as it is
+    o = ph.opening
+    table = ugr.ugr_table(ph.grid, dataclasses.replace(o, length=o.width, width=o.length))
+    ours = np.hstack([table.crosswise, table.endwise])
+    err = np.hstack([table.crosswise_error, table.endwise_error])
+    assert np.isfinite(theirs).all() and np.isfinite(ours).all()
+    assert (err > 0).all()
+    bad = np.abs(ours - theirs) > np.maximum(0.5, 3.0 * err)
+    assert not bad.any(), (ours[bad], theirs[bad], err[bad])
+
+
+def test_errors_cover_a_second_seed():
+    one = ugr.ugr_table(*(lambda p: (p.grid, p.opening))(traced("louvre")[2]))
+    two = ugr.ugr_table(*(lambda p: (p.grid, p.opening))(traced("louvre", seed=2)[2]))
+    for a, b, ea, eb in ((one.crosswise, two.crosswise, one.crosswise_error,
+                          two.crosswise_error),
+                         (one.endwise, two.endwise, one.endwise_error, two.endwise_error)):
+        z = np.abs(a - b) / np.hypot(ea, eb)
+        assert 0.3 < z.max() < 4.5 and np.median(z) < 1.5, z  # neither too small nor large
+    value, error = one.catalogue()
+    assert value == one.crosswise[ugr.ROOMS.index((4, 8)), 0] and error > 0
