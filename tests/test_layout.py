@@ -112,14 +112,7 @@ def test_import_graph_has_no_cycle():
 
 
 #: Modules allowed to be longer, and why.
-LONG_MODULES = {
-    # numba's on-disk cache is keyed by the file of each compiled entry point: helpers in
-    # another file could change without their callers being recompiled (every model, the
-    # spectral photons, the binning with its fast angles, emission of every light kind,
-    # whole paths from the emitted photon with Embree's hits, the escapes binned in
-    # vectorised chunks)
-    "trace/kernels.py": 1160,
-}
+LONG_MODULES: dict[str, int] = {}
 
 
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))

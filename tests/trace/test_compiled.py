@@ -100,11 +100,12 @@ def test_argument_checks_take_exactly_the_built_types():
 
 def test_the_build_is_named_by_the_kernels_sources(tmp_path, monkeypatch):
     for name in compiled.SOURCES:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(compiled.HERE / name, tmp_path / name)
     key = compiled.source_key()
     monkeypatch.setattr(compiled, "HERE", tmp_path)
     assert compiled.source_key() == key
-    with open(tmp_path / "kernels.py", "a") as f:
+    with open(tmp_path / "kernels" / "binning.py", "a") as f:
         f.write("\n")
     assert compiled.source_key() != key
     key = compiled.source_key()
@@ -173,7 +174,7 @@ def test_an_edit_of_the_kernels_leaves_the_build_and_says_so(tmp_path):
         pytest.skip("no ahead-of-time build of the kernels here (built by tools/setup.sh)")
     folder = tmp_path / "trace"
     shutil.copytree(compiled.HERE, folder, ignore=shutil.ignore_patterns("*.pyc"))
-    with open(folder / "kernels.py", "a") as f:
+    with open(folder / "kernels" / "scattering.py", "a") as f:
         f.write("\n# an edit\n")
     code = ("import sys, lumitrace.trace as t; t.__path__.insert(0, sys.argv[1]); "
             "from lumitrace.trace import compiled; print(compiled.backend(), compiled.note())")

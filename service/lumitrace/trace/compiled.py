@@ -24,10 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from . import kernel_sources
+
 #: The kernels the tracer calls, in the order the build exports them.
 ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect")
-#: The sources whose text the compiled code depends on (kernels.py's constants included).
-SOURCES = ("kernels.py", "codes.py", "rng.py", "records.py")
+#: The sources whose text the compiled code depends on (the kernels' constants included).
+SOURCES = kernel_sources.SOURCES
 MODULE = "kernels_aot"
 HERE = Path(__file__).resolve().parent
 #: Calls that went to the JIT although a build was loaded, by kernel (see :func:`backend`).
@@ -60,13 +62,8 @@ def cpu_key() -> str:
 def source_key() -> str:
     """A hash of the kernels' sources, the material codes they compare against, the
     Python, numpy and CPU they are built for: the build's name."""
-    from ..scene import model
-
-    h = hashlib.sha256()
-    for name in SOURCES:
-        h.update((HERE / name).read_bytes())
-    codes = sorted((k, v) for k, v in vars(model).items() if k.isupper() and isinstance(v, int))
-    h.update(repr((codes, np.__version__, platform.machine(), cpu_key())).encode())
+    h = hashlib.sha256(kernel_sources.digest(HERE).encode())
+    h.update(repr((np.__version__, platform.machine(), cpu_key())).encode())
     return h.hexdigest()[:16]
 
 

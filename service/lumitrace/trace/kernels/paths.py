@@ -1,0 +1,345 @@
+"""The path loop: photons followed bounce by bounce (a wave at a time from Embree's hits,
+or each whole, casting its own rays through Embree's ``rtcIntersect1``), spectral
+throughputs carried along, escapes handed to the binning."""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
+
+from ...scene import DIELECTRIC, DIFFUSE, GLOSSY, MIRROR, TRANSLUCENT
+from ..codes import MIXED, PRISTINE
+from ..records import CUT
+from .binning import _CHUNK, _bin_escapes, _grid_exit, _mark_segment
+from .emission import _reaches, _started
+from .jit import _ALWAYS, _INLINE, _JIT
+from .maths import _ONE, _dot, _uniform_pair
+from .scattering import scatter_one
+
+# --- spectral photons -------------------------------------------------------------------
+#
+# A spectral photon carries a throughput per wavelength band, scaled so that its luminous
+# weight (the sum over bands of the emitter's Y per band times the throughput) is 1: every
+# photon still carries the same luminous flux, and Y stays a photon count. At a coloured
+# surface it survives with the probability of its luminous albedo (the luminous weight of
+# throughput times albedo) and its throughput is multiplied by the albedo over that
+# probability, which keeps the weight at 1 and the estimate of every band unbiased. X and
+# Z of an escape are then the sums over bands of the emitter's X and Z per band times the
+# throughput: no wavelength is sampled, so a neutral path has exactly its light's colour.
+# A dispersive dielectric must send each wavelength its own way: there the photon picks one
+# band (with the probability of its luminous share, draw 2, which no bounce uses) and
+# becomes monochromatic, its throughput 1 / Y of that band.
+# A photon's band field says what its throughput is: PRISTINE, 1 in every band (nothing
+# coloured met yet: its row is not even written, and neutral surfaces leave it so), MIXED
+# (its row holds it), or a band: monochromatic, 1 / Y of that band (picked at a dispersive
+# surface, or the wavelength of the ray a ray-file light drew it from; no row needed).
+
+FIXED = 1 << 20  # = lumitrace.scene.spectra.FIXED_POINT
+
+
+@numba.njit(**_INLINE)
+def _luminous(tp, i, w, table, m):
+    """Luminous weight of photon ``i``'s throughput times ``table[m]`` (per band)."""
+    acc = 0.0
+    for b in range(tp.shape[1]):
+        acc += w[1, b] * tp[i, b] * table[m, b]
+    return acc
+
+
+@numba.njit(**_INLINE)
+def _rescale(tp, i, j, table, m, p):
+    """Row ``j`` := row ``i`` times ``table[m]`` / ``p`` (in place when i == j)."""
+    for b in range(tp.shape[1]):
+        tp[j, b] = tp[i, b] * table[m, b] / p
+
+
+@numba.njit(**_INLINE)
+def _fixed_xz(tp, i, band, w):
+    """Photon ``i``'s X and Z, in 1/FIXED of its Y (integers: exact sums), by its state
+    ``band``: a pristine photon's throughput is 1 in every band, a monochromatic one's
+    1 / Y of its band."""
+    if band >= 0:
+        return (np.int64(round(w[0, band] / w[1, band] * FIXED)),
+                np.int64(round(w[2, band] / w[1, band] * FIXED)))
+    x, z = 0.0, 0.0
+    for b in range(w.shape[1]):
+        t = 1.0 if band == PRISTINE else tp[i, b]
+        x += w[0, b] * t
+        z += w[2, b] * t
+    return np.int64(round(x * FIXED)), np.int64(round(z * FIXED))
+
+
+@numba.njit(**_INLINE)
+def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, neutral, w,
+                  tp, tband, i, j, h, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised,
+                  px, py, pz):
+    """:func:`scatter_one` for a spectral photon ``i`` on material ``m``, its new
+    throughput written to row ``j`` (``j`` <= ``i``) if it survives."""
+    band = tband[i]
+    if band == PRISTINE and neutral[m]:  # nothing coloured met, nor here: as monochrome
+        out = scatter_one(kind, s_refl[m, 0], s_spec[m, 0], s_trans[m, 0], s_ior[m, 0], alpha,
+                          dx, dy, dz, nx, ny, nz, u0, u1, u2, u3, polarised, px, py, pz)
+        tband[j] = PRISTINE
+        return out
+    if kind == DIELECTRIC and dispersive[m] and band < 0:
+        # a dispersive surface: one band goes on, picked by its luminous share
+        u, _ = _uniform_pair(h, 2)
+        pick = w.shape[1] - 1
+        acc = 0.0
+        for b in range(w.shape[1]):
+            acc += w[1, b] * (1.0 if band == PRISTINE else tp[i, b])
+            if u < acc:
+                pick = b
+                break
+        band = pick
+    if band >= 0:  # monochromatic: its band's values, its throughput stays 1 / Y there
+        out = scatter_one(kind, s_refl[m, band], s_spec[m, band], s_trans[m, band],
+                          s_ior[m, band], alpha, dx, dy, dz, nx, ny, nz, u0, u1, u2, u3,
+                          polarised, px, py, pz)
+        tband[j] = band
+        return out
+    if band == PRISTINE:
+        for b in range(tp.shape[1]):
+            tp[i, b] = 1.0
+        band = MIXED
+    ior = s_ior[m, 0]
+    refl = spec = trans = 0.0
+    if kind == DIFFUSE or kind == TRANSLUCENT:
+        refl = _luminous(tp, i, w, s_refl, m)
+    if kind == TRANSLUCENT:
+        trans = _luminous(tp, i, w, s_trans, m)
+    if kind == MIRROR or kind == GLOSSY:
+        spec = _luminous(tp, i, w, s_spec, m)
+    alive, ox, oy, oz, qx, qy, qz = scatter_one(kind, refl, spec, trans, ior, alpha, dx, dy, dz,
+                                                nx, ny, nz, u0, u1, u2, u3, polarised,
+                                                px, py, pz)
+    if alive:
+        if kind == DIFFUSE or (kind == TRANSLUCENT and u0 < refl):
+            _rescale(tp, i, j, s_refl, m, refl)
+        elif kind == TRANSLUCENT:
+            _rescale(tp, i, j, s_trans, m, trans)
+        elif kind == MIRROR or kind == GLOSSY:
+            _rescale(tp, i, j, s_spec, m, spec)
+        elif j != i:
+            for b in range(tp.shape[1]):
+                tp[j, b] = tp[i, b]
+        tband[j] = band
+    return alive, ox, oy, oz, qx, qy, qz
+
+
+# --- one bounce of a wave, or whole paths ----------------------------------------------------
+
+@numba.njit(**_JIT)
+def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
+           o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
+           ior, alpha, polarised, spectral, s_refl, s_spec, s_trans, s_ior, dispersive,
+           neutral, band_w, tp, tband, xz, escaped_xz, counts, res, layout, escaped, n_escaped,
+           part_hits, center, scale, axes, lo, hi, extra_edges, c_step, g_step, n_c, n_gamma,
+           side, n_bins, records, rec_texel, rec_cell, rec_exit, rec_segments, rec_parts,
+           rec_cells, rec_slabs, rec_x, rec_z, part_bit, glo, ghi, gn, m0, m1, m2, exits,
+           exit_pos, exit_dir, epsilon, backoff, near_hit, deep, fn, scene, offsets, order,
+           reach_lo, reach_hi):
+    """Advance the wave of photons ``o``, ``d`` (N, 3, normalised frame), ``pol``, ``base``
+    (hashes) and ``pid`` (rows of the batch), N = len(``prim``), by the Embree hits ``prim``, ``tfar``.
+
+    Escapes are counted in ``counts`` (2, texels), their goniophotometer bins appended to
+    ``escaped`` from ``n_escaped``; survivors are written compacted into ``o2`` .. ``pid2``
+    and, as float32 rays, into ``o32``, ``d32``. With ``records`` each photon's record
+    (rows ``pid``) is updated; with ``exits`` each escape's ray where it leaves the
+    goniophotometer's box (world m) and its direction, at its row of ``exit_pos`` and
+    ``exit_dir``. In a ``spectral`` scene each photon carries its spectral throughput
+    ``tp`` (N, bands; compacted in place) and its state ``tband`` (see :func:`_spectral_hit`);
+    an escape adds its fixed-point X and Z (``band_w``: the emitter's X, Y, Z per band) to
+    ``xz`` (rows X, X, Z, Z of the two halves), ``escaped_xz`` (2, escapes) and its record.
+
+    With ``deep`` each photon is instead followed to its end from its emission (``o``,
+    ``d``, ``pol``: the start points, directions and surface normals (3, N), world, moved
+    as :func:`start` moves them), its state in registers, each ray cast through Embree as it
+    goes (``fn`` .. ``order``: see :func:`intersect`; 0: no geometry) unless it misses the
+    box ``reach_lo``..``reach_hi``, as :func:`cull` has it; the same numbers are drawn, so
+    the tallies are the same. Returns (survivors, escaped bins, cut, absorbed, segments).
+    """
+    n_out, cut, absorbed, segments = 0, 0, 0, 0
+    n_parts = part_hits.shape[0]
+    ray = np.empty(40, np.uint32)  # deep: an RTCRayHit, 16-byte aligned within
+    k0 = ((16 - ray.ctypes.data % 16) % 16) // 4
+    rf = ray[k0:].view(np.float32)
+    ru = ray[k0:]
+    addr = numba.uint64(ray.ctypes.data + 4 * k0)
+    staged = np.empty((6, _CHUNK))  # escapes staged for binning, and its scratch
+    sbin = np.empty((2, _CHUNK), np.int64)
+    binning = (staged, sbin, np.empty((3, _CHUNK)), np.empty((4, _CHUNK), np.int64))
+    bins = (res, layout, counts, axes, extra_edges, 1.0 / c_step, 1.0 / g_step, n_c,
+            n_gamma, lo, hi, side, n_bins, escaped, spectral, escaped_xz, xz, records,
+            rec_texel, rec_cell, rec_exit, exits, exit_pos, exit_dir)
+    ns = 0
+    for i in range(prim.shape[0]):
+        h = base[i]
+        step = depth
+        if deep:  # emitted: unpolarised, in row i
+            ox, oy, oz = _started(o, pol, i, center, scale, epsilon)
+            dx, dy, dz = d[0, i], d[1, i], d[2, i]
+            qx, qy, qz = math.nan, (math.nan if polarised else 0.0), \
+                (math.nan if polarised else 0.0)
+            row = j = i  # (j: where a survivor's spectral throughput goes)
+            tri, t32 = np.int64(-1), np.inf
+            if fn != 0 and _reaches((ox, oy, oz), (dx, dy, dz), reach_lo, reach_hi):
+                tri, t32 = _closest(fn, scene, addr, rf, ru, ox, oy, oz, dx, dy, dz, offsets,
+                                    order)
+        else:
+            ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+            dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+            qx = pol[i, 0] if polarised else math.nan
+            qy = pol[i, 1] if polarised else 0.0
+            qz = pol[i, 2] if polarised else 0.0
+            row, j = pid[i], n_out
+            tri, t32 = np.int64(prim[i]), np.float64(tfar[i])
+        while True:
+            segments += 1
+            if records and rec_segments[row] < 65535:
+                rec_segments[row] += 1
+            if tri < 0:  # escaped: staged for binning, in the half its hash's lowest bit picks
+                staged[0, ns] = ox * scale + center[0]
+                staged[1, ns] = oy * scale + center[1]
+                staged[2, ns] = oz * scale + center[2]
+                staged[3, ns], staged[4, ns], staged[5, ns] = dx, dy, dz
+                sbin[0, ns], sbin[1, ns] = row, int(h & _ONE)
+                if spectral:
+                    qx_, qz_ = _fixed_xz(tp, i, tband[i], band_w)
+                    escaped_xz[0, (n_escaped >> 1) + ns] = qx_
+                    escaped_xz[1, (n_escaped >> 1) + ns] = qz_
+                    if records:
+                        rec_x[row] = qx_
+                        rec_z[row] = qz_
+                ns += 1
+                if ns == _CHUNK:
+                    n_escaped = _bin_escapes(ns, *binning, n_escaped, *bins)
+                    ns = 0
+                if records:
+                    qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
+                    _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
+                                  gn, m0, m1, m2)
+                break
+            if n_parts:
+                part_hits[part_index[tri]] += 1
+            # Embree's float32 tfar can put the hit a few ulps beyond the surface, behind an
+            # adjoining face near an edge: back up along the ray (never beyond the origin)
+            t = t32 - min(backoff, 0.5 * t32)
+            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+            nx, ny, nz = normals[tri, 0], normals[tri, 1], normals[tri, 2]
+            if records:
+                rec_parts[row] |= part_bit[tri]
+                _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, px, py, pz, glo, ghi, gn,
+                              m0, m1, m2)
+            if step == last:
+                cut += 1
+                if records:
+                    rec_texel[row] = CUT
+                break
+            cos_in = _dot(dx, dy, dz, nx, ny, nz)
+            stay = False
+            if t32 * abs(cos_in) < near_hit:
+                # a hit at about the origin, on a face the float64 origin lies in front of
+                # while the ray moves away from it, is float32 rounding: the photon goes on
+                # unchanged
+                rx = ox - corners[tri, 0]
+                ry = oy - corners[tri, 1]
+                rz = oz - corners[tri, 2]
+                stay = _dot(rx, ry, rz, nx, ny, nz) * cos_in > 0.0
+            if stay:
+                alive = True
+            else:
+                m = material_index[tri]
+                counter = (step + 1) * 4
+                u0, u1 = _uniform_pair(h, counter)
+                u2, u3 = _uniform_pair(h, counter + 1)
+                if spectral:
+                    alive, dx, dy, dz, qx, qy, qz = _spectral_hit(
+                        m, kind[m], alpha[m], s_refl, s_spec, s_trans, s_ior, dispersive,
+                        neutral, band_w, tp, tband, i, j, h, dx, dy, dz, nx, ny, nz, u0, u1,
+                        u2, u3, polarised, qx, qy, qz)
+                else:
+                    alive, dx, dy, dz, qx, qy, qz = scatter_one(
+                        kind[m], refl[m], spec[m], trans[m], ior[m], alpha[m], dx, dy, dz,
+                        nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
+            if not alive:
+                absorbed += 1
+                break
+            side_sign = _dot(dx, dy, dz, nx, ny, nz)
+            k = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
+            px, py, pz = px + k * nx, py + k * ny, pz + k * nz
+            if deep:  # on, from here
+                ox, oy, oz = px, py, pz
+                step += 1
+                tri, t32 = _closest(fn, scene, addr, rf, ru, px, py, pz, dx, dy, dz, offsets,
+                                    order)
+                continue
+            o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
+            d2[n_out, 0], d2[n_out, 1], d2[n_out, 2] = dx, dy, dz
+            o32[n_out, 0], o32[n_out, 1], o32[n_out, 2] = px, py, pz
+            d32[n_out, 0], d32[n_out, 1], d32[n_out, 2] = dx, dy, dz
+            if polarised:
+                pol2[n_out, 0], pol2[n_out, 1], pol2[n_out, 2] = qx, qy, qz
+            base2[n_out] = h
+            pid2[n_out] = row
+            if spectral and stay:  # moved on unchanged: its throughput moves along
+                tband[n_out] = tband[i]
+                if tband[i] == MIXED:
+                    for b in range(tp.shape[1]):
+                        tp[n_out, b] = tp[i, b]
+            n_out += 1
+            break
+    if ns:
+        n_escaped = _bin_escapes(ns, *binning, n_escaped, *bins)
+    return n_out, n_escaped, cut, absorbed, segments
+
+
+# --- intersection ---------------------------------------------------------------------------
+
+@intrinsic
+def _call_void3(typingctx, fn, a, b, c):
+    """Call the C function at address ``fn`` with three pointer arguments (addresses), no
+    result: Embree's ``rtcIntersect1(scene, rayhit, args)``, whose address is known only
+    at run time."""
+    sig = types.void(types.uint64, types.uint64, types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        f = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [ptr] * 3).as_pointer())
+        builder.call(f, [builder.inttoptr(a, ptr) for a in args[1:]])
+        return context.get_dummy_value()
+    return sig, codegen
+
+
+@numba.njit(**_ALWAYS)
+def _closest(fn, scene, addr, f, u, ox, oy, oz, dx, dy, dz, offsets, order):
+    """Embree's closest hit of one ray (made float32) through the RTCRayHit at ``addr``
+    (``f``, ``u``: its words): the triangle (-1: none), its float32 distance (inf: none)."""
+    f[0], f[1], f[2], f[3] = ox, oy, oz, 0.0  # origin, tnear
+    f[4], f[5], f[6], f[7] = dx, dy, dz, 0.0  # direction, time
+    f[8] = np.inf
+    u[9], u[10], u[11] = 0xFFFFFFFF, 0, 0  # mask, id, flags
+    u[18], u[19] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
+    _call_void3(fn, scene, addr, numba.uint64(0))
+    if u[18] == 0xFFFFFFFF:
+        return np.int64(-1), np.inf
+    return np.int64(order[offsets[u[18]] + u[17]]), np.float64(f[8])
+
+
+@numba.njit(**_JIT)
+def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
+    """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
+    geometry per part; triangle j of geometry g is ``order[offsets[g] + j]``): triangle
+    ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``: ``rtcIntersect1``."""
+    buf = np.empty(40, np.uint32)  # an RTCRayHit, 16-byte aligned within
+    k = ((16 - buf.ctypes.data % 16) % 16) // 4
+    f = buf[k:].view(np.float32)
+    u = buf[k:]
+    addr = numba.uint64(buf.ctypes.data + 4 * k)
+    for i in range(o32.shape[0]):
+        prim[i], tfar[i] = _closest(fn, scene, addr, f, u, o32[i, 0], o32[i, 1], o32[i, 2],
+                                    d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)
