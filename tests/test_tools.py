@@ -26,6 +26,7 @@ QUICK = ("--target-error", 0.3, "--resolution", 8, "--threads", 1, "--quiet")
 #: Each script's quick run ({out}: a fresh folder). A full run of those given "--help" is
 #: minutes long or needs a browser; they are exercised by their own tests where there are.
 RUNS: dict[str, tuple[str, ...]] = {
+    "application_cost.py": ("--photons", "20000", "--repeats", "1"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
