@@ -13,6 +13,7 @@ from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
 from .report import sweep  # its command's arguments (the standard library only, at import)
+from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
 from .trace.job import MAX_DEPTH
 
@@ -71,7 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
     stop.add_argument("--photons", type=_positive_int, help="total photons to trace, e.g. 5e6")
     stop.add_argument("--time", type=_positive_float, metavar="SECONDS", help="trace for this long")
     stop.add_argument("--target-error", type=_positive_float, metavar="E",
-                      help="stop at this flux-weighted relative standard error, e.g. 0.02")
+                      help="stop at this relative standard error of --target-of, e.g. 0.02")
+    stop.add_argument("--target-of", choices=("files", "map"), default="files",
+                      help="judge the target on the IES/LDT files (RMS and worst lit value, "
+                           "default) or on the intensity map")
     t.add_argument("--resolution", type=_positive_int, default=64,
                    help="cube-map face size in texels (default 64)")
     t.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD,
@@ -220,106 +224,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _progress_bar(total: int | None, seconds: float | None, enabled: bool):
-    """A tqdm bar on stderr counting photons (or seconds), with iterations and error; a
-    plain line per iteration when stderr is not a terminal (a log file, a farm's capture),
-    where a bar's carriage returns would pile up."""
-    if not enabled:
-        return None, None
-    if not sys.stderr.isatty():
-        def log(p):
-            print(f"iteration {p.iteration}: {p.photons:,} photons, {p.seconds:.1f} s, "
-                  f"error {_pct(p.relative_error)}{_at_most(p)}", file=sys.stderr, flush=True)
-        return None, log
-    from tqdm import tqdm
-
-    if total is not None:
-        bar = tqdm(total=total, unit="ph", unit_scale=True, file=sys.stderr, dynamic_ncols=True)
-    elif seconds is not None:
-        bar = tqdm(total=round(seconds, 1), unit="s", file=sys.stderr, dynamic_ncols=True,
-                   bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s {postfix}")
-    else:
-        bar = tqdm(unit="ph", unit_scale=True, file=sys.stderr, dynamic_ncols=True)
-
-    def update(p):
-        if total is not None:
-            bar.update(p.photons - bar.n)
-        elif seconds is not None:
-            bar.update(min(p.seconds, seconds) - bar.n)
-        else:
-            bar.update(p.photons - bar.n)
-        bar.set_postfix_str(f"it {p.iteration}, {p.photons:.3g} ph, err "
-                            f"{_pct(p.relative_error)}{_at_most(p)}")
-
-    return bar, update
-
-
-def _at_most(p) -> str:
-    """`` (at most B%)`` after an iteration's estimated error, when its bound differs."""
-    bound = p.estimate.error_bound if p.estimate is not None else None
-    return "" if bound is None or bound == p.relative_error else f" (at most {_pct(bound)})"
-
-
-def _pct(value: float | None) -> str:
-    """A relative error as a percentage; 'undefined' where there is none (no light)."""
-    return "undefined" if value is None or not math.isfinite(value) else f"{value:.2%}"
-
-
-def _pm(value: float | None, error: float | None, unit: str = "", digits: int = 2) -> str:
-    """A figure with its standard error: "237.24 cd +- 1.59"; "-" where it is undefined."""
-    if value is None:
-        return "-"
-    return f"{value:.{digits}f}{' ' + unit if unit else ''}" + (
-        "" if error is None else f" +- {error:.{digits}f}")
-
-
-def _summary_text(r, stage) -> str:
-    """The human summary of a result record."""
-    ang = lambda v, e: _pm(v, e, "deg", 1)  # noqa: E731
-    lines = [
-        f"{r.luminaire} in {stage}",
-        f"  photons         {r.photons:,} in {r.iterations} iterations, {r.seconds:.2f} s "
-        f"({r.photons_per_second:,.0f} photons/s)",
-        f"  emitted         {r.emitted_lm:10.2f} lm",
-        f"  escaped         {r.escaped_lm:10.2f} lm   (light output ratio "
-        f"{_pm(r.light_output_ratio, r.light_output_ratio_error, '', 4)})",
-        f"  absorbed        {r.absorbed_lm:10.2f} lm"]
-    if r.cut_lm:
-        lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
-    lines += [
-        f"  peak intensity  {_pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
-        f"C {r.peak_c:g}, gamma {r.peak_gamma:g} deg (standard errors after +-)",
-        f"  map error       {_pct(r.relative_error)} estimated RMS over the sphere, at most "
-        f"{_pct(r.relative_error_bound)} (raw map {_pct(r.raw_relative_error)})"
-        f"{', converged' if r.converged else ''}"
-        + ("" if r.escaped_lm else "   (no light escapes the luminaire)"),
-        f"  files' error    {_pct(r.photometry_error)} relative RMS standard error of the "
-        "IES/LDT values",
-        f"  downward flux   {r.downward_flux_fraction:.1%}   CIE flux code {r.cie_flux_code}",
-        f"  beam angle      {ang(r.beam_angle_c0_c180, r.beam_angle_c0_c180_error)} (C0-C180), "
-        f"{ang(r.beam_angle_c90_c270, r.beam_angle_c90_c270_error)} (C90-C270)",
-        f"  field angle     {ang(r.field_angle_c0_c180, r.field_angle_c0_c180_error)} "
-        f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
-        f"  symmetry        {r.symmetry}"]
-    if r.chromaticity_uv is not None:
-        cct = "none (Duv beyond 0.05)" if r.cct_K is None else f"{r.cct_K:.0f} K"
-        lines += [
-            f"  colour          CCT {cct}, Duv {r.duv:+.4f}, u'v' "
-            f"({r.chromaticity_uv[0]:.4f}, {r.chromaticity_uv[1]:.4f})",
-            f"  uniformity      Delta u'v' {r.colour_uniformity_duv:.4f} within the beam "
-            f"(noise {r.colour_uniformity_noise:.5f})",
-            f"  colour files    {r.colour_data}" + (f"  {r.colour_diagram}"
-                                                     if r.colour_diagram else "")]
-    lines += [
-        f"  intensity map   {r.intensity_map}",
-        f"  IES / LDT       {r.ies}  {r.ldt}",
-        f"  with errors     {r.photometry_data}",
-        f"  pictures        {r.polar_diagram}  {r.photometric_solid}" if r.polar_diagram
-        else "  pictures        (not drawn)",
-        f"  result layer    {r.result_layer}"]
-    return "\n".join(lines)
-
-
 _QUIET = False
 
 
@@ -334,7 +238,8 @@ def cmd_trace(args) -> int:
                              target_error=args.target_error, resolution=args.resolution,
                              threshold=args.threshold, seed=args.seed, max_depth=args.max_depth,
                              threads=args.threads or default_threads(), workers=args.workers,
-                             scheduler=args.scheduler, batch_size=args.batch_size)
+                             scheduler=args.scheduler, batch_size=args.batch_size,
+                             target_of=args.target_of)
     check_interrupted(defer=True)
     preflight(args.stage, args.out)
     if args.edits is not None:
@@ -376,7 +281,8 @@ def cmd_trace(args) -> int:
     try:
         from . import STARTED
 
-        result = run(scene, settings, progress=update, frame=args.frame, clock_start=STARTED)
+        result = run(scene, settings, progress=update, frame=args.frame, clock_start=STARTED,
+                     progress_maps=settings.target_of == "map")
     except ClusterLost as exc:  # the batches that finished are written, then it is said
         result, lost = exc.result, exc
     finally:
@@ -395,14 +301,15 @@ def cmd_trace(args) -> int:
         raise stop
     summary = record.summary()
     target = args.target_error
-    bound = record["relative_error_bound"]
-    missed = target is not None and not (bound is not None and bound <= target)
+    bound = record["judged_error"]
+    missed = target is not None and not record["converged"]
     summary["target_reached"] = None if target is None else not missed
     summary["warnings"] = list(scene.warnings) + _SHOWN
     text = json.dumps(summary) if args.json else "" if args.quiet else \
-        _summary_text(record, args.stage)
+        summary_text(record, args.stage)
     if missed and not (args.json or args.quiet):
-        text += (f"\nnot converged: {_pct(bound)} > {target:.2%} "
+        judged = "files'" if record["target_of"] == "files" else "map's"
+        text += (f"\nnot converged: the {judged} error {_pct(bound)} > {target:.2%} "
                  f"(exit status {NOT_CONVERGED_EXIT})")
     try:
         if text:

@@ -25,6 +25,9 @@ class TraceResult:
     estimate: MapEstimate
     #: batches traced again after a Dask worker was lost (their first tallies never came)
     batches_redone: int = 0
+    #: the photometric files' accuracy (a ``lumitrace.photometry.accuracy.FilesAccuracy``)
+    #: where the settings judge the target on the files
+    files_accuracy: Any = None
 
     @property
     def photons(self) -> int:
@@ -36,6 +39,23 @@ class TraceResult:
         return self.estimate.error
 
     @property
+    def judged_on(self) -> str:
+        """What the target error is judged on: "files" or "map"."""
+        return "files" if self.files_accuracy is not None else "map"
+
+    @property
+    def judged_error(self) -> float:
+        """The error the target is compared with: the files' (their RMS bound, or their
+        worst lit value's share) or the map's error bound."""
+        if self.files_accuracy is not None:
+            return self.files_accuracy.error
+        return self.estimate.error_bound
+
+    @property
     def converged(self) -> bool:
-        """Whether the map's error bound (not its point estimate) is within the target."""
-        return self.estimate.meets(self.settings.convergence_target)
+        """Whether the files (RMS bound and worst lit value) or the map (its error bound,
+        not its point estimate) are within the target."""
+        target = self.settings.convergence_target
+        if self.files_accuracy is not None:
+            return self.files_accuracy.meets(target)
+        return self.estimate.meets(target)

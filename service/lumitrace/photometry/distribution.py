@@ -14,6 +14,7 @@ from ..film.goniometer import (EXIT_SIDE, FACES, GAMMA_EDGES, N_CELLS, N_EXIT, N
                                cell_solid_angles)
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
+from .accuracy import FilesAccuracy, grid_accuracy
 from .measured import emitter_rings, symmetric_grid
 from .quantities import PhotometricFigures, figures
 
@@ -165,3 +166,14 @@ def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
                                               C_STEP, SYMMETRY_TOLERANCE)
     fig = figures(acc, grid, halves, C_STEP, rings, half_width)
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)
+
+
+def files_accuracy(acc: Accumulator) -> FilesAccuracy:
+    """The accuracy of the files :func:`photometry_of` would write from these counts: the
+    same grid (gammas, C step, symmetry), without the figures (a few tens of ms: what a
+    session judges its target on, round by round)."""
+    if not acc.photons or not acc.spread_known:
+        return FilesAccuracy(None, None, None)
+    gammas = default_gammas(beam_half_width(emitter_rings(acc)))
+    grid, _, _ = symmetric_grid(acc, gammas, C_STEP, SYMMETRY_TOLERANCE)
+    return grid_accuracy(grid, C_STEP)

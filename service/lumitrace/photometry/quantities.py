@@ -30,6 +30,7 @@ import numpy as np
 from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
+from .accuracy import grid_accuracy
 from .measured import cell_solid_angle_grid, emitter_rings, measure_all
 from .peak import Peak, fitted_peak
 
@@ -75,6 +76,10 @@ class PhotometricFigures:
     cie_flux_code_values: tuple[float, ...]
     cie_flux_code_errors: tuple[float, ...]
     photometry_error: float | None
+    #: the largest relative standard error of a lit value (at least a tenth of the largest)
+    #: and its (C, gamma) in degrees
+    photometry_worst_error: float | None = None
+    photometry_worst_at: tuple[float, float] | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -240,6 +245,7 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
     if top is None:  # too little light near the top for a fit: the cells' split estimate
         i, j = picks[0] if grid.candela.flat[a0] >= grid.candela.flat[a1] else picks[1]
         top = Peak(peak, peak_err, float(grid.c[i]), float(grid.gamma[j]))
+    accuracy = grid_accuracy(grid, c_step)
     rng = np.random.default_rng(0)
     spreads = {(c, f): plane_spreads(*profiles, c, f, rng, top)
                for f in (0.5, 0.1) for c in (0.0, 90.0)}
@@ -263,4 +269,6 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         beam_crossings_c0_c180=spreads[0.0, 0.5][2],
         beam_crossings_c90_c270=spreads[90.0, 0.5][2],
         cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
-        photometry_error=relative_error(grid, c_step) if acc.spread_known else None)
+        photometry_error=relative_error(grid, c_step) if acc.spread_known else None,
+        photometry_worst_error=accuracy.worst if acc.spread_known else None,
+        photometry_worst_at=accuracy.worst_at if acc.spread_known else None)

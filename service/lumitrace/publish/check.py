@@ -105,7 +105,7 @@ def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Ch
         stage.GetSessionLayer().subLayerPaths.append(str(layer.absolute()))
     prim = stage.GetPrimAtPath(scene.luminaire_path)
     names = ("sceneHash", "converged", "relativeError", "relativeErrorBound", "photons",
-             "photometryError", "iesFile")
+             "photometryError", "iesFile", "targetOf", "judgedError")
     values = {}
     for name in names:
         attr = prim.GetAttribute(RESULT_PREFIX + name)
@@ -129,10 +129,13 @@ def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Ch
     if values["sceneHash"] != values["currentSceneHash"]:
         return Check("stale", "the stage changed since its results were traced: trace it "
                      "again", STALE, values)
+    on = values["targetOf"] or "map"  # results from before the files were judged: the map
     if not values["converged"]:
-        err = values["relativeErrorBound"]
+        err = values["judgedError"] if values["targetOf"] else values["relativeErrorBound"]
         err = values["relativeError"] if err is None else err  # results from before the bound
+        what = "the files' error" if on == "files" else "the map's error, at most"
         return Check("not converged", "the results are current but did not reach their "
-                     f"target error (relative error at most "
+                     f"target error ({what} "
                      f"{'undefined' if err is None else f'{err:.2%}'})", NOT_CONVERGED, values)
-    return Check("current", "the results are current and converged", CURRENT, values)
+    return Check("current", f"the results are current and converged (judged on the {on})",
+                 CURRENT, values)

@@ -116,6 +116,7 @@ def trace_figures(result: TraceResult) -> dict[str, Any]:
         "raw_relative_error": result.estimate.raw_error,
         "filtered_relative_error": result.estimate.filtered_error,
         "converged": result.converged, "target_error": s.target_error,
+        "target_of": result.judged_on, "judged_error": result.judged_error,
         "threshold": float(s.threshold), "resolution": acc.resolution, "seed": s.seed,
         "input_hash": input_hash(result), "scene_hash": result.scene.content_hash(),
         "photons_per_second": acc.photons / secs, "segments_per_second": acc.segments / secs,

@@ -17,6 +17,8 @@ from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
 from ..film.result import TraceResult
+from ..photometry.accuracy import FilesAccuracy
+from ..photometry.distribution import files_accuracy
 from ..trace.allocation import MIN_EMITTER_PHOTONS, allocate
 from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
@@ -55,10 +57,13 @@ class Progress:
     iteration: int
     photons: int
     seconds: float
+    #: the map's estimated error (the files' judged error where the map was not estimated)
     relative_error: float
     budget: int | None
     estimate: MapEstimate | None = None
     accumulator: Accumulator | None = None
+    #: the photometric files' accuracy where the target is judged on them
+    files: FilesAccuracy | None = None
 
 
 #: With a photon budget alone, an emitter's job in a round holds at least this many photons
@@ -132,6 +137,7 @@ class Refinement:
         self.round_photons = min(first_round, self.full_round)
         self.iteration = 0
         self.estimate: MapEstimate | None = None
+        self.files: FilesAccuracy | None = None
 
     def next_jobs(self, most: int | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
@@ -156,6 +162,7 @@ class Refinement:
         t0 = time.perf_counter()
         self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
             else None
+        self.files = self.judge_files() if self.settings.target_error is not None else None
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
@@ -197,13 +204,33 @@ class Refinement:
         self.estimate = estimate(self.accumulator, self.settings.threshold)
         return self.estimate
 
+    def judge_files(self) -> FilesAccuracy | None:
+        """The photometric files' accuracy from the counts so far, where the settings judge
+        the target on the files (None where they judge it on the map)."""
+        if self.settings.target_of != "files":
+            return None
+        return files_accuracy(self.accumulator)
+
     def reached_target(self) -> bool:
-        """Whether the estimated error's bound is at or below the target error (the
-        settings'), once :data:`MIN_PHOTONS_FOR_TARGET` photons are traced."""
+        """Whether the target error (the settings') is met, once
+        :data:`MIN_PHOTONS_FOR_TARGET` photons are traced: by the files (RMS bound and worst
+        lit value) or by the map's estimated error bound, as the settings say."""
         t = self.settings.target_error
-        return (t is not None and self.estimate is not None
-                and self.accumulator.photons >= MIN_PHOTONS_FOR_TARGET
-                and self.estimate.meets(t))
+        if t is None or self.accumulator.photons < MIN_PHOTONS_FOR_TARGET:
+            return False
+        if self.settings.target_of == "files":
+            return self.files is not None and self.files.meets(t)
+        return self.estimate is not None and self.estimate.meets(t)
+
+    def judged(self) -> tuple[str, float | None, bool]:
+        """(what the target is judged on, the judged error, converged at the settings'
+        convergence target) from the last round: the files' accuracy or the map's bound."""
+        target = self.settings.convergence_target
+        if self.settings.target_of == "files":
+            files = self.files or self.judge_files()
+            return "files", files.error, files.meets(target)
+        est = self.estimate
+        return "map", est.error_bound if est else None, bool(est and est.meets(target))
 
     def no_escape(self) -> bool:
         """True once a session without a photon budget has traced
@@ -225,18 +252,23 @@ class Refinement:
 
     def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
         est = self.estimate or estimate(self.accumulator, self.settings.threshold)
+        files = self.judge_files()  # (the counts may have changed since the last round)
         return TraceResult(scene=self.scene, settings=self.settings,
                            accumulator=self.accumulator, iterations=self.iteration,
-                           seconds=seconds, prepare_seconds=prepare_seconds, estimate=est)
+                           seconds=seconds, prepare_seconds=prepare_seconds, estimate=est,
+                           files_accuracy=files)
 
 
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
         progress: Callable[[Progress], None] | None = None,
-        frame: TracingFrame | None = None, clock_start: float | None = None) -> TraceResult:
+        frame: TracingFrame | None = None, clock_start: float | None = None,
+        progress_maps: bool = True) -> TraceResult:
     """Trace ``scene`` until the settings say stop; return the accumulated result.
 
     ``frame`` pins the normalised tracing frame (default: the scene's own bounds);
-    ``progress`` is called after every iteration with an immutable snapshot;
+    ``progress`` is called after every iteration with an immutable snapshot (with the map
+    estimate unless not ``progress_maps``: a caller that shows the files' error alone does
+    not pay for the map's every round);
     ``clock_start`` (``time.perf_counter``) is when ``settings.seconds`` started to count
     (default: now; the command line counts from its own start).
     """
@@ -254,8 +286,9 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
         start = time.perf_counter()
         deadline = None if settings.seconds is None else \
             (clock_start if clock_start is not None else start) + settings.seconds
-        # a round's map estimate serves the progress shown and the target error only
-        estimated = progress is not None or settings.target_error is not None
+        # a round's map estimate serves the progress shown and a target judged on the map
+        estimated = (progress is not None and progress_maps) or (
+            settings.target_error is not None and settings.target_of == "map")
         while True:
             most = None
             if deadline is not None and r.iteration:
@@ -275,8 +308,11 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 break
             elapsed = time.perf_counter() - start
             if progress is not None:
-                progress(Progress(r.iteration, r.accumulator.photons, elapsed, est.error,
-                                  r.budget, est, r.accumulator.snapshot()))
+                judged = r.files if r.files is not None else r.judge_files()
+                error = est.error if est is not None else \
+                    judged.error if judged is not None else math.inf
+                progress(Progress(r.iteration, r.accumulator.photons, elapsed, error,
+                                  r.budget, est, r.accumulator.snapshot(), judged))
             if deadline is not None and time.perf_counter() >= deadline:
                 break
             if r.reached_target():

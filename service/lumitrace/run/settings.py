@@ -40,6 +40,9 @@ MAX_SEED = 2 ** 31 - 1
 MAX_THREADS = 1024
 MAX_TRACE_DEPTH = 1 << 20
 WORKER_MODES = ("auto", "threads", "processes")
+#: What a target error is judged on: the photometric files (their grid's relative RMS
+#: standard error and worst lit value, the default: what the user ships) or the map.
+TARGETS = ("files", "map")
 
 
 class SettingsError(LumitraceError):
@@ -75,8 +78,9 @@ def _real(name: str, value, lo: float, hi: float = math.inf, lo_open: bool = Fal
 @dataclass(frozen=True)
 class TraceSettings:
     """What to trace and when to stop: ``photons`` (total), ``seconds`` or ``target_error``
-    (relative RMS error of the written map); the first one reached stops the session, and
-    with none given the session traces :data:`DEFAULT_PHOTONS`."""
+    (relative error of the photometric files or, with ``target_of="map"``, of the written
+    map); the first one reached stops the session, and with none given the session traces
+    :data:`DEFAULT_PHOTONS`."""
 
     photons: int | None = None
     seconds: float | None = None
@@ -90,6 +94,8 @@ class TraceSettings:
     workers: str = "auto"
     #: a Dask scheduler's address (tcp://HOST:PORT): batches run on its workers
     scheduler: str | None = None
+    #: what ``target_error`` (and ``converged``) is judged on: one of :data:`TARGETS`
+    target_of: str = "files"
 
     def __post_init__(self) -> None:
         put = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731 (frozen)
@@ -106,6 +112,9 @@ class TraceSettings:
         put("threads", _integer("threads", self.threads, 1, MAX_THREADS))
         put("batch_size", _integer("batch_size", self.batch_size, 1, 1 << 24))
         put("max_depth", _integer("max_depth", self.max_depth, 0, MAX_TRACE_DEPTH))
+        if self.target_of not in TARGETS:
+            raise SettingsError(f"must be one of {', '.join(TARGETS)}, got "
+                                f"{self.target_of!r}", prop="target_of")
         if self.workers not in WORKER_MODES:
             raise SettingsError(f"must be one of {', '.join(WORKER_MODES)}, got "
                                 f"{self.workers!r}", prop="workers")

@@ -195,7 +195,7 @@ class Engine:
                 "iterations": r.iteration if r else 0,
                 "relative_error": defined(est.error) if est else None,
                 "relative_error_bound": defined(est.error_bound) if est else None,
-                "converged": bool(est and est.meets(self.settings.convergence_target)),
+                **self._judged(r),
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
                 "written_photons": self.written.get("photons"),
@@ -379,6 +379,14 @@ class Engine:
                 time.perf_counter() - self._last_write >= WRITE_INTERVAL:
             self._write(pictures=False)
 
+    @staticmethod
+    def _judged(r) -> dict[str, Any]:
+        """What the target is judged on, the judged error and whether it is met."""
+        if r is None or not r.accumulator.photons:
+            return {"target_of": None, "judged_error": None, "converged": False}
+        on, error, converged = r.judged()
+        return {"target_of": on, "judged_error": defined(error), "converged": converged}
+
     def _reached(self) -> bool:
         return self.refinement.finished()
 
@@ -390,7 +398,7 @@ class Engine:
                             photons=self.refinement.accumulator.photons,
                             relative_error=defined(est.error) if est else None,
                             relative_error_bound=defined(est.error_bound) if est else None,
-                            converged=bool(est and est.meets(self.settings.convergence_target)))
+                            **self._judged(self.refinement))
         unreached = self.refinement.accumulator.unreached_parts()
         if unreached:
             self.events.publish("warning", revision=self.revision.number,
