@@ -89,3 +89,17 @@ def test_errors_cover_a_second_seed():
         assert 0.3 < z.max() < 4.5 and np.median(z) < 1.5, z  # neither too small nor large
     value, error = one.catalogue()
     assert value == one.crosswise[ugr.ROOMS.index((4, 8)), 0] and error > 0
+
+
+def test_a_luminaire_sending_nothing_down_has_no_rating():
+    from lumitrace.photometry.distribution import LuminousOpening
+    from lumitrace.photometry.grid import CGammaGrid, default_gammas
+    from lumitrace.publish.record import defined
+
+    gam = default_gammas()
+    cd = 300.0 * np.maximum(-np.cos(np.radians(gam)), 0.0)[None, :]  # all light upward
+    grid = CGammaGrid(np.array([0.0]), gam, cd, "rotational", 0.01 * cd)
+    fields = ugr.ugr_table(grid, LuminousOpening(0.1, 0.1, 0.0, round=True)).as_dict()
+    assert defined(fields["ugr_4h8h_70_50_20"]) is None
+    assert defined(fields["ugr_4h8h_70_50_20_error"]) is None
+    assert all(v is None for row in fields["ugr_table"]["crosswise"] for v in row)

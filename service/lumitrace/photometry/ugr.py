@@ -241,8 +241,16 @@ def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> U
     unfold = _unfold_index(grid)
     drawn = (grid.candela[None] + noise)[:, unfold].reshape(draws, -1)
     dc, de = model.evaluate(drawn)
-    return UgrTable(cross[0], end[0], np.nanstd(dc, axis=0, ddof=1),
-                    np.nanstd(de, axis=0, ddof=1))
+    return UgrTable(cross[0], end[0], _spread(dc), _spread(de))
+
+
+def _spread(draws: np.ndarray) -> np.ndarray:
+    """Standard deviation over the draws (axis 0); NaN for a cell with an undefined draw
+    (no glare at all: UGR is minus infinity)."""
+    ok = np.isfinite(draws).all(axis=0)
+    out = np.full(draws.shape[1:], np.nan)
+    out[ok] = draws[:, ok].std(axis=0, ddof=1)
+    return out
 
 
 def _unfold_index(grid: CGammaGrid) -> np.ndarray:
