@@ -25,7 +25,7 @@ SMALL = dict(resolution=16, batch_size=1 << 14, threads=2, seed=5)
 def cluster():
     """A scheduler and two single-threaded worker processes on loopback, and a client."""
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as c, \
+                                  host="127.0.0.1", dashboard_address=":0") as c, \
             distributed.Client(c, set_as_default=False) as client:
         client.wait_for_workers(2, timeout=60)
         yield c.scheduler_address, client
@@ -225,3 +225,29 @@ def test_a_target_error_stops_the_run_on_the_cluster(cluster):
     assert r.estimate.meets(0.05) and MIN_PHOTONS_FOR_TARGET <= r.photons < 4_000_000
     assert [p.photons for p in seen] == sorted({p.photons for p in seen})  # every round shown
     assert seen[-1].photons == r.photons and len(seen) == r.iterations
+
+
+@pytest.mark.parametrize("stage, photons", [("warm_downlight.usda", 1 << 15),
+                                            ("louvre.usda", 300)])
+def test_a_tally_packed_for_the_network_unpacks_bit_for_bit(stage, photons):
+    """Counts go over the network in the narrowest exact integer type, deflated: a dense
+    spectral tally and a sparse one of few photons come back identical, and smaller."""
+    import pickle
+
+    from lumitrace.film.accumulate import SparseCounts
+    from lumitrace.run.cluster import pack, unpack
+    from lumitrace.run.workers import _traced
+    from lumitrace.trace.job import BatchJob
+    from lumitrace.trace.prepared import prepare
+
+    emitter = 3 if stage.startswith("louvre") else 0
+    tally = _traced(prepare(_scene(stage)), BatchJob(emitter, 1000, photons, 2, 32))
+    wire = pack(tally)
+    back = unpack(wire)
+    same_tally(tally, back)
+    assert isinstance(back.cells, type(tally.cells))
+    if stage.startswith("louvre"):
+        assert isinstance(tally.counts, SparseCounts)
+    else:
+        assert tally.xz is not None
+    assert len(wire) * 3 < len(pickle.dumps(tally, protocol=5))
