@@ -38,6 +38,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "profile_run.py": ("--photons", "20000"),
     "publish_stress.py": ("--runs", "1", "--bursts", "1", "--seconds", "1"),
     "retrace_bench.py": ("--photons", "20000", "--stages", "downlight", "--threads", "1"),
+    "seed_study.py": ("--seeds", "2", "--photons", "20000", "--stages", "lambertian_disc"),
     "side_by_side.py": ("--photons", "20000", "--repeats", "1", "--max-photons", "20000",
                         "--resolution", "8", "--scenes", "isotropic", "--peer", "none"),
     "startup.py": ("--photons", "10000", "--repeats", "1"),

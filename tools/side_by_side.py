@@ -13,6 +13,9 @@ Per scene:
 - throughput: ``lumitrace trace`` run as a user runs it (a subprocess, ``--photons``, no
   pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second,
   and the same of the peer, run interleaved with it (one of each, in turn);
+- the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
+  on the files, the default), whole process, CPU and wall seconds, against the peer's CPU
+  seconds to E on its grid; and the files' true error at the stop against the closed form;
 - convergence: a run in this process that records, after every iteration, the relative RMS
   error ``sqrt(sum(Omega (I - I_ref)^2) / sum(Omega I_ref^2))`` over the cells of a
   C 15 deg x gamma 5 deg grid, of the raw estimate (the goniophotometer's counts: what
@@ -297,6 +300,79 @@ def convergence(stage: Path, max_photons: int, resolution: int, seed: int = 1) -
     return out
 
 
+def files_cell_means(expectation: dict, up_axis: str, c: np.ndarray, gamma: np.ndarray,
+                     caps: tuple[float, float], sub: int = 12) -> np.ndarray:
+    """The closed form's mean over every cell of a published grid (planes ``c`` every
+    C step all round, gamma zones between midpoints, the poles over their caps)."""
+    step = float(c[1] - c[0]) if len(c) > 1 else 360.0
+    edges = np.concatenate([[0.0], 0.5 * (gamma[1:] + gamma[:-1]), [180.0]])
+    edges_lo, edges_hi = edges[:-1].copy(), edges[1:].copy()
+    edges_hi[0], edges_lo[-1] = caps[0], 180.0 - caps[1]
+    f = (np.arange(sub) + 0.5) / sub
+    out = np.zeros((len(c), len(gamma)))
+    for j, (lo, hi) in enumerate(zip(edges_lo, edges_hi)):
+        g = lo + f * (hi - lo)
+        pole = j in (0, len(gamma) - 1)
+        for i, c0 in enumerate(c):
+            cs = np.arange(0.0, 360.0, 360.0 / sub) if pole else c0 - 0.5 * step + f * step
+            cc, gg = np.meshgrid(cs, g, indexing="ij")
+            w = np.sin(np.radians(gg))
+            d = frame.directions(cc, gg, up_axis).reshape(-1, 3)
+            v = expected_intensity(expectation, d).reshape(cc.shape)
+            out[i, j] = float((v * w).sum() / w.sum())
+    return out
+
+
+def files_true_error(stage: Path, photometry_json: Path) -> float | None:
+    """The written files' true relative RMS error over the sphere against the closed form
+    (None for a stage without one), from the sidecar JSON's grid."""
+    from lumitrace.photometry.grid import CGammaGrid
+
+    try:
+        expectation = read_expectation(stage)
+    except KeyError:
+        return None
+    doc = json.loads(photometry_json.read_text())
+    grid = CGammaGrid(np.array(doc["c"]), np.array(doc["gamma"]), np.array(doc["candela"]),
+                      doc["symmetry"], np.array(doc["sigma"]), tuple(doc["poleCaps_deg"]))
+    full = grid.full()
+    ref = files_cell_means(expectation, read_stage(stage).up_axis, full.c, full.gamma,
+                           grid.pole_caps)
+    omega = cell_solid_angle_grid(full.gamma, float(full.c[1] - full.c[0]))
+    return math.sqrt(float((omega * (full.candela - ref) ** 2).sum())
+                     / float((omega * ref ** 2).sum()))
+
+
+def user_view(stage: Path, out: Path, t: dict) -> dict:
+    """The real ``lumitrace trace --target-error E`` (files judged, the default), whole
+    process, at each level: CPU and wall seconds, photons, the files' stated and true error
+    at the stop; against the peer's CPU seconds to E on its grid."""
+    rows = {}
+    for lv in LEVELS:
+        cmd = [sys.executable, "-m", "lumitrace.cli", "trace", str(stage), "--target-error",
+               str(lv), "--no-pictures", "--json", "--no-progress", "--no-sublayer",
+               "--out", str(out), "--replace-results"]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+        if p.returncode not in (0, 3):
+            raise RuntimeError(f"{' '.join(cmd)} failed: {p.stderr[-2000:]}")
+        summary = json.loads(p.stdout.strip().splitlines()[-1])
+        ph = summary["photometry"]
+        peer = t["cpu_seconds_to"][f"{lv:g}"]["peer"]
+        rows[f"{lv:g}"] = {
+            "cpu_seconds": cpu, "wall_seconds": wall, "photons": summary["photons"],
+            "files_error": ph["photometry_error"], "files_worst": ph["photometry_worst_error"],
+            "files_true_error": files_true_error(stage, Path(summary["outputs"]
+                                                             ["photometry_data"])),
+            "map_error_bound": summary["relative_error_bound"], "peer_cpu_seconds": peer,
+            "cpu_over_peer": cpu / peer if peer else None}
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--photons", type=int, default=10_000_000)
@@ -307,6 +383,8 @@ def main(argv=None) -> int:
     ap.add_argument("--peer", default="auto",
                     help="the peer's executable, 'auto' (build tools/peer with cargo) or 'none'")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-user-view", action="store_true",
+                    help="leave out the real trace --target-error commands")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     from lumitrace.trace.aot import warm_up
@@ -322,6 +400,8 @@ def main(argv=None) -> int:
                            peer)
             t.update(convergence(stage, args.max_photons, args.resolution))
             t["cpu_seconds_to"] = time_to_levels(t)
+            if not args.no_user_view:
+                t["user_view"] = user_view(stage, folder / f"user_{name}", t)
             rows[name] = t
             if not args.json:
                 _print(name, t)
@@ -349,6 +429,16 @@ def _print(name: str, t: dict) -> None:
         if row["filtered_over_peer"] is not None:
             print(f"  CPU s to {float(lv):.0%}: ours (filtered map) {row['ours_filtered']:.2f}, "
                   f"peer {row['peer']:.2f}: {row['filtered_over_peer']:.2f} of the peer's")
+    for lv, u in t.get("user_view", {}).items():
+        true = "no closed form" if u["files_true_error"] is None else \
+            f"{u['files_true_error']:.2%}"
+        ratio = "-" if u["cpu_over_peer"] is None else f"{u['cpu_over_peer']:.2f}"
+        peer = "not reached" if u["peer_cpu_seconds"] is None else \
+            f"{u['peer_cpu_seconds']:.2f} CPU s"
+        print(f"  trace --target-error {float(lv):.0%}: {u['photons'] / 1e6:.2f}M photons, "
+              f"{u['cpu_seconds']:.2f} CPU s ({u['wall_seconds']:.2f} s wall), files "
+              f"{u['files_error']:.2%} (worst lit {u['files_worst']:.2%}), true {true}; "
+              f"peer to {float(lv):.0%} on its grid {peer}: {ratio} of the peer's")
     sys.stdout.flush()
 
 
