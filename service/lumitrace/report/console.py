@@ -81,7 +81,7 @@ def summary_text(r, stage) -> str:
         lines.append(f"  cut (depth)     {r.cut_lm:10.4f} lm")
     lines += [
         f"  peak intensity  {pm(r.peak_intensity, r.peak_intensity_error, 'cd')} at "
-        f"C {r.peak_c:g}, gamma {r.peak_gamma:g} deg (standard errors after +-)",
+        f"C {r.peak_c:.1f}, gamma {r.peak_gamma:.1f} deg (standard errors after +-)",
         f"  map error       {pct(r.relative_error)} estimated RMS over the sphere, at most "
         f"{pct(r.relative_error_bound)} (raw map {pct(r.raw_relative_error)})"
         f"{', converged' if r.converged and r.target_of == 'map' else ''}"
