@@ -33,6 +33,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
                               "--reference-photons", "20000", "--thresholds", "1"),
     "generate_schema.py": ("--check",),
+    "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
+                         "--resolution", "8", "--threads", "1"),
     "make_stages.py": ("--check",),
     "photometry_accuracy.py": ("--photons", "20000", "--stages", "isotropic"),
     "profile_run.py": ("--photons", "20000"),
