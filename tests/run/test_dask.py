@@ -251,3 +251,41 @@ def test_a_tally_packed_for_the_network_unpacks_bit_for_bit(stage, photons):
     else:
         assert tally.xz is not None
     assert len(wire) * 3 < len(pickle.dumps(tally, protocol=5))
+
+
+def test_a_sweep_on_the_cluster_equals_the_local_sweep(cluster, tmp_path):
+    """Both variants of a variant set swept on the cluster: the same photometric grids as
+    the local sweep's, and a rerun on the cluster traces nothing."""
+    import shutil
+
+    from lumitrace.report.sweep import plan, run_sweep, stage_files
+    from lumitrace.run.settings import TraceSettings
+    from pxr import Sdf, Usd
+
+    address, _ = cluster
+    stage = tmp_path / "disc.usda"
+    shutil.copy(ROOT / "stages" / "reference" / "lambertian_disc.usda", stage)
+    s = Usd.Stage.Open(str(stage))
+    vs = s.GetDefaultPrim().GetVariantSets().AddVariantSet("output")
+    for name, flux in (("low", 500.0), ("high", 2000.0)):
+        vs.AddVariant(name)
+        vs.SetVariantSelection(name)
+        with vs.GetVariantEditContext():
+            s.GetPrimAtPath("/Luminaire/Source").CreateAttribute(
+                "lumitrace:luminousFlux", Sdf.ValueTypeNames.Float).Set(flux)
+    s.GetPrimAtPath("/Luminaire/Source").GetAttribute("lumitrace:luminousFlux").Clear()
+    s.GetRootLayer().Save()
+    grids = {}
+    for where, scheduler in (("local", None), ("dask", address)):
+        out = tmp_path / where
+        settings = TraceSettings(photons=30_000, scheduler=scheduler, **SMALL)
+        cases = plan(stage_files([str(stage)]), None, out)
+        rows = run_sweep(cases, settings, out)
+        assert [r["variant"] for r in rows] == ["output=high", "output=low"]  # USD's order
+        grids[where] = [json.loads(open(r["photometry_data"]).read())["candela"]
+                        for r in rows]
+        if scheduler:
+            assert not any(r["traced"] for r in run_sweep(cases, settings, out))
+    assert grids["local"] == grids["dask"]
+    assert grids["dask"][0][0][0] == pytest.approx(4 * grids["dask"][1][0][0])  # the same
+    # photons, four times the flux
