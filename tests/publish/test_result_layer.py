@@ -70,6 +70,11 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "ugr4H8HError": 0.125,
         "screenLuminanceMax": 1450.0,
         "bugRating": "B1 U0 G1",
+        "datasheetHtml": out / "stage.datasheet.html",
+        "datasheetPdf": out / "stage.datasheet.pdf",
+        "gldfFile": out / "stage.gldf",
+        "targetOf": "files",
+        "judgedError": 0.0175,
     }
 
 

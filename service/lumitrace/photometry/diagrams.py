@@ -2,13 +2,15 @@
 
 The polar curve is the classic datasheet diagram: intensities in cd/klm of lamp flux in the
 C0-C180 plane (solid) and the C90-C270 plane (dashed), nadir (gamma = 0) at the bottom,
-C0 and C90 on the right. The photometric solid is the surface r = I(direction) drawn
-around the luminaire's own geometry, rendered offscreen with pyvista.
+C0 and C90 on the right (drawn by :mod:`.curves`). The photometric solid is the surface
+r = I(direction) drawn around the luminaire's own geometry in false colour with a candela
+scale, rendered offscreen with pyvista.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
@@ -19,46 +21,19 @@ from .grid import CGammaGrid
 
 
 def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
-                  title: str = "") -> Path:
-    """Write the polar light distribution curve (PNG) of ``grid`` (cd)."""
+                  title: str = "", figures: Mapping | None = None) -> Path:
+    """Write the polar light distribution curve (PNG) of ``grid`` (cd), with its error
+    band and, given the record's ``figures``, the beam and field angles and the peak
+    (see :func:`lumitrace.photometry.curves.draw_polar`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    per_klm = 1000.0 / lamp_lumens
-    g = grid.gamma
-    fig = plt.figure(figsize=(6, 6.4), dpi=120)
-    ax = fig.add_subplot(projection="polar")
-    ax.set_theta_zero_location("S")
-    ax.set_theta_direction(1)
-    top = 0.0
-    for c, style, label in ((0.0, "-", "C0 - C180"), (90.0, "--", "C90 - C270")):
-        right = grid.at(np.array([c]))[0] * per_klm
-        left = grid.at(np.array([c + 180.0]))[0] * per_klm
-        theta = np.concatenate([np.radians(g), 2 * np.pi - np.radians(g[::-1])])
-        r = np.concatenate([right, left[::-1]])
-        top = max(top, float(np.nanmax(r)) if r.size else 0.0)
-        ax.plot(theta, r, style, lw=1.6, color="#c0392b" if c == 0 else "#2c5aa0", label=label)
-    # the radius starts at zero: autoscaled, a curve of zeros would be drawn as a circle
-    ax.set_ylim(0.0, top * 1.05 if top > 0 else 1.0)
-    ax.set_thetagrids(np.arange(0, 360, 30),
-                      [f"{int(a if a <= 180 else 360 - a)}°" for a in range(0, 360, 30)])
-    ax.set_rlabel_position(100)
-    # few rings, labelled with thousands separators: a narrow beam's 100000 cd/klm
-    # must not run into its neighbours
-    from matplotlib.ticker import FuncFormatter, MaxNLocator
+    from .curves import draw_polar
 
-    ax.yaxis.set_major_locator(MaxNLocator(4))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
-    ax.tick_params(axis="y", labelsize=8)
-    if not top > 0:
-        ax.text(0.5, 0.5, "no light leaves the luminaire", transform=ax.transAxes,
-                ha="center", va="center", fontsize=11)
-        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: ""))
-    ax.grid(True, lw=0.4, alpha=0.6)
-    ax.set_title((title + "\n" if title else "") + "cd/klm", fontsize=10)
-    ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.1), fontsize=8, frameon=False)
+    fig = plt.figure(figsize=(6, 6.4), dpi=120)
+    draw_polar(fig.add_subplot(projection="polar"), grid, lamp_lumens, figures, title)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
@@ -83,12 +58,12 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
     peak = float(cd.max()) or 1.0
     pts = center + d * (cd / peak * 1.5 * size)[..., None]
     try:
-        return _solid_pyvista(path, pts, tri, scene.up_axis, title)
+        return _solid_pyvista(path, pts, cd, tri, scene.up_axis, title)
     except Exception:  # no working offscreen OpenGL: draw it with matplotlib instead
-        return _solid_matplotlib(path, pts, tri, title)
+        return _solid_matplotlib(path, pts, cd, tri, title)
 
 
-def _solid_pyvista(path, pts, tri, up_axis, title) -> Path:
+def _solid_pyvista(path, pts, cd, tri, up_axis, title) -> Path:
     import pyvista as pv
     from vtkmodules.vtkCommonCore import vtkLogger, vtkObject  # (all of vtk: 0.5 s more)
 
@@ -96,10 +71,18 @@ def _solid_pyvista(path, pts, tri, up_axis, title) -> Path:
     vtkObject.GlobalWarningDisplayOff()
     pv.OFF_SCREEN = True
     grid = pv.StructuredGrid(pts[..., 0], pts[..., 1], pts[..., 2])
+    grid.point_data["cd"] = np.ascontiguousarray(cd).ravel(order="F")
     plotter = pv.Plotter(off_screen=True, window_size=(900, 800))
     plotter.set_background("white")
-    plotter.add_mesh(grid, color="#f5b041", opacity=0.55, smooth_shading=True,
-                     show_edges=True, edge_color="#b9770e", line_width=0.3)
+    # false colour by intensity, with its candela scale
+    plotter.add_mesh(grid, scalars="cd", cmap="inferno", clim=(0.0, float(cd.max()) or 1.0),
+                     opacity=0.6, smooth_shading=True, show_edges=True, edge_color="#777777",
+                     line_width=0.2,
+                     scalar_bar_args={"title": "intensity (cd)", "color": "black",
+                                      "vertical": True, "position_x": 0.86,
+                                      "position_y": 0.2, "height": 0.6, "width": 0.06,
+                                      "fmt": "%.0f", "title_font_size": 16,
+                                      "label_font_size": 14})
     if tri.size:
         faces = np.hstack([np.full((len(tri), 1), 3), np.arange(3 * len(tri)).reshape(-1, 3)])
         mesh = pv.PolyData(tri.reshape(-1, 3), faces.ravel())
@@ -115,7 +98,7 @@ def _solid_pyvista(path, pts, tri, up_axis, title) -> Path:
     return Path(path)
 
 
-def _solid_matplotlib(path, pts, tri, title) -> Path:
+def _solid_matplotlib(path, pts, cd, tri, title) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -123,8 +106,14 @@ def _solid_matplotlib(path, pts, tri, title) -> Path:
 
     fig = plt.figure(figsize=(6, 6), dpi=120)
     ax = fig.add_subplot(projection="3d")
-    ax.plot_surface(pts[..., 0], pts[..., 1], pts[..., 2], color="#f5b041", alpha=0.5,
-                    edgecolor="#b9770e", linewidth=0.2)
+    from matplotlib import cm
+    from matplotlib.colors import Normalize
+
+    norm = Normalize(0.0, float(cd.max()) or 1.0)
+    ax.plot_surface(pts[..., 0], pts[..., 1], pts[..., 2], facecolors=cm.inferno(norm(cd)),
+                    alpha=0.5, linewidth=0.1)
+    fig.colorbar(cm.ScalarMappable(norm, "inferno"), ax=ax, shrink=0.6,
+                 label="intensity (cd)")
     if tri.size:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 

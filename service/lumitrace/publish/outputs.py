@@ -21,12 +21,15 @@ from ..photometry import frame
 from ..film.convergence import colour_maps
 from ..photometry.colour import ColourOverAngle, colour_over_angle
 from ..photometry.distribution import Photometry, photometry_of
+from ..photometry.measured import emitter_rings
+from ..photometry.zonal import zonal_flux
 from ..photometry.tables import application_figures
 from ..film.result import TraceResult
 from ..scene import Scene
 from .exr import write_intensity_exr
 from .latlong import write_latlong_texture
 from .photometric import photometric_paths, write_colour_files, write_photometric_files
+from .deliverables import deliverable_paths, write_deliverables
 from ..schema import RESULT_FIELDS
 from .record import ResultRecord, trace_figures
 from .ownership import claim_outputs, ownership_record
@@ -75,6 +78,7 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          "luminous_opening": (o.length, o.width, o.height),
                          **application_figures(ph, result.accumulator),
+                         "zonal_flux": zonal_flux(emitter_rings(result.accumulator)),
                          **(col.as_dict() if col is not None else {}),
                          **{k: str(v) for k, v in paths.items()}})
 
@@ -128,7 +132,7 @@ def planned_outputs(scene, out_dir: str | os.PathLike | None, name: str | None =
     stage_path, out, name, layer_dir = output_place(scene, out_dir, name)
     paths = {"intensity_map": out / f"{name}{INTENSITY_SUFFIX}",
              "latlong_map": out / f"{name}{LATLONG_SUFFIX}",
-             **photometric_paths(out, name),
+             **photometric_paths(out, name), **deliverable_paths(out, name),
              "result_layer": layer_dir / f"{name}{RESULT_LAYER_SUFFIX}"}
     return stage_path, name, paths
 
@@ -144,7 +148,7 @@ def claim_planned_outputs(scene, out_dir: str | os.PathLike | None,
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
                   sublayer: bool = True, pictures: bool = True,
-                  extra: dict | None = None,
+                  extra: dict | None = None, deliverables: bool = False,
                   on_stage: Callable[[Callable[[], None]], None] | None = None
                   ) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
@@ -152,7 +156,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
     return the record. Waits up to ``wait`` s for another run publishing the same NAME.
     ``pictures`` False skips the polar curve and photometric solid (the slow part; the
-    record then names none, and the previous run's are removed); ``extra`` adds entries to
+    record then names none, and the previous run's are removed); ``deliverables`` adds the
+    datasheet and the GLDF container (:mod:`.deliverables`); ``extra`` adds entries to
     the EXR header and the result layer's customLayerData (the service's revision).
     ``on_stage(step)`` runs the steps that touch layers open in this process (reloading
     the result layer, sublayering it) and returns what ``step`` returns (the stage's
@@ -177,6 +182,9 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     if not pictures:
         paths.pop("polar_diagram")
         paths.pop("photometric_solid")
+    if not deliverables:
+        for key in deliverable_paths(layer_dir, name):
+            paths.pop(key)
     record = build_record(result, ph, paths, col)
     folders = [layer_dir]
     try:
@@ -196,7 +204,10 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
             write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id,
                                     cct_K=col.total["cct_K"] if col is not None else None)
             if col is not None:
-                write_colour_files(col, staged, name, pictures, run_id=tx.run_id)
+                write_colour_files(col, staged, name, pictures, run_id=tx.run_id,
+                                   title=scene.info.name)
+            if deliverables:
+                write_deliverables(scene, ph, record, staged, paths, run_id=tx.run_id)
             acc = result.accumulator
             channels = {"Y": est.filtered, "raw.Y": est.raw,
                         "count": acc.counts().astype(np.float64),

@@ -105,8 +105,9 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
               else f"{info.colour_rendering_index:g}",
               watts=info.input_power_w or 0.0)
     if pictures:
-        title = f"{luminaire}: {fig.luminous_flux:.0f} lm, LOR {fig.light_output_ratio:.2f}"
-        polar_diagram(paths["polar_diagram"], grid, lamp, title)
+        title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \
+                f"LOR {fig.light_output_ratio:.2f}"
+        polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
         # VTK does not survive a Python exception raised inside it by a signal handler:
         # a signal waits until the picture is drawn
         with signals_held():
@@ -114,11 +115,12 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
 
 
 def write_colour_files(col: ColourOverAngle, paths: dict[str, Path], name: str,
-                       pictures: bool = True, run_id: str = "") -> None:
-    """Write the colour over angle as JSON and, with ``pictures``, its diagram."""
+                       pictures: bool = True, run_id: str = "", title: str = "") -> None:
+    """Write the colour over angle as JSON and, with ``pictures``, its diagram (titled
+    ``title``, the luminaire's name, else ``name``)."""
     write_text(paths["colour_data"], json.dumps({"runId": run_id, **col.table()}, indent=1)
                + "\n")
     if pictures:
         from ..photometry.diagrams import colour_diagram
 
-        colour_diagram(paths["colour_diagram"], col, name)
+        colour_diagram(paths["colour_diagram"], col, title or name)
