@@ -12,7 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
-from .report import sweep  # its command's arguments (the standard library only, at import)
+from .report import datasheet_command, sweep  # their arguments (the standard library only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
 from .trace.job import MAX_DEPTH
@@ -122,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(a stage flattened with its results) before tracing")
     t.add_argument("--no-pictures", action="store_true",
                    help="skip the polar curve and the photometric solid (the slow outputs)")
+    t.add_argument("--deliverables", action="store_true",
+                   help="also write the datasheet (HTML, PDF) and the GLDF container")
 
     c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
                                      "current and converged, 1 stale or missing, 3 not "
@@ -221,6 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="refuse more photons than this (default 20e6: 560 MB)")
     y.add_argument("--luminaire", default=None, help="the luminaire prim (default: defaultPrim)")
     sweep.add_parser(sub)
+    datasheet_command.add_parser(sub)
     return p
 
 
@@ -292,7 +295,7 @@ def cmd_trace(args) -> int:
     from .publish.outputs import write_outputs
 
     record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
-                           pictures=not args.no_pictures)
+                           pictures=not args.no_pictures, deliverables=args.deliverables)
     if lost is not None:
         raise lost.written(record["photons"])
     if _RECEIVED:  # a signal a library swallowed while the outputs were written
@@ -557,7 +560,8 @@ def _dispatch(args) -> int:
         return cmd_trace(args)
     check_interrupted()  # the others have no USD-loading phase of their own
     return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve, "edits": cmd_edits,
-            "check": cmd_check, "rays": cmd_rays, "sweep": sweep.command}[args.command](args)
+            "check": cmd_check, "rays": cmd_rays, "sweep": sweep.command,
+            "datasheet": datasheet_command.command}[args.command](args)
 
 
 def _failure(exc: BaseException) -> tuple[int, str]:
