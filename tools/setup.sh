@@ -2,7 +2,8 @@
 # Install lumitrace into ./.venv (created if missing). With --test, also the test
 # dependencies: the Python ones, the OpenEXR C++ headers the cube-map tests compile
 # OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
-# the headless Chromium the live view tests drive (chromium, chromium-driver).
+# the headless Chromium the live view tests drive (chromium, chromium-driver), and
+# pdftoppm (poppler-utils), which renders the datasheet's PDF in its tests.
 set -e
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -14,13 +15,16 @@ if [ "$1" = "--test" ]; then
     .venv/bin/python -m pip install -q -e '.[crosscheck]' 2>/dev/null ||
         echo "note: the eulumdat cross-check reader did not install; its tests are skipped" >&2
     # system packages: OpenEXR's headers and a compiler (the ImfEnvmap oracle tests),
-    # headless Chromium and its driver (the live view tests)
+    # headless Chromium and its driver (the live view tests), pdftoppm (the datasheet)
     need=""
     if ! pkg-config --exists OpenEXR 2>/dev/null || ! command -v g++ >/dev/null 2>&1; then
         need="$need libopenexr-dev pkg-config g++"
     fi
     if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
         need="$need chromium chromium-driver"
+    fi
+    if ! command -v pdftoppm >/dev/null 2>&1; then  # renders the datasheet's PDF pages
+        need="$need poppler-utils"
     fi
     if [ -n "$need" ]; then
         if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
