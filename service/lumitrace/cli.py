@@ -222,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--max-rays", type=_positive_int, default=None,
                    help="refuse more photons than this (default 20e6: 560 MB)")
     y.add_argument("--luminaire", default=None, help="the luminaire prim (default: defaultPrim)")
+    y.add_argument("--luminance-images", type=Path, default=None, metavar="DIR",
+                   help="also write luminance images (EXR, PNG, JSON) of the standard views")
     sweep.add_parser(sub)
     datasheet_command.add_parser(sub)
     return p
@@ -337,6 +339,10 @@ def cmd_rays(args) -> int:
     claim_ray_file(out, scene)  # before the trace: a refusal costs no photons
     rays = exit_rays(scene, args.photons, args.seed)
     write_ray_file(out, rays, scene)
+    if args.luminance_images is not None:
+        from .publish.luminance_images import images_from_rays
+        images = images_from_rays(rays, scene, args.luminance_images, stage_name(args.stage))
+        print(f"{args.luminance_images}: {len(images)} luminance images")
     print(f"{out}: {len(rays):,} rays, {rays.flux.astype(float).sum():.6g} lm "
           f"(of {args.photons:,} photons)")
     return 0
