@@ -155,6 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
+    v.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
     v.add_argument("--token", default=None,
@@ -366,7 +368,7 @@ def cmd_serve(args) -> int:
     settings = TraceSettings(photons=args.photons, target_error=target,
                              resolution=args.resolution, threshold=args.threshold,
                              seed=args.seed, threads=args.threads or default_threads(),
-                             workers="threads")
+                             workers="threads", scheduler=args.scheduler)
     preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")

@@ -289,3 +289,46 @@ def test_a_sweep_on_the_cluster_equals_the_local_sweep(cluster, tmp_path):
     assert grids["local"] == grids["dask"]
     assert grids["dask"][0][0][0] == pytest.approx(4 * grids["dask"][1][0][0])  # the same
     # photons, four times the flux
+
+
+def test_the_service_on_the_cluster_after_a_delta_equals_a_fresh_trace(cluster, tmp_path):
+    """`lumitrace serve --scheduler`: its counts after a delta equal, exactly, those of a
+    local `lumitrace trace --edits` of the stage and its edits layer in the same frame."""
+    import shutil
+
+    from lumitrace.publish.exr import read_intensity_exr
+    from service_process import Service
+
+    address, client = cluster
+    stage = tmp_path / "downlight.usda"
+    shutil.copy(STAGES / "downlight.usda", stage)
+    args = ("--photons", 40_000, "--resolution", 16, "--seed", 5)
+    before = client.run_on_scheduler(_batches_seen)
+    with Service(stage, *args, "--threads", 2, "--scheduler", address) as s:
+        s.wait_done(0)
+        s.client.set("/Luminaire/Materials/ReflectorAluminium",
+                     "lumitrace:specularReflectance", 0.6)
+        status = s.wait_done(1)
+        served = read_intensity_exr(stage.parent / "downlight.intensity.exr")[0]["count"]
+        assert s.stop()[0] == 0
+    assert client.run_on_scheduler(_batches_seen) - before >= 4  # both revisions' rounds
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(STAGES / "downlight.usda", fresh / "downlight.usda")
+    shutil.copy(tmp_path / "downlight.lumitrace-edits.usda", fresh / "edits.usda")
+    frame = ",".join(repr(v) for v in status["tracing_frame"])
+    p = subprocess.run([sys.executable, "-m", "lumitrace", "trace", str(fresh / "downlight.usda"),
+                        "--edits", str(fresh / "edits.usda"), *map(str, args), "--threads", "1",
+                        "--no-progress", "--no-pictures", "--frame", frame], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
+    assert p.returncode == 0, p.stderr
+    traced = read_intensity_exr(fresh / "downlight.intensity.exr")[0]["count"]
+    assert served.sum() > 10_000
+    np.testing.assert_array_equal(served, traced)
+
+
+def _batches_seen(dask_scheduler) -> int:
+    """Batches the scheduler has sent to a worker (its transition log)."""
+    return sum(1 for t in dask_scheduler.transition_log
+               if str(t[0]).startswith("lumitrace-batch") and t[2] == "processing")

@@ -16,7 +16,7 @@ import threading
 import uuid
 import zlib
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -31,6 +31,8 @@ from ..trace.job import BatchJob
 TRACER_PARTS = ("scene", "trace", "film")
 #: Seconds to wait for the scheduler and for at least one worker.
 CONNECT_SECONDS = 30.0
+#: Seconds between looks at whether a round that may be interrupted still matters.
+POLL_SECONDS = 0.02
 
 _prepared: dict = {}
 _prepare_lock = threading.Lock()
@@ -117,10 +119,11 @@ def unpack(data: bytes) -> BatchTally:
     return BatchTally(**{k: _decode(v) for k, v in pickle.loads(zlib.decompress(data)).items()})
 
 
-def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJob
-               ) -> bytes:
-    """Trace one job on a worker, with the scene prepared once per worker (``key``: the
-    scene's hash and frame) and kept for the batches that follow."""
+def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJob,
+               records: bool = False) -> bytes:
+    """Trace one job on a worker (with its photons' records where asked), the scene
+    prepared once per worker (``key``: the scene's hash and frame) and kept for the batches
+    that follow."""
     mine = identity()
     if mine != expected:
         raise WorkerMismatch(f"runs lumitrace {mine[0]} (tracer {mine[1]}), the client "
@@ -139,7 +142,7 @@ def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJ
     from ..film.accumulate import compact
     from ..trace.tracer import trace_batch
 
-    tally = trace_batch(ps, job)  # compacted as the local pools do: only the texels hit
+    tally = trace_batch(ps, job, records=records)  # compacted as the local pools do: only the texels hit
     tally.counts, tally.cells = compact(tally.counts), compact(tally.cells)
     return pack(tally)
 
@@ -216,27 +219,45 @@ class ClusterRunner:
     session traces its rounds with. ``threads``: the cluster's threads (a round's size);
     ``redone``: batches run again after a worker was lost; ``batches``: batches traced."""
 
-    def __init__(self, client, scene: Scene, frame):
+    def __init__(self, client, scene: Scene | None = None, frame=None):
         self.client = client
         self.address = client.scheduler.address
         self.expected = identity()
-        self.key = f"{scene.content_hash()}-{frame!r}"
-        self.scene = client.scatter((scene, frame), broadcast=True, hash=False)
+        self.key: str | None = None
+        self.scene = None
         self.threads = total_threads(client)
         self.redone = 0
         self.batches = 0
         self._run = uuid.uuid4().hex[:12]
+        if scene is not None:
+            self.use(scene, frame)
 
-    def __call__(self, jobs: Iterable[BatchJob]) -> Iterator[BatchTally]:
+    def use(self, scene: Scene, frame) -> None:
+        """Trace ``scene`` in ``frame`` from now on: sent to every worker once, and again
+        only when it changed (a service's next revision)."""
+        key = f"{scene.content_hash()}-{frame!r}"
+        if key != self.key:
+            self.scene = self.client.scatter((scene, frame), broadcast=True, hash=False)
+            self.key = key
+
+    def __call__(self, jobs: Iterable[BatchJob], records: bool = False,
+                 interrupted: Callable[[], bool] | None = None) -> Iterator[BatchTally] | None:
+        """The jobs' tallies in job order (with per-photon records where asked); None, the
+        round's batches cancelled, as soon as ``interrupted()`` says so."""
         jobs = list(jobs)
         keys = [f"lumitrace-batch-{self._run}-{self.batches + i}" for i in range(len(jobs))]
         self.batches += len(jobs)
         futures = [self.client.submit(_run_batch, self.expected, self.key, self.scene, job,
-                                      key=k, pure=False) for job, k in zip(jobs, keys)]
+                                      records, key=k, pure=False)
+                   for job, k in zip(jobs, keys)]
         got: list[BatchTally] = []
         try:
             for f in futures:
-                got.append(self._result(f))
+                tally = self._result(f, interrupted)
+                if tally is None:
+                    self.client.cancel(futures)
+                    return None
+                got.append(tally)
         except ClusterLost as lost:
             lost.tallies = got  # the batches that finished, a prefix of the round's jobs
             raise
@@ -246,11 +267,18 @@ class ClusterRunner:
         self.redone += self._count_redone(keys)
         return iter(got)
 
-    def _result(self, future) -> BatchTally:
+    def _result(self, future, interrupted=None) -> BatchTally | None:
         from distributed import KilledWorker
         from distributed.client import FutureCancelledError
 
         try:
+            while interrupted is not None:
+                if interrupted():
+                    return None
+                try:
+                    return unpack(future.result(timeout=POLL_SECONDS))
+                except TimeoutError:
+                    continue
             return unpack(future.result())
         except KilledWorker as exc:
             raise LumitraceError(f"a batch lost its worker too often ({exc}): the batch "
@@ -270,7 +298,6 @@ class ClusterRunner:
             return int(self.client.run_on_scheduler(_story_processing, keys=keys))
         except Exception:  # noqa: BLE001 - a count for the record, never a failure
             return 0
-
 
     def close(self) -> None:
         """Leave the cluster (its workers stay for the next run)."""

@@ -84,6 +84,14 @@ class Engine:
         #: paused by a client: nothing is traced until it resumes (edits are still taken)
         self.paused = False
         self.records_cap = records_cap
+        #: the Dask cluster the rounds run on (``settings.scheduler``), None: this process
+        self._cluster = None
+        if self.settings.scheduler:
+            from ..run.cluster import ClusterRunner, connect
+
+            self._cluster = ClusterRunner(connect(self.settings.scheduler))
+            # a full round keeps the cluster's threads busy
+            self.settings = replace(self.settings, threads=self._cluster.threads)
 
     # -- control (any thread) -----------------------------------------------------------
 
@@ -228,6 +236,8 @@ class Engine:
                     self._failed(pending, exc)
         if not self._halted:
             self._final_write()
+        if self._cluster is not None:
+            self._cluster.close()
 
     def _idle(self) -> bool:
         """Nothing to do until a new revision: none traced yet, the current one done and
@@ -354,17 +364,23 @@ class Engine:
             self._finish()
             return
         keep = r.records is not None
-        futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
-        tallies = []
-        try:
-            for f in futures:
-                if self._interrupted():
-                    _drain(futures)
-                    return  # the round is dropped: its photons never reach the map
-                tallies.append(f.result())
-        except BaseException:
-            _drain(futures)  # a batch failed: none of the round may outlive it
-            raise
+        if self._cluster is not None:
+            self._cluster.use(r.scene, self.frame)
+            tallies = self._cluster(jobs, keep, self._interrupted)
+            if tallies is None:
+                return  # the round is dropped: its photons never reach the map
+        else:
+            futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
+            tallies = []
+            try:
+                for f in futures:
+                    if self._interrupted():
+                        _drain(futures)
+                        return  # the round is dropped: its photons never reach the map
+                    tallies.append(f.result())
+            except BaseException:
+                _drain(futures)  # a batch failed: none of the round may outlive it
+                raise
         with self._cv:
             est = r.add_round(tallies)
         acc = r.accumulator
