@@ -122,7 +122,9 @@ def test_a_worker_killed_mid_run_changes_nothing_but_redone_batches(cluster):
         if p.iteration == 2:  # the next round is submitted as soon as this returns
             threading.Thread(target=kill_when_busy, daemon=True).start()
 
-    remote = run(scene, TraceSettings(scheduler=address, **settings), progress=progress)
+    with pytest.warns(UserWarning, match=r"^\d+ batch\(es\) traced again after a Dask "
+                                         r"worker was lost \(the result is the same\)$"):
+        remote = run(scene, TraceSettings(scheduler=address, **settings), progress=progress)
     assert killed.is_set()
     _same_accumulators(local, remote)
     assert remote.batches_redone >= 1

@@ -325,6 +325,9 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
     _warn_unreached(r.accumulator)
     result = r.result(time.perf_counter() - start, t_prep)
     result.batches_redone = getattr(trace_jobs, "redone", 0)
+    if result.batches_redone:
+        warn(f"{result.batches_redone} batch(es) traced again after a Dask worker was lost "
+             "(the result is the same)")
     if lost is not None and not result.photons:
         raise LumitraceError(f"{lost.message} before any batch finished: nothing was "
                              "written", lost.where)
