@@ -37,8 +37,10 @@ class DatasheetInput:
         return luminaire_name(self.record, self.info)
 
 
-def curve_pngs(data: DatasheetInput, dpi: int = 110) -> dict[str, bytes]:
-    """The polar curve and (for a narrow beam) the Cartesian diagram as PNG bytes."""
+def curve_pngs(data: DatasheetInput, dpi: int = 110, polar: bool = True
+               ) -> dict[str, bytes]:
+    """The polar curve (unless ``polar`` is False) and, for a narrow beam, the Cartesian
+    diagram as PNG bytes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -48,10 +50,12 @@ def curve_pngs(data: DatasheetInput, dpi: int = 110) -> dict[str, bytes]:
 
     lamp = float(data.record.get("lamp_flux") or 0.0)
     out = {}
-    fig = plt.figure(figsize=(4.6, 4.9), dpi=dpi)
-    draw_polar(fig.add_subplot(projection="polar"), data.grid, lamp, data.record, data.name)
-    fig.tight_layout()
-    out["polar"] = _png(fig)
+    if polar:
+        fig = plt.figure(figsize=(4.6, 4.9), dpi=dpi)
+        draw_polar(fig.add_subplot(projection="polar"), data.grid, lamp, data.record,
+                   data.name)
+        fig.tight_layout()
+        out["polar"] = _png(fig)
     if is_narrow(data.record):
         fig, ax = plt.subplots(figsize=(4.6, 3.4), dpi=dpi)
         draw_cartesian(ax, data.grid, lamp, data.record, data.name)

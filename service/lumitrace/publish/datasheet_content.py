@@ -213,7 +213,7 @@ def colour_section(record: Mapping) -> Section | None:
         return None
     rows = [[Cell("CCT"), Cell(f"{record['cct_K']:.0f} K", "cct_K", record["cct_K"])],
             [Cell("Duv"), Cell(f"{record.get('duv'):+.4f}", "duv", record.get("duv"))],
-            [Cell("Colour over angle (largest Δu'v' in the beam)"),
+            [Cell("Colour over angle (largest Delta u'v' in the beam)"),
              Cell(f"{record.get('colour_uniformity_duv') or 0:.4f} "
                   f"(noise {record.get('colour_uniformity_noise') or 0:.4f})",
                   "colour_uniformity_duv", record.get("colour_uniformity_duv"))]]

@@ -2,7 +2,9 @@
 figures on page one, the tables after them, from the same sections as the HTML page."""
 from __future__ import annotations
 
+import contextlib
 import io
+import logging
 from datetime import datetime, timezone
 
 from .datasheet import DatasheetInput
@@ -12,6 +14,24 @@ from .datasheet_content import Section, sections
 PAGE = (8.27, 11.69)
 LEFT, RIGHT, TOP, BOTTOM = 0.06, 0.94, 0.95, 0.05
 LINE = 0.0128
+
+
+#: Settings of the PDF's text: the standard Helvetica (Latin-1 glyphs).
+CORE_FONTS = {"pdf.use14corefonts": True, "font.family": "sans-serif",
+              "font.sans-serif": ["Helvetica"]}
+
+
+@contextlib.contextmanager
+def _quiet_font_lookup():
+    """Silence matplotlib's note that the core Helvetica has no 'normal' weight (it uses
+    its medium one, which is the same)."""
+    log = logging.getLogger("matplotlib.font_manager")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def _columns(s: Section, x0: float, x1: float) -> list[float]:
@@ -35,10 +55,13 @@ def _draw_section(fig, s: Section, y: float, x0: float, x1: float, size: float =
         for x, h in zip(cols, s.header):
             fig.text(x, y, h, fontsize=size, weight="bold", va="top")
         y -= LINE
-    for row in s.rows:
-        for x, c in zip(cols, row):
-            fig.text(x, y, c.text, fontsize=size, va="top", family="DejaVu Sans")
-        y -= LINE
+    if s.rows:
+        # one text per column (a text is the slow part of a PDF page): lines LINE apart
+        spacing = LINE * PAGE[1] * 72.0 / size
+        for k, x in enumerate(cols):
+            column = "\n".join(row[k].text if k < len(row) else "" for row in s.rows)
+            fig.text(x, y, column, fontsize=size, va="top", linespacing=spacing)
+        y -= LINE * len(s.rows)
     if s.note:
         fig.text(x0, y, s.note, fontsize=size - 1, color="#555555", va="top", wrap=True)
         y -= LINE * (1 + len(s.note) // 150)
@@ -64,8 +87,11 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
     left, right, wide = sections(data.record, data.info)
     lamp = float(data.record.get("lamp_flux") or 0.0)
     buf = io.BytesIO()
-    with PdfPages(buf, metadata={"Title": f"{data.name}: datasheet",
-                                 "Creator": "lumitrace", "CreationDate": when}) as pdf:
+    # the PDF's standard Helvetica, not embedded: text is most of a datasheet, and an
+    # embedded font's glyphs make the page three times slower
+    meta = {"Title": f"{data.name}: datasheet", "Creator": "lumitrace", "CreationDate": when}
+    with matplotlib.rc_context(CORE_FONTS), _quiet_font_lookup(), \
+            PdfPages(buf, metadata=meta) as pdf:
         fig = plt.figure(figsize=PAGE)
         fig.text(LEFT, 0.975, data.name, fontsize=15, weight="bold", va="top")
         sub = " · ".join(x for x in (data.info.manufacturer, data.info.catalogue_number) if x)

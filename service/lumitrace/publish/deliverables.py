@@ -34,9 +34,14 @@ def deliverable_paths(out_dir: str | Path, name: str) -> dict[str, Path]:
             "gldf": out / f"{name}{GLDF_SUFFIX}"}
 
 
-def write_datasheet(data: DatasheetInput, html_path: Path, pdf_path: Path) -> None:
-    """Write the datasheet's HTML page and PDF."""
-    write_text(html_path, datasheet_html(data, curve_pngs(data)))
+def write_datasheet(data: DatasheetInput, html_path: Path, pdf_path: Path,
+                    polar_png: bytes | None = None) -> None:
+    """Write the datasheet's HTML page and PDF (``polar_png``: the polar curve already
+    drawn for this record, else drawn here)."""
+    curves = curve_pngs(data, polar=polar_png is None)
+    if polar_png is not None:
+        curves = {"polar": polar_png, **curves}
+    write_text(html_path, datasheet_html(data, curves))
     write_bytes(pdf_path, datasheet_pdf(data))
 
 
@@ -46,10 +51,11 @@ def write_deliverables(scene: Scene, ph: Photometry, record: Mapping,
     """Write the datasheet and the GLDF container to ``staged`` paths (the transaction's;
     ``final`` names the files as published, which the container's entries follow). The
     LDT, IES and solid picture are read from ``staged``, as this run wrote them."""
-    solid = staged.get("photometric_solid")
+    solid, polar = staged.get("photometric_solid"), staged.get("polar_diagram")
     solid_png = Path(solid).read_bytes() if solid and Path(solid).is_file() else None
+    polar_png = Path(polar).read_bytes() if polar and Path(polar).is_file() else None
     data = DatasheetInput(record, ph.grid, scene.info, solid_png, run_id)
-    write_datasheet(data, staged["datasheet_html"], staged["datasheet_pdf"])
+    write_datasheet(data, staged["datasheet_html"], staged["datasheet_pdf"], polar_png)
     name = luminaire_name(record, scene.info)
     files = GldfFiles(
         ldt=(final["ldt"].name, Path(staged["ldt"]).read_bytes()),
