@@ -129,7 +129,8 @@ class Refinement:
         self.records_dropped = False
         self.accumulator = Accumulator(scene, settings.resolution, goniometer)
         fluxes = [e.flux for e in scene.emitters]
-        self.shares = [f / sum(fluxes) for f in fluxes]
+        total = sum(fluxes)  # once: ten thousand emitters summed per emitter took 0.7 s
+        self.shares = [f / total for f in fluxes]
         self.retarget(settings)
         self.done = [0] * len(fluxes)
         threads = max(1, int(settings.threads))

@@ -279,9 +279,11 @@ class Scene:
         pts = [self.triangles.reshape(-1, 3)] if self.triangles.size else []
         cube = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0)
                          for z in (-1.0, 1.0)])
-        for e in self.emitters:
-            m = np.asarray(e.to_world, dtype=np.float64)
-            pts.append(m[:3, 3][None, :] + np.linalg.norm(m[:3, :3], 2) * e.reach * cube)
+        if self.emitters:  # the transforms' 2-norms in one call (one each: 0.1 ms apiece)
+            m = np.array([e.to_world for e in self.emitters], dtype=np.float64)
+            size = np.linalg.norm(m[:, :3, :3], 2, axis=(1, 2))
+            reach = np.array([e.reach for e in self.emitters], dtype=np.float64)
+            pts += list(m[:, None, :3, 3] + (size * reach)[:, None, None] * cube)
         return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
 
     def shape_points(self) -> np.ndarray:

@@ -75,30 +75,35 @@ def build_paths(directory: Path | None = None) -> tuple[Path, Path]:
     return (d / (stem + importlib.machinery.EXTENSION_SUFFIXES[0]), d / (stem + ".json"))
 
 
+#: numpy's array flag bits (``ndarray.flags.num``) a build's array argument needs.
+_C, _F, _ALIGNED, _WRITEABLE = 0x1, 0x2, 0x100, 0x400
+
+
 def _check(spec: list) -> tuple:
-    """One argument's check from its type as the build wrote it: ("array", dtype, ndim,
-    layout, writeable) or the name of a scalar type."""
+    """One argument's check from its type as the build wrote it (("array", dtype, ndim,
+    layout, writeable) or the name of a scalar type): (dtype, ndim, flag bits it needs)
+    for an array, (None, the Python and numpy types) for a scalar."""
     if isinstance(spec, str):
-        return _SCALARS[spec]
+        return (None, _SCALARS[spec])
     _, dtype, ndim, layout, writeable = spec
-    return (np.dtype(dtype), ndim, layout, writeable)
+    need = _ALIGNED | (_WRITEABLE if writeable else 0) | {"C": _C, "F": _F}.get(layout, 0)
+    return (np.dtype(dtype), ndim, need)
 
 
 def _fits(checks: tuple, args: tuple) -> bool:
-    """Whether ``args`` are exactly the types a build's function was compiled for."""
+    """Whether ``args`` are exactly the types a build's function was compiled for (a
+    fraction of a microsecond an argument: a many-emitter run calls a kernel per batch)."""
     if len(args) != len(checks):
         return False
+    ndarray = np.ndarray
     for a, c in zip(args, checks):
-        if isinstance(c[0], np.dtype):  # an array's check (a scalar's is its types)
-            dtype, ndim, layout, writeable = c
-            if type(a) is not np.ndarray or a.ndim != ndim or a.dtype != dtype:
+        dtype = c[0]
+        if dtype is None:  # a scalar
+            if type(a) not in c[1]:
                 return False
-            f = a.flags
-            if not f.aligned or (writeable and not f.writeable) or \
-                    (layout == "C" and not f.c_contiguous) or \
-                    (layout == "F" and not f.f_contiguous):
-                return False
-        elif type(a) not in c:
+        elif type(a) is not ndarray or a.ndim != c[1] or \
+                (a.dtype is not dtype and a.dtype != dtype) or \
+                a.flags.num & c[2] != c[2]:
             return False
     return True
 

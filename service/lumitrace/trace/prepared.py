@@ -113,9 +113,10 @@ class PreparedScene:
     def triangle_count(self) -> int:
         return int(self.normals.shape[1])
 
-    @property
+    @cached_property
     def spectral(self) -> bool:
-        """Whether photons carry wavelengths: some surface has a colour or dispersion."""
+        """Whether photons carry wavelengths: some surface has a colour or dispersion (read
+        once: the scene's answer looks at every emitter, and every batch asks)."""
         return self.scene.colour == "spectral"
 
     @cached_property
