@@ -18,7 +18,7 @@ LINE = 0.0128
 
 #: Settings of the PDF's text: the standard Helvetica (Latin-1 glyphs).
 CORE_FONTS = {"pdf.use14corefonts": True, "font.family": "sans-serif",
-              "font.sans-serif": ["Helvetica"]}
+              "font.sans-serif": ["Helvetica"], "axes.unicode_minus": False}
 
 
 @contextlib.contextmanager
@@ -108,9 +108,11 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
         draw_polar(polar, data.grid, lamp, data.record)
         polar.title.set_fontsize(6)
         if narrow:
-            ax = fig.add_axes((0.76, 0.66, 0.21, 0.22))
+            ax = fig.add_axes((0.75, 0.67, 0.20, 0.21))
             draw_cartesian(ax, data.grid, lamp, data.record)
-            ax.title.set_fontsize(5)
+            ax.set_title("Cartesian diagram (cd/klm)", fontsize=6)
+            ax.set_xlabel("deg from nadir: C180/C270 left, C0/C90 right", fontsize=5)
+            ax.set_ylabel("")
         y = 0.57
         for s in left:
             y = _draw_section(fig, s, y, LEFT, 0.52)
