@@ -12,7 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
-from .report import datasheet_command, sweep  # their arguments (the standard library only)
+from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
 from .trace.job import MAX_DEPTH
