@@ -103,3 +103,31 @@ def test_a_luminaire_sending_nothing_down_has_no_rating():
     assert defined(fields["ugr_4h8h_70_50_20"]) is None
     assert defined(fields["ugr_4h8h_70_50_20_error"]) is None
     assert all(v is None for row in fields["ugr_table"]["crosswise"] for v in row)
+
+
+def test_closed_form_asymmetric_grid_against_eulumdat_ugr(tmp_path):
+    """No photon noise: a distribution brighter toward C0 than C180, all planes, through
+    our LDT writer. Crosswise both see C0 +- atan(T/R); endwise lumitrace sees, as the
+    signed T of CIE 117 gives, the C0 side of the luminaires left of the line of sight and
+    the C180 side of those right of it, eulumdat-ugr takes |T| and sees the C0 side of all:
+    endwise they agree only for luminaires symmetric about C90-C270."""
+    pyldt = pytest.importorskip("pyldt")
+    calc = pytest.importorskip("eulumdat_ugr")
+    from lumitrace.photometry.distribution import LuminousOpening
+    from lumitrace.photometry.eulumdat import format_ldt
+    from lumitrace.photometry.grid import CGammaGrid, default_gammas
+
+    gam, c = default_gammas(), np.arange(0.0, 360.0 + 1e-9, 5.0)
+    cc, gg = np.meshgrid(c, gam, indexing="ij")
+    cd = np.maximum(np.cos(np.radians(gg)), 0.0) * (
+        300.0 + 200.0 * np.maximum(np.cos(np.radians(cc)), 0.0))
+    grid = CGammaGrid(c, gam, cd, "none", 0.01 * cd)
+    opening = LuminousOpening(0.6, 0.3, 0.0)
+    path = tmp_path / "asym.ldt"
+    dims = dict(length=600, width=300, height=10, lum_length=600, lum_width=300, lum_height=0)
+    path.write_text(format_ldt(grid, grid.flux(), "asym", dims, 1.0, 1.0), encoding="latin-1")
+    theirs = calc.UgrCalculator.compute(pyldt.LdtReader.read(str(path))).values
+    table = ugr.ugr_table(grid, opening)
+    assert np.abs(table.crosswise - theirs[:, :5]).max() < 0.5
+    # endwise, the dim C180 side of half the luminaires lowers the rating
+    assert (table.endwise < theirs[:, 5:]).all()
