@@ -126,8 +126,10 @@ def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJ
     that follow."""
     mine = identity()
     if mine != expected:
-        raise WorkerMismatch(f"runs lumitrace {mine[0]} (tracer {mine[1]}), the client "
-                             f"{expected[0]} (tracer {expected[1]})")
+        from distributed import get_worker
+
+        raise WorkerMismatch(f"({get_worker().address}) runs lumitrace {mine[0]} (tracer "
+                             f"{mine[1]}), the client {expected[0]} (tracer {expected[1]})")
     ps = _prepared.get(key)
     if ps is None:
         from ..trace.prepared import prepare
