@@ -144,7 +144,7 @@ def _run_batch(expected: tuple[str, str], key: str, scene_and_frame, job: BatchJ
     from ..film.accumulate import compact
     from ..trace.tracer import trace_batch
 
-    tally = trace_batch(ps, job, records=records)  # compacted as the local pools do: only the texels hit
+    tally = trace_batch(ps, job, records=records)  # compacted as the local pools do
     tally.counts, tally.cells = compact(tally.counts), compact(tally.cells)
     return pack(tally)
 
