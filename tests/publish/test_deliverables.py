@@ -122,10 +122,12 @@ def test_gldf_rs_reads_the_product_and_its_file_references(demo, tmp_path):
     assert photometry["PhotometryFileReference"]["@fileId"] == "file_ldt"
     figures = photometry["DescriptivePhotometry"]
     ph = summary["photometry"]
-    assert figures["LightOutputRatio"] == pytest.approx(summary["light_output_ratio"],
-                                                        rel=1e-9)
-    assert figures["LuminousEfficacy"] == pytest.approx(ph["luminous_flux"] / 13.5, rel=1e-9)
-    assert figures["PhotometricCode"] == ph["cie_flux_code"]
+    assert figures["LightOutputRatio"] == summary["light_output_ratio"]
+    assert figures["LuminousEfficacy"] == ph["luminous_flux"] / 13.5
+    assert figures["CIE-FluxCode"] == ph["cie_flux_code"]
+    assert figures["LightDistributionBUG-Rating"] == ph["bug_rating"]
+    assert figures["UGR-4H8H-70-50-20-LQ"] == {"X": ph["ugr_4h8h_70_50_20"],
+                                                "Y": ph["ugr_4h8h_70_50_20_endwise"]}
     emitter = general["Emitters"]["Emitter"][0]["FixedLightEmitter"][0]
     assert emitter["RatedLuminousFlux"] == round(ph["luminous_flux"])
     variant = doc["ProductDefinitions"]["Variants"]["Variant"][0]

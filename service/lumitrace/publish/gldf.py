@@ -56,13 +56,14 @@ def _locale(tag: str, text: str) -> str:
 
 
 def _num(value: float) -> str:
-    return f"{float(value):.10g}"
+    """A double as XML text that reads back to the same double."""
+    return repr(float(value))
 
 
 def descriptive_photometry(record: Mapping, input_power_w: float | None) -> str:
     """``DescriptivePhotometry`` from the record: LOR, efficacy (lm/W, with a power),
-    downward flux fraction, divergences (beam and field angles), the CIE flux code and the
-    catalogue UGR where the record has them."""
+    downward flux fraction, divergences (beam and field angles), the CIE flux code, the
+    catalogue UGR and the BUG rating where the record has them."""
     def fraction(key):
         v = record.get(key)
         return None if v is None else min(max(float(v), 0.0), 1.0)
@@ -88,21 +89,25 @@ def descriptive_photometry(record: Mapping, input_power_w: float | None) -> str:
             parts.append(f"<{tag}><C0-C180>{_num(a)}</C0-C180><C90-C270>{_num(b)}"
                          f"</C90-C270></{tag}>")
     if record.get("cie_flux_code"):
-        parts.append(f"<PhotometricCode>{escape(record['cie_flux_code'])}</PhotometricCode>")
+        parts.append(f"<CIE-FluxCode>{escape(record['cie_flux_code'])}</CIE-FluxCode>")
     ugr = catalogue_ugr(record)
-    if ugr is not None:
+    if ugr is not None:  # X crosswise, Y endwise
         parts.append(f"<UGR-4H8H-70-50-20-LQ><X>{_num(ugr[0])}</X><Y>{_num(ugr[1])}</Y>"
                      "</UGR-4H8H-70-50-20-LQ>")
+    if record.get("bug_rating"):
+        parts.append(f"<LightDistributionBUG-Rating>{escape(record['bug_rating'])}"
+                     "</LightDistributionBUG-Rating>")
     return f"<DescriptivePhotometry>{''.join(parts)}</DescriptivePhotometry>" if parts else ""
 
 
 def catalogue_ugr(record: Mapping) -> tuple[float, float] | None:
     """The catalogue UGR (4H 8H, reflectances 70/50/20) crosswise and endwise, where the
     record has it (the glare figures are optional: None without them)."""
-    value = record.get("ugr_4h8h_70_50_20") if "ugr_4h8h_70_50_20" in record else None
-    if isinstance(value, (list, tuple)) and len(value) >= 2 and None not in value[:2]:
-        return float(value[0]), float(value[1])
-    return None
+    cross = record.get("ugr_4h8h_70_50_20")
+    end = record.get("ugr_4h8h_70_50_20_endwise")
+    if cross is None or end is None:
+        return None
+    return float(cross), float(end)
 
 
 def product_xml(record: Mapping, info, files: GldfFiles, name: str,
