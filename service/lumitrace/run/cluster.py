@@ -10,6 +10,7 @@ scheduler that goes away ends the run: the batches gathered until then are kept
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import pickle
 import threading
@@ -62,13 +63,20 @@ def identity() -> tuple[str, str]:
     share with the client to trace the same photons."""
     from .. import __version__
 
+    return __version__, _code_hash()
+
+
+@functools.lru_cache(maxsize=1)
+def _code_hash() -> str:
+    """A hash of the tracer's sources as this process loaded them (read once: every batch
+    checks it)."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for part in TRACER_PARTS:
-        for path in sorted((root / part).glob("*.py")):
-            h.update(f"{part}/{path.name}".encode())
+        for path in sorted((root / part).rglob("*.py")):  # trace/kernels/ included
+            h.update(path.relative_to(root).as_posix().encode())
             h.update(path.read_bytes())
-    return __version__, h.hexdigest()[:12]
+    return h.hexdigest()[:12]
 
 
 class WorkerMismatch(RuntimeError):
