@@ -30,6 +30,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
     "dask_bench.py": ("--photons", "100000", "--resolution", "8", "--small-batches", "10"),
+    "deliverables_cost.py": ("--photons", "20000", "--repeats", "1", "--no-pictures"),
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
                               "--reference-photons", "20000", "--thresholds", "1"),
     "generate_schema.py": ("--check",),

@@ -272,6 +272,23 @@ def test_the_datasheet_command_reproduces_the_published_record(demo, tmp_path):
     assert ours == theirs  # same photons, same seed: the same figures exactly
 
 
+def test_the_datasheet_command_traces_a_stage_without_a_current_result(tmp_path):
+    stage = tmp_path / "iso.usda"
+    shutil.copy(ROOT / "stages" / "reference" / "isotropic.usda", stage)
+    p = _lumitrace("datasheet", str(stage), "--photons", "20000", "--seed", "4", "--json")
+    assert p.returncode == 0, p.stderr
+    said = json.loads(p.stdout.strip().splitlines()[-1])
+    assert said["from_published"] is False and said["status"] == "missing"
+    page = _cells(said["datasheet_html"])
+    values = {k: v for k, v, _ in page.cells}
+    assert values["photons"] == 20000 and values["seed"] == 4
+    assert "traced for this datasheet, not published" in \
+        Path(said["datasheet_html"]).read_text()
+    assert Path(said["datasheet_html"]).parent == tmp_path / "iso.datasheet"
+    # nothing of the stage's outputs is written
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["iso.datasheet", "iso.usda"]
+
+
 def test_zonal_flux_of_a_lambertian_disc_is_the_closed_form():
     from lumitrace.photometry.measured import emitter_rings
     from lumitrace.photometry.zonal import zonal_flux

@@ -106,6 +106,7 @@ table { border-collapse: collapse; width: 100%; }
 td, th { border-bottom: 1px solid #e3e3e3; padding: 2px 6px; text-align: left;
          vertical-align: top; }
 td[data-key] { font-variant-numeric: tabular-nums; }
+.grid td:first-child { width: 44%; }
 .note { color: #555; font-size: 11px; margin: 2px 0; }
 """
 
