@@ -9,6 +9,13 @@ A child process is started as a user starts the CLI (``lumitrace trace STAGE --p
 --no-pictures``); it notes the wall time, from just before the parent started it, at which
 the emission kernel first returns (the first photons exist). Medians of ``--repeats``; the stage is traced from a
 copy, into a temporary folder.
+
+Then the whole process against the floor: the ``lumitrace`` command (without pictures, and
+with them) and ``python -c "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"``
+(no USD tool starts faster), in turn, each a fresh process timed from its start until it is
+reaped, with its CPU seconds and peak resident memory from the kernel's accounting of the
+child (``os.wait4``), after a first run of each that is not counted (Python's bytecode
+cached, as an installed package has it); the ratios are taken pair by pair, medians given.
 """
 from __future__ import annotations
 
@@ -69,6 +76,57 @@ def one(stage: Path, photons: int, out: Path, jit: bool) -> dict:
     return ast.literal_eval(p.stderr.strip().splitlines()[-1])
 
 
+#: The floor: the imports a USD tool cannot start without.
+FLOOR = "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"
+#: The ``lumitrace`` command as its console script runs it.
+COMMAND = "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())"
+
+
+def whole(cmd: list[str], cwd: Path, env: dict) -> dict:
+    """One command as a fresh process: wall seconds from its start until it is reaped, its
+    CPU seconds (user + system) and peak resident memory (MB), as the kernel counted them."""
+    t = time.perf_counter()
+    p = subprocess.Popen(cmd, cwd=cwd, env=env, stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    err = p.stderr.read()
+    _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t
+    p.returncode = os.waitstatus_to_exitcode(status)
+    p.stderr.close()
+    if p.returncode:
+        raise SystemExit(f"{' '.join(cmd[:4])} ... failed:\n{err.decode(errors='replace')}")
+    return {"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "peak_mb": ru.ru_maxrss / 1024}
+
+
+def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
+    """Medians of the floor's, the plain run's and the run with pictures' figures, and of
+    the ratios (run / floor) and differences (pictures - plain) taken run by run. Python's
+    bytecode is cached (in a folder of its own) and each command run once first, as an
+    installed package has it: where writing bytecode is turned off, every module would
+    otherwise be compiled again in every process."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPYCACHEPREFIX"] = str(out.parent / "bytecode")
+    trace = [sys.executable, "-c", COMMAND, "trace", str(stage), "--photons", str(photons),
+             "--out", str(out)]
+    cmds = {"floor": [sys.executable, "-c", FLOOR], "plain": trace + ["--no-pictures"],
+            "pictures": trace}
+    rows: dict[str, list] = {k: [] for k in cmds}
+    for first in [True] + [False] * repeats:
+        for name, cmd in cmds.items():
+            shutil.rmtree(out, ignore_errors=True)
+            figures = whole(cmd, stage.parent, env)
+            if not first:
+                rows[name].append(figures)
+    med = lambda xs: statistics.median(xs)  # noqa: E731
+    keys = ("wall_s", "cpu_s", "peak_mb")
+    summary = {name: {k: med([r[k] for r in runs]) for k in keys} for name, runs in rows.items()}
+    pairs = list(zip(rows["floor"], rows["plain"], rows["pictures"]))
+    summary["plain_over_floor"] = {k: med([p[k] / f[k] for f, p, _ in pairs]) for k in keys}
+    summary["plain_minus_floor_mb"] = med([p["peak_mb"] - f["peak_mb"] for f, p, _ in pairs])
+    summary["pictures_minus_plain"] = {k: med([q[k] - p[k] for _, p, q in pairs]) for k in keys}
+    return summary
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--stage", type=Path, default=ROOT / "stages/reference/isotropic.usda")
@@ -91,6 +149,10 @@ def main(argv=None) -> int:
         summary[name]["numba_loaded"] = runs[0]["numba_loaded"]
     summary["ratio_first_photon"] = (summary["aot"]["first_photon_s"]
                                      / summary["jit"]["first_photon_s"])
+    with tempfile.TemporaryDirectory() as tmp:
+        stage = Path(tmp) / args.stage.name
+        shutil.copy(args.stage, stage)
+        summary["whole"] = against_floor(stage, args.photons, Path(tmp) / "out", args.repeats)
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
@@ -101,6 +163,18 @@ def main(argv=None) -> int:
               f"run {s['run_s']:.2f} s, peak {s['peak_mb']:.0f} MB"
               f"{' (numba loaded)' if s['numba_loaded'] else ''}")
     print(f"  first photon, ahead-of-time / JIT: {summary['ratio_first_photon']:.2f}")
+    w = summary["whole"]
+    print("whole processes, in turn (medians; ratios and differences run by run):")
+    for name, label in (("floor", "import floor"), ("plain", "--no-pictures"),
+                        ("pictures", "with pictures")):
+        s = w[name]
+        print(f"  {label:>13s}: {s['wall_s']:.2f} s wall, {s['cpu_s']:.2f} CPU s, "
+              f"peak {s['peak_mb']:.0f} MB")
+    r, d = w["plain_over_floor"], w["pictures_minus_plain"]
+    print(f"  --no-pictures / floor: {r['wall_s']:.2f} wall, {r['cpu_s']:.2f} CPU, "
+          f"+{w['plain_minus_floor_mb']:.0f} MB")
+    print(f"  pictures - no pictures: +{d['wall_s']:.2f} s wall, +{d['cpu_s']:.2f} CPU s, "
+          f"+{d['peak_mb']:.0f} MB")
     return 0
 
 
