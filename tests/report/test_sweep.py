@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 from helpers.paths import REFERENCE, ROOT, STAGES
@@ -124,3 +125,32 @@ def test_variants_named_narrow_the_sweep(swept, tmp_path):
         plan([folder / "downlight.usda"], parse_variants(["finish=matte"]), tmp_path)
     with pytest.raises(LumitraceError, match="no stage of the sweep has a variant set 'lens'"):
         plan([folder / "isotropic.usda"], parse_variants(["lens"]), tmp_path)
+
+
+def test_a_sweep_interrupted_picks_up_where_it_stopped(tmp_path):
+    """SIGINT while the second stage (a long one) traces: exit 130 with the first stage's
+    row in the table; started again, the sweep traces only the second."""
+    import signal
+
+    shutil.copy(REFERENCE / "isotropic.usda", tmp_path / "a.usda")  # quick
+    shutil.copy(REFERENCE / "integrating_sphere.usda", tmp_path / "b.usda")  # long paths
+    args = [sys.executable, "-m", "lumitrace", "sweep", str(tmp_path), "--photons", "4e6",
+            "--resolution", "8", "--threads", "1", "--out", str(tmp_path / "out")]
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
+    p = subprocess.Popen(args, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    for line in p.stderr:  # a line per case
+        if line.startswith("[1/2] a.usda"):
+            break
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 128 + signal.SIGINT, err
+    rows = json.loads((tmp_path / "out" / "sweep.json").read_text())["rows"]
+    assert [os.path.basename(r["stage"]) for r in rows] == ["a.usda"]
+    shutil.copy(REFERENCE / "lambertian_disc.usda", tmp_path / "b.usda")  # quick now
+    again = subprocess.run([*args, "--json"], capture_output=True, text=True, cwd=ROOT,
+                           env=env, timeout=300)
+    assert again.returncode == 0, again.stderr
+    rows = json.loads(again.stdout.splitlines()[-1])["rows"]
+    assert [(os.path.basename(r["stage"]), r["traced"]) for r in rows] == [
+        ("a.usda", False), ("b.usda", True)]
