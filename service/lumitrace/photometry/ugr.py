@@ -10,8 +10,8 @@ across the line of sight, C0 toward the observer) and endwise (turned 90 deg):
     UGR = 8 log10(0.25 / Lb * sum L^2 omega / p^2),   L^2 omega = I^2 / (A_p r^2)
 
 with I the intensity toward the eye, A_p the projected luminous area, r the distance, p
-Guth's position index (his formula, over the luminaires CIE 117 table 4.1 gives an index
-for: T/R <= 3, gamma <= 85 deg and H/R within the table). The background luminance is
+Guth's position index from CIE 117 table 4.1 (:mod:`.guth`; the luminaires it gives an
+index for: T/R <= 3, gamma <= 85 deg, H/R within the table). The background luminance is
 Lb = E_WID / pi, the indirect illuminance of the walls from a three-surface flux transfer
 (floor cavity, walls, ceiling; the exact form factor of opposed rectangles), which gives
 CIE 190's transfer factors (its table 5) to their rounding. The flux first reaching the
@@ -29,6 +29,7 @@ from functools import lru_cache
 import numpy as np
 
 from .grid import CGammaGrid
+from .guth import table_index
 from .luminance import projected_area, taps
 
 #: Standard rooms: (x, y) in multiples of H, x across the line of sight.
@@ -45,19 +46,6 @@ HEIGHT = 2.0
 CATALOGUE_ROOM, CATALOGUE_REFLECTANCE = (4, 8), 0
 #: Redraws of the grid for the errors.
 DRAWS = 64
-
-
-def guth_index(t: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
-    """Guth's position index of sources at T across and R along the line of sight, H above
-    the eye (m): ln p = (35.2 - 0.31889 tau - 1.22 exp(-2 tau / 9)) 1e-3 sigma + (21 +
-    0.26667 tau - 0.002963 tau^2) 1e-5 sigma^2, sigma the angle (deg) between the line of
-    sight and the source, tau the angle (deg) from vertical of the plane through both."""
-    t = np.abs(t)
-    sig = np.degrees(np.arctan2(np.hypot(t, h), r))
-    tau = np.degrees(np.arctan2(t, h))
-    a = (35.2 - 0.31889 * tau - 1.22 * np.exp(-2.0 * tau / 9.0)) * 1e-3
-    b = (21.0 + 0.26667 * tau - 0.002963 * tau ** 2) * 1e-5
-    return np.exp(a * sig + b * sig ** 2)
 
 
 def counted(t: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
@@ -104,7 +92,7 @@ def room(x: float, y: float, spacing: float = SPACING, h: float = HEIGHT) -> Roo
     cross = np.degrees(np.arctan2(-t, r)) % 360.0
     end = np.degrees(np.arctan2(-r, -t)) % 360.0
     return Room(x, y, n_t * n_r, t, r, np.sqrt(t * t + r * r + h * h),
-                np.degrees(np.arctan2(np.hypot(t, r), h)), cross, end, guth_index(t, r, h))
+                np.degrees(np.arctan2(np.hypot(t, r), h)), cross, end, table_index(t, r, h))
 
 
 def _parallel_form_factor(a: float, b: float, c: float) -> float:
