@@ -213,7 +213,7 @@ def colour_section(record: Mapping) -> Section | None:
         return None
     rows = [[Cell("CCT"), Cell(f"{record['cct_K']:.0f} K", "cct_K", record["cct_K"])],
             [Cell("Duv"), Cell(f"{record.get('duv'):+.4f}", "duv", record.get("duv"))],
-            [Cell("Colour over angle (largest Delta u'v' in the beam)"),
+            [Cell("Beam colour spread (Delta u'v')"),
              Cell(f"{record.get('colour_uniformity_duv') or 0:.4f} "
                   f"(noise {record.get('colour_uniformity_noise') or 0:.4f})",
                   "colour_uniformity_duv", record.get("colour_uniformity_duv"))]]
@@ -224,8 +224,7 @@ def provenance(record: Mapping) -> Section:
     """How the figures were computed: photons, seed, errors, version, hashes."""
     r = record
     err, bound = r.get("relative_error"), r.get("relative_error_bound")
-    rows = [[Cell("Method"), Cell("photon tracing of the USD stage (lumitrace "
-                                  f"{__version__}); every figure from the photon counts")],
+    rows = [[Cell("Method"), Cell(f"photon tracing, lumitrace {__version__}")],
             [Cell("Stage, luminaire prim"), Cell(f"{r.get('stage')}, {r.get('luminaire')}")],
             [Cell("Photons traced"), Cell(f"{r.get('photons') or 0:,}", "photons",
                                           r.get("photons"))],
@@ -243,7 +242,9 @@ def provenance(record: Mapping) -> Section:
                   "converged", r.get("converged"))],
             [Cell("Input hash"), Cell(str(r.get("input_hash")), "input_hash",
                                       r.get("input_hash"))]]
-    return Section("How it was computed", ("", ""), rows)
+    return Section("How it was computed", ("", ""), rows,
+                   "every figure from the photon counts of the USD stage, with its standard "
+                   "error")
 
 
 def sections(record: Mapping, info) -> tuple[list[Section], list[Section], list[Section]]:

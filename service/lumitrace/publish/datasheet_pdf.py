@@ -14,6 +14,9 @@ from .datasheet_content import Section, sections
 PAGE = (8.27, 11.69)
 LEFT, RIGHT, TOP, BOTTOM = 0.06, 0.94, 0.95, 0.05
 LINE = 0.0128
+#: matplotlib's line pitch in the standard Helvetica, per point of font size and unit of
+#: line spacing (measured on a rendered page): what makes a column's lines LINE apart.
+HELVETICA_PITCH = 0.926
 
 
 #: Settings of the PDF's text: the standard Helvetica (Latin-1 glyphs).
@@ -53,15 +56,18 @@ def _draw_section(fig, s: Section, y: float, x0: float, x1: float, size: float =
     cols = _columns(s, x0, x1)
     if any(s.header):
         for x, h in zip(cols, s.header):
-            fig.text(x, y, h, fontsize=size, weight="bold", va="top")
+            fig.text(x, y - 0.8 * LINE, h, fontsize=size, weight="bold", va="baseline")
         y -= LINE
     if s.rows:
         # one text per column (a text is the slow part of a PDF page): lines LINE apart
-        spacing = LINE * PAGE[1] * 72.0 / size
+        spacing = LINE * PAGE[1] * 72.0 / size / HELVETICA_PITCH
         for k, x in enumerate(cols):
             column = "\n".join(row[k].text if k < len(row) else "" for row in s.rows)
-            fig.text(x, y, column, fontsize=size, va="top", linespacing=spacing)
-        y -= LINE * len(s.rows)
+            # baselines, not tops, line up (a column's first glyphs do not shift it): a
+            # text's baseline is its last line's
+            fig.text(x, y - (0.8 + len(s.rows) - 1) * LINE, column, fontsize=size,
+                     va="baseline", linespacing=spacing)
+        y -= LINE * (len(s.rows) + 0.4)
     if s.note:
         fig.text(x0, y, s.note, fontsize=size - 1, color="#555555", va="top", wrap=True)
         y -= LINE * (1 + len(s.note) // 150)
@@ -103,12 +109,14 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
             ax = fig.add_axes((0.02, 0.60, 0.40, 0.34))
             ax.imshow(plt.imread(io.BytesIO(data.solid_png), format="png"))
             ax.set_axis_off()
-        box = (0.44, 0.635, 0.26, 0.25) if narrow else (0.50, 0.625, 0.40, 0.27)
+        shift = 0.0 if data.solid_png else -0.30  # no picture: the curves move left
+        box = (0.44 + shift, 0.635, 0.26, 0.25) if narrow else \
+            (0.50 + 1.5 * shift, 0.625, 0.40, 0.27)
         polar = fig.add_axes(box, projection="polar")
         draw_polar(polar, data.grid, lamp, data.record)
         polar.title.set_fontsize(6)
         if narrow:
-            ax = fig.add_axes((0.75, 0.67, 0.20, 0.21))
+            ax = fig.add_axes((0.75 + 0.5 * shift, 0.67, 0.20 - 0.5 * shift, 0.21))
             draw_cartesian(ax, data.grid, lamp, data.record)
             ax.set_title("Cartesian diagram (cd/klm)", fontsize=6)
             ax.set_xlabel("deg from nadir: C180/C270 left, C0/C90 right", fontsize=5)
