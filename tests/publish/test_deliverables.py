@@ -317,3 +317,27 @@ def test_the_cartesian_diagram_is_for_narrow_beams():
     assert is_narrow({"beam_angle_c0_c180": 24.0, "beam_angle_c90_c270": 80.0})
     assert not is_narrow({"beam_angle_c0_c180": 120.0, "beam_angle_c90_c270": 119.0})
     assert not is_narrow({"beam_angle_c0_c180": None, "beam_angle_c90_c270": None})
+
+
+def test_a_bare_light_and_a_rectangular_opening_make_valid_l3d():
+    l3d = pytest.importorskip("l3d")
+    from lumitrace.photometry.distribution import LuminousOpening
+    from lumitrace.publish.l3d import l3d_bytes
+    from lumitrace.stage.reader import read_stage
+
+    schema = _schema(L3D_XSD)
+    bare = read_stage(ROOT / "stages" / "reference" / "isotropic.usda")
+    opening = LuminousOpening(0.3, 0.1, 0.0, (0.01, -0.02, -0.05))
+    data = l3d_bytes(bare, opening, "bare light")
+    xml = zipfile.ZipFile(io.BytesIO(data)).read("structure.xml").decode()
+    assert [e.reason for e in schema.iter_errors(xml)] == []
+    structure = json.loads(l3d.parse_structure_xml(xml))
+    leo = structure["Structure"]["Geometry"]["LightEmittingObjects"]["LightEmittingObject"][0]
+    assert leo["Rectangle"] == {"@sizeX": 0.3, "@sizeY": 0.1} and leo["Circle"] is None
+    assert (leo["Position"]["@x"], leo["Position"]["@y"], leo["Position"]["@z"]) == \
+        pytest.approx((0.01, -0.02, -0.05))
+    obj = zipfile.ZipFile(io.BytesIO(data)).read("luminaire/luminaire.obj").decode()
+    v = np.array([line.split()[1:] for line in obj.splitlines() if line.startswith("v ")],
+                 dtype=float)
+    assert bare.triangles.size == 0  # no geometry: a stand-in box the opening's size
+    assert v.max(axis=0) - v.min(axis=0) == pytest.approx((0.3, 0.1, 0.01))
