@@ -4,17 +4,18 @@ the photometric files, into the run's transaction beside them."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 from ..atomic import atomic_path, write_text
 from ..filenames import DATASHEET_HTML_SUFFIX, DATASHEET_PDF_SUFFIX, GLDF_SUFFIX
 from ..photometry.distribution import Photometry
 from ..scene import Scene
-from .datasheet import DatasheetInput, curve_pngs, datasheet_html
-from .datasheet_content import luminaire_name
-from .datasheet_pdf import datasheet_pdf
-from .gldf import GldfFiles, gldf_bytes
-from .l3d import l3d_bytes
+
+if TYPE_CHECKING:
+    from .datasheet import DatasheetInput
+
+# The writers are imported when a deliverable is written: every run imports this module
+# for the paths, and the XML escaping (xml.sax) loads urllib, http and ssl (20 ms).
 
 #: Output keys of the deliverables (record fields of :data:`lumitrace.schema.RESULT_FIELDS`).
 DELIVERABLES = ("datasheet_html", "datasheet_pdf", "gldf")
@@ -38,6 +39,9 @@ def write_datasheet(data: DatasheetInput, html_path: Path, pdf_path: Path,
                     polar_png: bytes | None = None) -> None:
     """Write the datasheet's HTML page and PDF (``polar_png``: the polar curve already
     drawn for this record, else drawn here)."""
+    from .datasheet import curve_pngs, datasheet_html
+    from .datasheet_pdf import datasheet_pdf
+
     curves = curve_pngs(data, polar=polar_png is None)
     if polar_png is not None:
         curves = {"polar": polar_png, **curves}
@@ -51,6 +55,11 @@ def write_deliverables(scene: Scene, ph: Photometry, record: Mapping,
     """Write the datasheet and the GLDF container to ``staged`` paths (the transaction's;
     ``final`` names the files as published, which the container's entries follow). The
     LDT, IES and solid picture are read from ``staged``, as this run wrote them."""
+    from .datasheet import DatasheetInput
+    from .datasheet_content import luminaire_name
+    from .gldf import GldfFiles, gldf_bytes
+    from .l3d import l3d_bytes
+
     solid, polar = staged.get("photometric_solid"), staged.get("polar_diagram")
     solid_png = Path(solid).read_bytes() if solid and Path(solid).is_file() else None
     polar_png = Path(polar).read_bytes() if polar and Path(polar).is_file() else None
