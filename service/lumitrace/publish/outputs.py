@@ -172,6 +172,10 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         warn("the polar curve and the photometric solid are not drawn: matplotlib is not "
              "installed (install lumitrace[plot])", OutputWarning)
     pictures = pictures and drawable
+    if deliverables and not drawable:
+        warn("the datasheet and the GLDF container are not written: matplotlib is not "
+             "installed (install lumitrace[plot])", OutputWarning)
+        deliverables = False
     est = result.estimate
     ph = photometry_of(scene, result.accumulator)
     col = colour_over_angle(result.accumulator)
