@@ -69,6 +69,11 @@ def command(args) -> int:
     from ..run.settings import TraceSettings, default_threads
     from ..stage.reader import read_stage
 
+    from ..publish.outputs import plotting_available
+
+    if not plotting_available():
+        raise LumitraceError("the datasheet needs matplotlib: install lumitrace[plot]",
+                             str(args.stage))
     scene = read_stage(args.stage)
     name = stage_name(args.stage)
     folder = Path(args.results) if args.results else Path(args.stage).absolute().parent
