@@ -24,13 +24,15 @@ from .datasheet_content import Section, luminaire_name, sections
 class DatasheetInput:
     """What a datasheet is made of: the result ``record``, the published ``grid`` (cd,
     with sigma), the luminaire's ``info`` (:class:`~lumitrace.scene.LuminaireInfo`), the
-    photometric solid's PNG (or None) and the run id."""
+    photometric solid's PNG (or None), the run id and the colour diagram's PNG."""
 
     record: Mapping
     grid: CGammaGrid
     info: object
     solid_png: bytes | None = None
     run_id: str = ""
+    #: the colour over angle diagram's PNG (a stage with colour, pictures drawn), or None
+    colour_png: bytes | None = None
 
     @property
     def name(self) -> str:
@@ -123,6 +125,9 @@ def datasheet_html(data: DatasheetInput, curves: Mapping[str, bytes] | None = No
     if data.solid_png:
         pics.append(_img(data.solid_png, "the luminaire in its photometric solid"))
     pics += [_img(png, f"{kind} diagram") for kind, png in curves.items()]
+    colour = "" if not data.colour_png else \
+        f'<section><h2>Colour over angle</h2>{_img(data.colour_png, "colour over angle")}' \
+        "</section>"
     sub = " · ".join(x for x in (info.manufacturer, info.catalogue_number) if x)
     # "</" never closes the script element early; JSON reads "<\\/" as "</"
     record_json = json.dumps(dict(data.record), default=str).replace("</", "<\\/")
@@ -134,6 +139,6 @@ def datasheet_html(data: DatasheetInput, curves: Mapping[str, bytes] | None = No
             f'<div class="pictures">{"".join(pics)}</div>'
             f'<div class="grid"><div>{"".join(_table(s) for s in left)}</div>'
             f'<div>{"".join(_table(s) for s in right)}</div></div>'
-            f'{"".join(_table(s) for s in wide)}'
+            f'{"".join(_table(s) for s in wide)}{colour}'
             '<script type="application/json" id="lumitrace-record">'
             f"{record_json}</script></body></html>\n")

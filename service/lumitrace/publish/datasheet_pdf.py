@@ -137,6 +137,10 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
             y = TOP
             while queue and (y == TOP or y - _height(queue[0]) > BOTTOM):
                 y = _draw_section(fig, queue.pop(0), y, LEFT, RIGHT)
+            if not queue and data.colour_png and y - 0.25 > BOTTOM:  # below the tables
+                ax = fig.add_axes((LEFT, y - 0.26, RIGHT - LEFT, 0.25))
+                ax.imshow(plt.imread(io.BytesIO(data.colour_png), format="png"))
+                ax.set_axis_off()
             pdf.savefig(fig)
             plt.close(fig)
     return buf.getvalue()

@@ -54,16 +54,19 @@ def write_deliverables(scene: Scene, ph: Photometry, record: Mapping,
                        run_id: str = "") -> None:
     """Write the datasheet and the GLDF container to ``staged`` paths (the transaction's;
     ``final`` names the files as published, which the container's entries follow). The
-    LDT, IES and solid picture are read from ``staged``, as this run wrote them."""
+    LDT, IES and pictures are read from ``staged``, as this run wrote them."""
     from .datasheet import DatasheetInput
     from .datasheet_content import luminaire_name
     from .gldf import GldfFiles, gldf_bytes
     from .l3d import l3d_bytes
 
-    solid, polar = staged.get("photometric_solid"), staged.get("polar_diagram")
-    solid_png = Path(solid).read_bytes() if solid and Path(solid).is_file() else None
-    polar_png = Path(polar).read_bytes() if polar and Path(polar).is_file() else None
-    data = DatasheetInput(record, ph.grid, scene.info, solid_png, run_id)
+    def png(key):
+        path = staged.get(key)
+        return Path(path).read_bytes() if path and Path(path).is_file() else None
+
+    solid_png, polar_png = png("photometric_solid"), png("polar_diagram")
+    data = DatasheetInput(record, ph.grid, scene.info, solid_png, run_id,
+                          png("colour_diagram"))
     write_datasheet(data, staged["datasheet_html"], staged["datasheet_pdf"], polar_png)
     name = luminaire_name(record, scene.info)
     files = GldfFiles(
