@@ -2,6 +2,7 @@
 the one shape the tracing session hands to the writers (neither knows the other)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,8 +27,11 @@ class TraceResult:
     #: batches traced again after a Dask worker was lost (their first tallies never came)
     batches_redone: int = 0
     #: the photometric files' accuracy (a ``lumitrace.photometry.accuracy.FilesAccuracy``)
-    #: where the settings judge the target on the files
+    #: where the settings judge the target on the files (set by the writer from the grid
+    #: it writes where the session had none current)
     files_accuracy: Any = None
+    #: whether the target is judged on the files (else on the map)
+    judge_files: bool = False
 
     @property
     def photons(self) -> int:
@@ -41,14 +45,14 @@ class TraceResult:
     @property
     def judged_on(self) -> str:
         """What the target error is judged on: "files" or "map"."""
-        return "files" if self.files_accuracy is not None else "map"
+        return "files" if self.judge_files else "map"
 
     @property
     def judged_error(self) -> float:
         """The error the target is compared with: the files' (their RMS bound, or their
         worst lit value's share) or the map's error bound."""
-        if self.files_accuracy is not None:
-            return self.files_accuracy.error
+        if self.judge_files:
+            return self.files_accuracy.error if self.files_accuracy is not None else math.inf
         return self.estimate.error_bound
 
     @property
@@ -56,6 +60,6 @@ class TraceResult:
         """Whether the files (RMS bound and worst lit value) or the map (its error bound,
         not its point estimate) are within the target."""
         target = self.settings.convergence_target
-        if self.files_accuracy is not None:
-            return self.files_accuracy.meets(target)
+        if self.judge_files:
+            return self.files_accuracy is not None and self.files_accuracy.meets(target)
         return self.estimate.meets(target)
