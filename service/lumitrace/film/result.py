@@ -24,7 +24,7 @@ class TraceResult:
     seconds: float
     prepare_seconds: float
     estimate: MapEstimate
-    #: batches traced again after a Dask worker was lost (their first tallies never came)
+    #: batches sent again after a Dask worker was lost (with it, their tallies or the scene)
     batches_redone: int = 0
     #: the photometric files' accuracy (a ``lumitrace.photometry.accuracy.FilesAccuracy``)
     #: where the settings judge the target on the files (set by the writer from the grid

@@ -34,6 +34,8 @@ TRACER_PARTS = ("scene", "trace", "film")
 CONNECT_SECONDS = 30.0
 #: Seconds between looks at whether a round that may be interrupted still matters.
 POLL_SECONDS = 0.02
+#: Times a round sends the scene again after the cluster lost it, before it gives up.
+MAX_RESENDS = 3
 
 _prepared: dict = {}
 _prepare_lock = threading.Lock()
@@ -77,6 +79,11 @@ def _code_hash() -> str:
             h.update(path.relative_to(root).as_posix().encode())
             h.update(path.read_bytes())
     return h.hexdigest()[:12]
+
+
+class _SceneLost(Exception):
+    """The cluster cancelled a batch while the scheduler is still there (the scene's last
+    copy went with a worker)."""
 
 
 class WorkerMismatch(RuntimeError):
@@ -234,7 +241,8 @@ class ClusterRunner:
         self.address = client.scheduler.address
         self.expected = identity()
         self.key: str | None = None
-        self.scene = None
+        self.scene = None  # the scattered (scene, frame)
+        self._payload = None
         self.threads = total_threads(client)
         self.redone = 0
         self.batches = 0
@@ -247,23 +255,46 @@ class ClusterRunner:
         only when it changed (a service's next revision)."""
         key = f"{scene.content_hash()}-{frame!r}"
         if key != self.key:
-            self.scene = self.client.scatter((scene, frame), broadcast=True, hash=False)
+            self._payload = (scene, frame)
+            self._send_scene()
             self.key = key
+
+    def _send_scene(self) -> None:
+        self.scene = self.client.scatter(self._payload, broadcast=True, hash=False)
+
+    def _submit(self, jobs: list[BatchJob], records: bool) -> tuple[list, list]:
+        keys = [f"lumitrace-batch-{self._run}-{self.batches + i}" for i in range(len(jobs))]
+        self.batches += len(jobs)
+        return keys, [self.client.submit(_run_batch, self.expected, self.key, self.scene, job,
+                                         records, key=k, pure=False)
+                      for job, k in zip(jobs, keys)]
 
     def __call__(self, jobs: Iterable[BatchJob], records: bool = False,
                  interrupted: Callable[[], bool] | None = None) -> Iterator[BatchTally] | None:
         """The jobs' tallies in job order (with per-photon records where asked); None, the
         round's batches cancelled, as soon as ``interrupted()`` says so."""
         jobs = list(jobs)
-        keys = [f"lumitrace-batch-{self._run}-{self.batches + i}" for i in range(len(jobs))]
-        self.batches += len(jobs)
-        futures = [self.client.submit(_run_batch, self.expected, self.key, self.scene, job,
-                                      records, key=k, pure=False)
-                   for job, k in zip(jobs, keys)]
+        keys, futures = self._submit(jobs, records)
         got: list[BatchTally] = []
+        resent = 0
         try:
-            for f in futures:
-                tally = self._result(f, interrupted)
+            while len(got) < len(jobs):
+                i = len(got)
+                try:
+                    tally = self._result(futures[i], interrupted)
+                except _SceneLost as exc:
+                    # every copy of the scene was on workers that went away (the scheduler
+                    # keeps one copy of scattered data): send it again, and the batches
+                    # from here on
+                    resent += 1
+                    if resent > MAX_RESENDS:
+                        raise LumitraceError(f"the cluster lost the scene {resent - 1} times "
+                                             f"in one round ({exc})", self.address) from None
+                    self.client.cancel(futures[i:])
+                    self._send_scene()
+                    keys[i:], futures[i:] = self._submit(jobs[i:], records)
+                    self.redone += len(jobs) - i
+                    continue
                 if tally is None:
                     self.client.cancel(futures)
                     return None
@@ -296,9 +327,13 @@ class ClusterRunner:
         except WorkerMismatch as exc:
             raise LumitraceError(f"a Dask worker that joined during the run {exc}: install "
                                  "the same lumitrace on every worker", self.address) from None
-        except (FutureCancelledError, OSError, TimeoutError) as exc:
-            if self.client.status in ("running", "connecting") and \
-                    not isinstance(exc, FutureCancelledError):
+        except FutureCancelledError as exc:
+            if exc.reason != "scheduler-connection-lost" and self.client.status == "running":
+                raise _SceneLost(exc.reason) from None
+            raise ClusterLost("the Dask scheduler went away mid-run", self.address,
+                              []) from None
+        except (OSError, TimeoutError):
+            if self.client.status in ("running", "connecting"):
                 raise
             raise ClusterLost("the Dask scheduler went away mid-run", self.address,
                               []) from None

@@ -139,7 +139,6 @@ class Refinement:
         self.iteration = 0
         self.estimate: MapEstimate | None = None
         self.files: FilesAccuracy | None = None
-        self._files_photons = 0  # the photons self.files was judged at
 
     def next_jobs(self, most: int | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
@@ -165,7 +164,6 @@ class Refinement:
         self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
             else None
         self.files = self.judge_files() if self.settings.target_error is not None else None
-        self._files_photons = self.accumulator.photons
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
@@ -255,16 +253,11 @@ class Refinement:
 
     def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
         est = self.estimate or estimate(self.accumulator, self.settings.threshold)
-        # the files' accuracy of the last round, where no photon came since; else the
-        # writer measures it from the grid it writes (a scene of thousands of lights pays
-        # for measuring the grid once, not twice)
-        files = self.files if self.files is not None and \
-            self._files_photons == self.accumulator.photons else None
+        files = self.judge_files()  # (the counts may have changed since the last round)
         return TraceResult(scene=self.scene, settings=self.settings,
                            accumulator=self.accumulator, iterations=self.iteration,
                            seconds=seconds, prepare_seconds=prepare_seconds, estimate=est,
-                           files_accuracy=files,
-                           judge_files=self.settings.target_of == "files")
+                           files_accuracy=files)
 
 
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
