@@ -139,6 +139,7 @@ class Refinement:
         self.iteration = 0
         self.estimate: MapEstimate | None = None
         self.files: FilesAccuracy | None = None
+        self._files_photons = 0  # the photons self.files was judged at
 
     def next_jobs(self, most: int | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
@@ -164,6 +165,7 @@ class Refinement:
         self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
             else None
         self.files = self.judge_files() if self.settings.target_error is not None else None
+        self._files_photons = self.accumulator.photons
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
@@ -203,6 +205,7 @@ class Refinement:
     def reestimate(self) -> MapEstimate:
         """Estimate the map again (after photons were retraced)."""
         self.estimate = estimate(self.accumulator, self.settings.threshold)
+        self.files = None  # judged again when asked: the counts changed
         return self.estimate
 
     def judge_files(self) -> FilesAccuracy | None:
@@ -250,14 +253,20 @@ class Refinement:
         self.accumulator.set_colours(scene)
         self.scene = scene
         self.estimate = estimate(self.accumulator, self.settings.threshold)
+        self.files = None  # judged again when asked: the fluxes changed
 
     def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
         est = self.estimate or estimate(self.accumulator, self.settings.threshold)
-        files = self.judge_files()  # (the counts may have changed since the last round)
+        # the files' accuracy of the last round, where no photon came since; else the
+        # writer measures it from the grid it writes (a scene of thousands of lights pays
+        # for measuring the grid once, not twice)
+        files = self.files if self.files is not None and \
+            self._files_photons == self.accumulator.photons else None
         return TraceResult(scene=self.scene, settings=self.settings,
                            accumulator=self.accumulator, iterations=self.iteration,
                            seconds=seconds, prepare_seconds=prepare_seconds, estimate=est,
-                           files_accuracy=files)
+                           files_accuracy=files,
+                           judge_files=self.settings.target_of == "files")
 
 
 def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = None,
