@@ -4,9 +4,11 @@ The scene goes to every worker once (``scatter(broadcast=True)``); each worker p
 once per scene hash and frame and keeps it, so a batch ships only its small job record and
 brings back its compacted tally. Tallies are handed back in job order, so a run on the
 cluster adds exactly what a local run adds. A worker lost mid-batch costs nothing but time:
-the scheduler runs its batches again elsewhere, and the run counts them (``redone``). A
-scheduler that goes away ends the run: the batches gathered until then are kept
-(:class:`ClusterLost`). Dask is imported only here, only when a scheduler is named.
+the scheduler runs its batches again elsewhere, and the run counts them (``redone``). The
+scheduler soon keeps a single copy of scattered data: a worker lost with the scene's last
+copy costs the scene sent again with the round's remaining batches. A scheduler that goes
+away ends the run: the batches gathered until then are kept (:class:`ClusterLost`). Dask
+is imported only here, only when a scheduler is named.
 """
 from __future__ import annotations
 
