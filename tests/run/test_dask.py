@@ -366,3 +366,21 @@ def test_the_scene_lost_with_its_last_worker_is_sent_again(cluster):
     for job, tally in zip(jobs, tallies):
         same_tally(_traced(ps, job), tally, f"job {job.first}")
     client.wait_for_workers(2, timeout=60)
+
+
+def test_dask_is_loaded_only_when_a_scheduler_is_named():
+    code = ("import sys\n"
+            "from lumitrace.cli import build_parser\n"
+            "from lumitrace.run.session import run\n"
+            "from lumitrace.run.settings import TraceSettings\n"
+            "from lumitrace.stage.reader import read_stage\n"
+            "import lumitrace.serve.engine, lumitrace.report.sweep\n"
+            "build_parser()\n"
+            f"run(read_stage({str(STAGES / 'downlight.usda')!r}), TraceSettings(photons=2000,"
+            " resolution=8, threads=1))\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('dask', "
+            "'distributed')))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stderr
