@@ -29,10 +29,9 @@ def test_table_against_eulumdat_luminance(name):
     calc = pytest.importorskip("eulumdat_luminance")
     _, _, ph, ldt = traced(name)
     theirs = calc.LuminanceCalculator.compute(pyldt.LdtReader.read(str(ldt)), full=True)
-    # eulumdat-luminance takes the file's luminous length across C0, lumitrace writes it
-    # along C0 (see test_ugr): the same opening, read as the package reads it
-    o = ph.opening
-    ours = luminance_table(ph.grid, dataclasses.replace(o, length=o.width, width=o.length))
+    # the file's luminous length runs along C90 (the side seen from C0 is length wide), its
+    # width along C0, as the package reads them: the opening as measured
+    ours = luminance_table(ph.grid, ph.opening)
     cc, gg = np.meshgrid(ours.c, ours.gamma, indexing="ij")
     want = np.asarray(theirs.at(c_deg=cc.ravel(), g_deg=gg.ravel())).reshape(cc.shape)
     # the file holds 4 significant digits of cd/klm

@@ -3,7 +3,6 @@ hand, the rooms' flux transfer against CIE 190's own factors, and the table of t
 stages against the third-party eulumdat-ugr reading the LDT lumitrace writes."""
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -73,10 +72,9 @@ def _their_table(ldt_path) -> np.ndarray:
 def test_table_against_eulumdat_ugr(name):
     _, _, ph, ldt = traced(name)
     theirs = _their_table(ldt)
-    # eulumdat-ugr takes the file's luminous length across C0 (the side seen from C0 is
-    # length wide), lumitrace writes the length along C0: the same opening, read as it is
-    o = ph.opening
-    table = ugr.ugr_table(ph.grid, dataclasses.replace(o, length=o.width, width=o.length))
+    # the file's luminous length runs along C90 (the side seen from C0 is length wide), its
+    # width along C0, as eulumdat-ugr reads them: the opening as measured
+    table = ugr.ugr_table(ph.grid, ph.opening)
     ours = np.hstack([table.crosswise, table.endwise])
     err = np.hstack([table.crosswise_error, table.endwise_error])
     assert np.isfinite(theirs).all() and np.isfinite(ours).all()

@@ -89,10 +89,12 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     box = opening.box
     round_area = opening.round and abs(opening.length - opening.width) <= \
         0.02 * max(opening.length, opening.width)  # a circle: its diameter and width 0
-    mm = {"length": 1000 * box[0], "width": 1000 * box[1], "height": 1000 * box[2],
+    # EULUMDAT's length runs along the C90-C270 plane (the C0-C180 plane is across a linear
+    # luminaire), its width along C0-C180: our extents along C90 and C0, in that order
+    mm = {"length": 1000 * box[1], "width": 1000 * box[0], "height": 1000 * box[2],
           "lum_length": 1000 * (0.5 * (opening.length + opening.width) if round_area
-                                else opening.length),
-          "lum_width": 0.0 if round_area else 1000 * opening.width,
+                                else opening.width),
+          "lum_width": 0.0 if round_area else 1000 * opening.length,
           "lum_height": 1000 * opening.height}
     write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
               fig.downward_flux_fraction, fig.light_output_ratio,
