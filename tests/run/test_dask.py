@@ -359,7 +359,7 @@ def test_the_scene_lost_with_its_last_worker_is_sent_again(cluster):
         while holders[0] in client.scheduler_info(n_workers=-1)["workers"]:
             time.sleep(0.05)
         tallies = list(runner(jobs))
-        assert runner.redone == len(jobs)
+        assert runner.redone >= len(jobs)  # every batch of the round sent again
     finally:
         runner.close()
     ps = prepare(scene, frame)
