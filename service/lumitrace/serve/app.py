@@ -51,6 +51,8 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     """The aiohttp application of a running service (with the live view page unless
     ``viewer`` is False)."""
     previews = PreviewCache()
+    if viewer:  # an edit's first preview is made as soon as its map is, before its files
+        engine.refreshed = lambda: previews.get(engine)
 
     @web.middleware
     async def guard(request: web.Request, handler):

@@ -14,7 +14,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from ..errors import LumitraceError
 from ..publish.outputs import write_outputs
@@ -37,6 +37,9 @@ WRITE_INTERVAL = 2.0
 BURST_GAP = 0.15
 BURST_QUIET = 0.05
 BURST_WAIT = 0.5
+#: The pictures of a done revision are drawn once this many seconds passed without a new
+#: revision (drawing takes seconds, and an edit would wait for it).
+PICTURES_QUIET = 1.0
 #: Bytes of per-photon records kept for selective retracing (40 bytes a photon: 1 GiB
 #: holds about 27 million photons); above it, an edit restarts the trace.
 RECORDS_CAP = 1 << 30
@@ -60,6 +63,9 @@ class Engine:
         self.out_dir = out_dir
         #: False: the result layer is written but not sublayered into the stage file
         self.sublayer = sublayer
+        #: called (on the engine's thread) once an edit's map is refreshed, before its
+        #: files are written: the live view makes its preview frame then
+        self.refreshed: Callable[[], Any] | None = None
         self._cv = threading.Condition()
         self._pending: Revision | None = None
         self._arrivals: list[float] = [0.0, 0.0]  # the last two submit times
@@ -224,7 +230,7 @@ class Engine:
             while True:
                 with self._cv:
                     while self._pending is None and not self._stopping and self._idle():
-                        self._cv.wait()
+                        self._cv.wait(self._pictures_wait() or None)
                     if self._stopping:
                         break
                     if self._pending is not None:
@@ -241,9 +247,18 @@ class Engine:
 
     def _idle(self) -> bool:
         """Nothing to do until a new revision: none traced yet, the current one done and
-        written, or the current one failed."""
+        written (its pictures drawn, or waiting for the edits to pause), or the current one
+        failed."""
         return self._halted or self.paused or (self.refinement is None or self.done) \
-            and not self._pictures_due()
+            and not (self._pictures_due() and not self._pictures_wait())
+
+    def _pictures_wait(self) -> float:
+        """Seconds until the pictures of a done revision may be drawn: they wait until
+        :data:`PICTURES_QUIET` s passed without a new revision, so an edit made while a
+        designer is editing is not queued behind seconds of drawing (0: now)."""
+        if not self._pictures_due():
+            return 0.0
+        return max(0.0, PICTURES_QUIET - (time.monotonic() - self._arrivals[1]))
 
     def _step(self, pending: Revision | None, pool: ThreadPoolExecutor) -> None:
         """One unit of work: take a new revision, draw the pictures, or trace a round."""
@@ -251,7 +266,8 @@ class Engine:
             self._take(pending)
             self._halted = False
         elif self._pictures_due():
-            self._write(pictures=True)
+            if not self._pictures_wait():
+                self._write(pictures=True)
         else:
             self._round(pool)
 
@@ -301,6 +317,7 @@ class Engine:
             with self._cv:
                 old.rescale(rev.scene)
                 self.revision = rev
+            self._refreshed()
             self._write(pictures=False)  # at once; the pictures follow if it is done
             return
         if old is not None and self.frame is not None:
@@ -355,6 +372,7 @@ class Engine:
             self.events.publish("warning", revision=rev.number,
                                 message="photon records dropped above their memory cap: "
                                         "the next edit restarts the trace")
+        self._refreshed()
         self._write(pictures=False)
 
     def _round(self, pool: ThreadPoolExecutor) -> None:
@@ -389,6 +407,8 @@ class Engine:
                             iteration=r.iteration, photons=acc.photons,
                             relative_error=defined(est.error), seconds=elapsed,
                             photons_per_second=acc.photons / max(elapsed, 1e-9))
+        if r.iteration == 1:  # a new trace's first map: its preview before its files
+            self._refreshed()
         if self._reached():
             self._finish()
         elif r.iteration <= EAGER_WRITES or \
@@ -428,6 +448,16 @@ class Engine:
         if self.refinement is not None and self.refinement.accumulator.photons and \
                 not self._written_full:
             self._write(pictures=True)
+
+    def _refreshed(self) -> None:
+        """Tell the live view an edit's map is ready (its failure is its own: logged as an
+        event, the engine goes on)."""
+        if self.refreshed is not None:
+            try:
+                self.refreshed()
+            except Exception as exc:  # the preview is the page's business, not the run's
+                self.events.publish("warning", revision=self.revision.number,
+                                    message=f"the preview could not be made: {exc}")
 
     def _write(self, pictures: bool) -> None:
         """Publish the current refinement's result (one transaction, on the USD thread)."""

@@ -106,6 +106,9 @@ class PreviewCache:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
+        # one frame is made at a time: requests arriving while it is made wait for it and
+        # take it, rather than each making its own (and slowing every one down)
+        self._making = threading.Lock()
         self._cached: _Cached | None = None
 
     def get(self, engine) -> bytes | None:
@@ -116,9 +119,13 @@ class PreviewCache:
         with self._lock:
             if self._cached is not None and self._cached.key == key:
                 return self._cached.data
-        data = preview_frame(**snap)
-        with self._lock:
-            self._cached = _Cached(key, data)
+        with self._making:
+            with self._lock:
+                if self._cached is not None and self._cached.key == key:
+                    return self._cached.data
+            data = preview_frame(**snap)
+            with self._lock:
+                self._cached = _Cached(key, data)
         return data
 
 

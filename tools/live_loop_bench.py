@@ -1,0 +1,124 @@
+"""The live loop's latencies against a real ``lumitrace serve``: from a delta's arrival to
+the first refreshed preview a client can read, and to the cheap outputs on disk.
+
+    python tools/live_loop_bench.py [--stage stages/downlight.usda] [--edits 20] [--json]
+
+The service traces the stage (a copy) until it is converged; then, ``--edits`` times each,
+a material edit (the reflector's specular reflectance) and a flux-only edit (the source's
+flux) are sent, each once the previous one is written. Timed on the client, from the send:
+``accepted``, the service's answer to the delta (applied, the stage read again);
+``preview``, the first ``/preview`` frame that carries the new revision (polled every
+2 ms); ``written``, the ``written`` event of the revision (the IES, LDT, EXR and result
+layer on disk). Printed: median and 90th percentile of each, in ms.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import statistics
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from service_process import Service  # noqa: E402
+
+from lumitrace.serve.viewer import read_frame  # noqa: E402
+
+ROOT = HERE.parent
+REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
+SOURCE = "/Luminaire/LED"
+
+
+def _preview_revision(url: str) -> int | None:
+    try:
+        with urllib.request.urlopen(url + "preview", timeout=5) as r:
+            return read_frame(r.read())[0].get("revision")
+    except OSError:
+        return None
+
+
+def _watch_written(service: Service, seen: dict, stop: threading.Event) -> None:
+    """Record the arrival time of every ``written`` event by revision."""
+    for event in service.client.events(timeout=600):
+        if stop.is_set():
+            return
+        if event.kind == "written":
+            seen.setdefault(event.data.get("revision"), time.perf_counter())
+
+
+def _percentile(values: list[float], q: float) -> float:
+    v = sorted(values)
+    return v[min(len(v) - 1, int(round(q * (len(v) - 1))))]
+
+
+def measure(stage: Path, edits: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / stage.name
+        shutil.copy(stage, copy)
+        service = Service(copy, "--out", Path(tmp) / "out", "--no-sublayer", "--quiet",
+                          "--target-error", "0.02")
+        seen: dict = {}
+        stop = threading.Event()
+        threading.Thread(target=_watch_written, args=(service, seen, stop),
+                         daemon=True).start()
+        try:
+            service.wait_status(lambda s: s.get("state") == "done", timeout=300)
+            out = {}
+            for kind in ("material", "flux"):
+                preview, written, accepted = [], [], []
+                for k in range(edits):
+                    if kind == "material":
+                        delta = {"op": "set", "path": REFLECTOR,
+                                 "property": "lumitrace:specularReflectance",
+                                 "value": 0.80 + 0.005 * (k % 20)}
+                    else:
+                        delta = {"op": "set", "path": SOURCE,
+                                 "property": "lumitrace:luminousFlux",
+                                 "value": 1100.0 + 5.0 * k}
+                    t0 = time.perf_counter()
+                    revision = service.client.send([delta])["revision"]
+                    accepted.append(1000.0 * (time.perf_counter() - t0))
+                    while (_preview_revision(service.url) or 0) < revision:
+                        time.sleep(0.002)
+                    preview.append(1000.0 * (time.perf_counter() - t0))
+                    deadline = time.monotonic() + 60
+                    while revision not in seen and time.monotonic() < deadline:
+                        time.sleep(0.002)
+                    written.append(1000.0 * (seen.get(revision, time.perf_counter()) - t0))
+                    service.wait_status(lambda s: s.get("state") in ("done", "tracing"))
+                out[kind] = {name: {"median_ms": statistics.median(v),
+                                    "p90_ms": _percentile(v, 0.9)}
+                             for name, v in (("accepted", accepted), ("preview", preview),
+                                             ("written", written))}
+            return out
+        finally:
+            stop.set()
+            service.stop()
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--stage", type=Path, default=ROOT / "stages" / "downlight.usda")
+    p.add_argument("--edits", type=int, default=20)
+    p.add_argument("--json", action="store_true")
+    a = p.parse_args(argv)
+    result = measure(a.stage, a.edits)
+    if a.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for kind, rows in result.items():
+            print(f"{kind} edit: " + "; ".join(
+                f"to the {name} median {r['median_ms']:.0f} ms, 90th percentile "
+                f"{r['p90_ms']:.0f} ms" for name, r in rows.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
