@@ -218,16 +218,26 @@ class _MapCells:
 
 
 def closed_form_cells(expectation: dict, up_axis: str, sub: int = 24) -> np.ndarray:
-    """The closed form's mean over every grid cell (sin-weighted midpoint quadrature)."""
-    planes = np.arange(0.0, 360.0, C_STEP)
+    """The closed form's mean over every cell of the peer's grid (C 15 deg by gamma 5 deg,
+    every cell a C sector, the poles' too: the raw grid counts them so)."""
     edges = np.concatenate([[0.0], 0.5 * (GAMMAS[1:] + GAMMAS[:-1]), [180.0]])
-    out = np.zeros((len(planes), len(GAMMAS)))
+    return cell_means(expectation, up_axis, np.arange(0.0, 360.0, C_STEP), C_STEP,
+                      edges[:-1], edges[1:], pooled_poles=False, sub=sub)
+
+
+def cell_means(expectation: dict, up_axis: str, planes: np.ndarray, step: float,
+               lo: np.ndarray, hi: np.ndarray, pooled_poles: bool, sub: int) -> np.ndarray:
+    """The closed form's mean over cells (sin-weighted midpoint quadrature): C sectors of
+    ``step`` deg around ``planes`` by gamma zones ``lo`` .. ``hi`` (deg); with
+    ``pooled_poles`` the first and last zones are whole polar caps (all C)."""
     f = (np.arange(sub) + 0.5) / sub
-    for j, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-        g = lo + f * (hi - lo)
+    out = np.zeros((len(planes), len(lo)))
+    for j, (g0, g1) in enumerate(zip(lo, hi)):
+        g = g0 + f * (g1 - g0)
+        pole = pooled_poles and j in (0, len(lo) - 1)
         for i, c0 in enumerate(planes):
-            c = c0 - 0.5 * C_STEP + f * C_STEP
-            cc, gg = np.meshgrid(c, g, indexing="ij")
+            cs = np.arange(0.0, 360.0, 360.0 / sub) if pole else c0 - 0.5 * step + f * step
+            cc, gg = np.meshgrid(cs, g, indexing="ij")
             w = np.sin(np.radians(gg))
             d = frame.directions(cc, gg, up_axis).reshape(-1, 3)
             v = expected_intensity(expectation, d).reshape(cc.shape)
@@ -306,21 +316,9 @@ def files_cell_means(expectation: dict, up_axis: str, c: np.ndarray, gamma: np.n
     C step all round, gamma zones between midpoints, the poles over their caps)."""
     step = float(c[1] - c[0]) if len(c) > 1 else 360.0
     edges = np.concatenate([[0.0], 0.5 * (gamma[1:] + gamma[:-1]), [180.0]])
-    edges_lo, edges_hi = edges[:-1].copy(), edges[1:].copy()
-    edges_hi[0], edges_lo[-1] = caps[0], 180.0 - caps[1]
-    f = (np.arange(sub) + 0.5) / sub
-    out = np.zeros((len(c), len(gamma)))
-    for j, (lo, hi) in enumerate(zip(edges_lo, edges_hi)):
-        g = lo + f * (hi - lo)
-        pole = j in (0, len(gamma) - 1)
-        for i, c0 in enumerate(c):
-            cs = np.arange(0.0, 360.0, 360.0 / sub) if pole else c0 - 0.5 * step + f * step
-            cc, gg = np.meshgrid(cs, g, indexing="ij")
-            w = np.sin(np.radians(gg))
-            d = frame.directions(cc, gg, up_axis).reshape(-1, 3)
-            v = expected_intensity(expectation, d).reshape(cc.shape)
-            out[i, j] = float((v * w).sum() / w.sum())
-    return out
+    lo, hi = edges[:-1].copy(), edges[1:].copy()
+    hi[0], lo[-1] = caps[0], 180.0 - caps[1]
+    return cell_means(expectation, up_axis, c, step, lo, hi, pooled_poles=True, sub=sub)
 
 
 def files_true_error(stage: Path, photometry_json: Path) -> float | None:

@@ -50,3 +50,19 @@ def expect_error(stage, *fragments, **kwargs):
     for fragment in fragments:
         assert fragment in message, message
     return message
+
+
+def with_attributes(src, dst, attributes: dict):
+    """A copy of stage ``src`` at ``dst`` with ``attributes`` ({name: (Sdf type name in
+    lower case, value)}) authored on its default prim (the luminaire's own data)."""
+    import shutil
+
+    from pxr import Sdf
+
+    shutil.copy(src, dst)
+    stage = Usd.Stage.Open(str(dst))
+    prim = stage.GetDefaultPrim()
+    for name, (kind, value) in attributes.items():
+        prim.CreateAttribute(name, getattr(Sdf.ValueTypeNames, kind.capitalize())).Set(value)
+    stage.GetRootLayer().Save()
+    return dst

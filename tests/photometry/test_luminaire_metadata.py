@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from helpers.paths import ROOT
+from helpers.stages import with_attributes
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 from lumitrace.photometry.eulumdat import read_ldt
@@ -26,15 +27,7 @@ INFO = {"lumitrace:manufacturer": ("string", "Acme Lighting GmbH"),
 
 
 def _with_info(src: Path, dst: Path, info: dict) -> Path:
-    from pxr import Sdf, Usd
-
-    shutil.copy(src, dst)
-    stage = Usd.Stage.Open(str(dst))
-    prim = stage.GetDefaultPrim()
-    for name, (kind, value) in info.items():
-        prim.CreateAttribute(name, getattr(Sdf.ValueTypeNames, kind.capitalize())).Set(value)
-    stage.GetRootLayer().Save()
-    return dst
+    return with_attributes(src, dst, info)
 
 
 def _trace(stage: Path, *extra):

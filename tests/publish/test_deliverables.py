@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers.paths import ROOT
+from helpers.stages import with_attributes
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 
@@ -32,15 +33,7 @@ INFO = {"lumitrace:manufacturer": ("string", "Acme Lighting GmbH"),
 
 
 def _with_info(src: Path, dst: Path) -> Path:
-    from pxr import Sdf, Usd
-
-    shutil.copy(src, dst)
-    stage = Usd.Stage.Open(str(dst))
-    prim = stage.GetDefaultPrim()
-    for name, (kind, value) in INFO.items():
-        prim.CreateAttribute(name, getattr(Sdf.ValueTypeNames, kind.capitalize())).Set(value)
-    stage.GetRootLayer().Save()
-    return dst
+    return with_attributes(src, dst, INFO)
 
 
 def _lumitrace(*args: str) -> subprocess.CompletedProcess:
