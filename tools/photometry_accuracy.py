@@ -131,8 +131,10 @@ def main(argv=None) -> int:
         print("  IES cd            " + "".join(f"{b['cd']:11.3f}" for b in r["bands"]))
         print(f"  upward flux fraction {r['upward_fraction']:.3%}; z of {r['z_n']} file values "
               f"against their sigma: max |z| {r['z_max']:.2f}, variance {r['z_var']:.2f}")
-        print(f"  peak {r['peak']:.2f} +- {r['peak_error']:.2f} cd (largest cell mean "
-              f"{r['peak_truth']:.2f}); beam {r['beam']:.2f} +- {r['beam_error']:.2f} deg "
+        pm = lambda v, e: "n/a" if v is None else \
+            f"{v:.2f} +- {'n/a' if e is None else f'{e:.2f}'}"  # noqa: E731
+        print(f"  peak {pm(r['peak'], r['peak_error'])} cd (largest cell mean "
+              f"{r['peak_truth']:.2f}); beam {pm(r['beam'], r['beam_error'])} deg "
               f"(closed form {r['beam_truth']:.2f}); "
               f"files' relative RMS error {r['file_error']:.2%}")
         print(f"  true relative RMS error over the sphere: Y {r['map_error_Y']:.2%}, "

@@ -29,6 +29,10 @@ from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA, cell_s
 FIT_SHARE = 0.5
 FIT_RADIUS_MIN = 1.5
 FIT_RADIUS_MAX = 10.0
+#: Photons (effective: flux^2 / variance) a half must hold within a fit's reach; with fewer,
+#: the fit reaches further (to :data:`FIT_RADIUS_MAX`), and without them the cells' split
+#: estimate serves.
+MIN_FIT_PHOTONS = 400
 #: A half moves its pick of the top to its fit's maximum when that lies this many of its
 #: standard errors away (Mahalanobis distance), else keeps the pick.
 LOCATE_SIGMAS = 2.0
@@ -110,6 +114,9 @@ def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg:
     near = np.flatnonzero(dirs @ centre >= cos_r)
     if near.size < 12:
         return None
+    total, spread = float(flux[near].sum()), float(var[near].sum())
+    if spread <= 0 or total * total < MIN_FIT_PHOTONS * spread:
+        return None  # too few photons in reach for six parameters
     omega = cell_solid_angles().reshape(-1)[near]
     u, v = _tangent_basis(centre)
     d = dirs[near]
@@ -178,8 +185,11 @@ def fitted_peak(acc: Accumulator, picks: tuple[tuple[float, float], tuple[float,
     """The peak from the two halves: ``picks`` are each half's (C, gamma) of its top cell;
     each half locates the peak near its own pick and the other half measures it there.
     None where a fit is not possible (too little light near the top)."""
-    radius = fit_radius(half_width_deg)
     cells = [half_cells(acc, h) for h in (0, 1)]
+    radius = fit_radius(half_width_deg)
+    while radius < FIT_RADIUS_MAX and any(
+            local_fit(*cells[h], _direction(*picks[h]), radius) is None for h in (0, 1)):
+        radius = min(FIT_RADIUS_MAX, 2.0 * radius)  # too few photons in reach: reach further
     values, errors, where = [], [], []
     for h in (0, 1):
         located = locate(cells[h], _direction(*picks[h]), LOCATE_RADIUS * radius)
