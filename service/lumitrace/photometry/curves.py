@@ -62,6 +62,10 @@ def draw_polar(ax, grid: CGammaGrid, lamp_lumens: float, figures: Mapping | None
         theta = np.radians(ang) % (2 * np.pi)
         order = np.argsort(np.where(ang < 0, 360.0 + ang, ang), kind="stable")
         theta, r, s = theta[order], r[order], s[order]
+        # closed through nadir: the C + 180 half ends just short of 360 deg, where the
+        # C half began at 0
+        theta = np.append(theta, theta[0] + 2 * np.pi)
+        r, s = np.append(r, r[0]), np.append(s, s[0])
         ax.fill_between(theta, np.maximum(r - s, 0.0), r + s, color=colour, alpha=0.25,
                         lw=0)
         ax.plot(theta, r, style, lw=1.5, color=colour, label=label)
