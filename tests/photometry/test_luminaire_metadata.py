@@ -26,10 +26,6 @@ INFO = {"lumitrace:manufacturer": ("string", "Acme Lighting GmbH"),
         "lumitrace:colourRenderingIndex": ("double", 92.0)}
 
 
-def _with_info(src: Path, dst: Path, info: dict) -> Path:
-    return with_attributes(src, dst, info)
-
-
 def _trace(stage: Path, *extra):
     p = subprocess.run([sys.executable, "-m", "lumitrace", "trace", str(stage), "--photons",
                         "300000", "--resolution", "16", "--no-progress", "--no-pictures",
@@ -40,7 +36,7 @@ def _trace(stage: Path, *extra):
 @pytest.fixture(scope="module")
 def warm(tmp_path_factory):
     folder = tmp_path_factory.mktemp("metadata")
-    stage = _with_info(ROOT / "stages" / "warm_downlight.usda", folder / "warm.usda", INFO)
+    stage = with_attributes(ROOT / "stages" / "warm_downlight.usda", folder / "warm.usda", INFO)
     code, out, err = _trace(stage)
     assert code == 0, err
     return stage, json.loads(out.strip().splitlines()[-1])
@@ -119,8 +115,8 @@ def test_a_rectangular_opening_stays_rectangular(tmp_path):
 ])
 def test_bad_luminaire_data_is_one_error_naming_the_property(tmp_path, name, kind, value,
                                                               words):
-    stage = _with_info(ROOT / "stages" / "downlight.usda", tmp_path / "dl.usda",
-                       {name: (kind, value)})
+    stage = with_attributes(ROOT / "stages" / "downlight.usda", tmp_path / "dl.usda",
+                            {name: (kind, value)})
     code, _, err = _trace(stage)
     lines = [ln for ln in err.splitlines() if ln.startswith("lumitrace: error")]
     assert code == 2 and len(lines) == 1 and name in lines[0] and words in lines[0], err

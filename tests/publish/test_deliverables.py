@@ -32,10 +32,6 @@ INFO = {"lumitrace:manufacturer": ("string", "Acme Lighting GmbH"),
         "lumitrace:colourRenderingIndex": ("double", 82.0)}
 
 
-def _with_info(src: Path, dst: Path) -> Path:
-    return with_attributes(src, dst, INFO)
-
-
 def _lumitrace(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "lumitrace", *args], capture_output=True,
                           text=True, timeout=300)
@@ -45,8 +41,8 @@ def _lumitrace(*args: str) -> subprocess.CompletedProcess:
 def demo(tmp_path_factory):
     """The demo with the luminaire's data, traced with the deliverables: (stage, the
     --json summary)."""
-    stage = _with_info(ROOT / "stages" / "downlight.usda",
-                       tmp_path_factory.mktemp("deliverables") / "dl.usda")
+    stage = with_attributes(ROOT / "stages" / "downlight.usda",
+                            tmp_path_factory.mktemp("deliverables") / "dl.usda", INFO)
     p = _lumitrace("trace", str(stage), "--photons", "300000", "--resolution", "16",
                    "--no-progress", "--no-pictures", "--deliverables", "--json")
     assert p.returncode == 0, p.stderr

@@ -164,8 +164,9 @@ class Refinement:
         t0 = time.perf_counter()
         self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
             else None
-        self.files = self.judge_files() if self.settings.target_error is not None else None
-        self._files_photons = self.accumulator.photons
+        self.files = None
+        if self.settings.target_error is not None:
+            self.current_files()
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
@@ -208,6 +209,14 @@ class Refinement:
         self.files = None  # judged again when asked: the counts changed
         return self.estimate
 
+    def current_files(self) -> FilesAccuracy | None:
+        """:meth:`judge_files`, measured once per photon count (a service's status asks
+        for it at every poll; rescales and retraces drop it)."""
+        if self.files is None or self._files_photons != self.accumulator.photons:
+            self.files = self.judge_files()
+            self._files_photons = self.accumulator.photons
+        return self.files
+
     def judge_files(self) -> FilesAccuracy | None:
         """The photometric files' accuracy from the counts so far, where the settings judge
         the target on the files (None where they judge it on the map)."""
@@ -231,7 +240,7 @@ class Refinement:
         convergence target) from the last round: the files' accuracy or the map's bound."""
         target = self.settings.convergence_target
         if self.settings.target_of == "files":
-            files = self.files or self.judge_files()
+            files = self.current_files()
             return "files", files.error, files.meets(target)
         est = self.estimate
         return "map", est.error_bound if est else None, bool(est and est.meets(target))
@@ -318,7 +327,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 break
             elapsed = time.perf_counter() - start
             if progress is not None:
-                judged = r.files if r.files is not None else r.judge_files()
+                judged = r.current_files()
                 error = est.error if est is not None else \
                     judged.error if judged is not None else math.inf
                 progress(Progress(r.iteration, r.accumulator.photons, elapsed, error,
