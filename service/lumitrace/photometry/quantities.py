@@ -31,7 +31,7 @@ from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
 from .grid import CGammaGrid
 from .accuracy import grid_accuracy
-from .measured import cell_solid_angle_grid, emitter_rings, measure_all
+from .measured import emitter_rings, measure_all
 from .peak import Peak, fitted_peak
 
 #: Cone half-angles (deg) of the CIE flux code, and the horizon.
@@ -213,15 +213,6 @@ def _in_plane(peak: Peak, c_deg: float) -> bool:
 IN_PLANE_DEG = 2.5
 
 
-def relative_error(grid: CGammaGrid, c_step: float) -> float | None:
-    """Relative RMS standard error of the grid as a whole: sqrt(sum dOmega sigma^2 /
-    sum dOmega I^2), over the full sphere."""
-    full = grid.full()
-    omega = cell_solid_angle_grid(full.gamma, c_step)
-    den = float((omega * full.candela ** 2).sum())
-    return math.sqrt(float((omega * full.sigma ** 2).sum()) / den) if den > 0 else None
-
-
 #: Gamma raster (deg) of the profiles beam and field angles are read from.
 PROFILE_GAMMAS = np.arange(0.0, 180.0 + 1e-9, 0.5)
 
@@ -269,6 +260,6 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         beam_crossings_c0_c180=spreads[0.0, 0.5][2],
         beam_crossings_c90_c270=spreads[90.0, 0.5][2],
         cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
-        photometry_error=relative_error(grid, c_step) if acc.spread_known else None,
+        photometry_error=accuracy.rms if acc.spread_known else None,
         photometry_worst_error=accuracy.worst if acc.spread_known else None,
         photometry_worst_at=accuracy.worst_at if acc.spread_known else None)
