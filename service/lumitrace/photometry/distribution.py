@@ -10,8 +10,8 @@ import math
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import (EXIT_SIDE, FACES, GAMMA_EDGES, N_CELLS, N_EXIT, N_GAMMA,
-                               cell_solid_angles)
+from ..film.goniometer import (EXIT_SIDE, FACE_AXES, FACES, GAMMA_EDGES, N_CELLS, N_EXIT,
+                               N_GAMMA, cell_solid_angles)
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
 from .accuracy import FilesAccuracy, grid_accuracy
@@ -84,8 +84,34 @@ def luminous_opening(acc: Accumulator) -> LuminousOpening:
         else:
             keep = idx >= N_CELLS
             flux[idx[keep] - N_CELLS] += w * values[keep]
-    flux = flux.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE)
-    lo, hi = np.array(g.lo), np.array(g.hi)
+    return opening_of_faces(flux.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE), g.lo, g.hi)
+
+
+def opening_of_exits(positions: np.ndarray, flux: np.ndarray, lo, hi) -> LuminousOpening:
+    """The luminous opening of exit rays (``positions`` (N, 3) on the box ``lo``, ``hi``,
+    m in the photometric frame, ``flux`` lm each), binned on the box's faces as the
+    goniophotometer bins them and measured by the same rule as :func:`luminous_opening`."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    p = np.asarray(positions, np.float64)
+    # distance to each face's plane, in FACES' order: bottom, top, -C0, +C0, -C90, +C90
+    gap = np.abs(np.stack([p[:, 2] - lo[2], p[:, 2] - hi[2], p[:, 0] - lo[0],
+                           p[:, 0] - hi[0], p[:, 1] - lo[1], p[:, 1] - hi[1]], axis=1))
+    face = np.argmin(gap, axis=1)
+    axes = np.array(FACE_AXES)[face]
+    span = np.maximum(hi - lo, 1e-12)
+    rel = (p - lo) / span
+    rows = np.arange(len(p))
+    col = np.clip((rel[rows, axes[:, 0]] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
+    row = np.clip((rel[rows, axes[:, 1]] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
+    binned = np.bincount((face * EXIT_SIDE + row) * EXIT_SIDE + col,
+                         np.asarray(flux, np.float64), N_EXIT)
+    return opening_of_faces(binned.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE), lo, hi)
+
+
+def opening_of_faces(flux: np.ndarray, lo, hi) -> LuminousOpening:
+    """The luminous opening from the exit flux per face bin (``flux`` (faces, rows, cols) in
+    :data:`~lumitrace.film.goniometer.FACES`' order) of the box ``lo``, ``hi`` (m)."""
+    lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
     box = tuple(float(x) for x in hi - lo)
     total = float(flux.sum())
     if total <= 0:

@@ -4,12 +4,15 @@ rays (where every escaping photon leaves the luminaire's box, and its direction)
 The rays within a cone of half-angle :data:`HALF_ANGLE` about the direction toward the
 observer are projected along it onto the plane perpendicular to it; a pixel's luminance is
 its rays' flux over the cone's solid angle and the pixel's area (cd/m^2), its standard
-error from the rays' fluxes (sqrt(sum w^2), analog photons). The lit area is the pixels at
-or above half the median lit pixel (a boundary pixel counts when it is more than half
-covered, so the edge neither adds nor loses area on average); the mean luminance is all the
-cone's flux over the cone's solid angle and the lit area: the luminance table's intensity
-over projected area, measured another way. The peak pixel is a maximum of noisy values
-(biased upward by about its own error).
+error from the rays' fluxes (sqrt(sum w^2), analog photons). The lit area is the luminous
+opening seen from the view (:func:`~lumitrace.photometry.luminance.projected_area` of the
+opening measured from the same rays, as the luminance table takes it); the mean luminance is
+all the cone's flux over the cone's solid angle and that area: the table's intensity over
+projected area, measured from other photons. The bright area is the pixels at or above half
+the median lit pixel (a boundary pixel counts when it is more than half covered), and its
+mean says how much brighter than the opening's mean the part that carries the light is (an
+opening lit unevenly). The peak pixel is a maximum of noisy values (biased upward by about
+its own error).
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import frame
+from .luminance import projected_area
 
 #: Standard viewing directions (C, gamma) in degrees: nadir, and the C0 and C90 planes at
 #: 45 deg and at the screen-work angles 65 and 85 deg.
@@ -33,8 +37,9 @@ PIXELS = 32
 @dataclass(frozen=True)
 class LuminanceImage:
     """Luminance (cd/m^2) per pixel seen from (``c``, ``gamma``) deg, rows from the top,
-    with standard errors, the pixel's sides (m), the lit area (m^2), the mean luminance over it
-    and the peak pixel, each with its error, and the rays it holds."""
+    with standard errors, the pixel's sides (m), the lit area (m^2, the opening seen from the
+    view) and the mean luminance over it, the bright area and its mean, and the peak pixel,
+    each with its error, and the rays it holds."""
 
     c: float
     gamma: float
@@ -47,13 +52,16 @@ class LuminanceImage:
     peak: float
     peak_error: float
     rays: int
+    bright_area: float = 0.0
+    bright_mean: float = 0.0
 
     def as_dict(self) -> dict:
         """The figures (not the pixels)."""
         return {"c_deg": self.c, "gamma_deg": self.gamma, "pixel_m": list(self.pixel_m),
                 "lit_area_m2": self.lit_area, "mean_cd_per_m2": self.mean,
                 "mean_error": self.mean_error, "peak_cd_per_m2": self.peak,
-                "peak_error": self.peak_error, "rays": self.rays}
+                "peak_error": self.peak_error, "rays": self.rays,
+                "bright_area_m2": self.bright_area, "bright_mean_cd_per_m2": self.bright_mean}
 
 
 def photometric_rays(rays, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -81,10 +89,12 @@ def image_axes(view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def luminance_image(positions: np.ndarray, directions: np.ndarray, flux: np.ndarray,
-                    c: float, gamma: float, half_angle: float = HALF_ANGLE,
+                    c: float, gamma: float, opening=None, half_angle: float = HALF_ANGLE,
                     pixels: int = PIXELS) -> LuminanceImage:
     """The image seen from (``c``, ``gamma``) deg of rays in the photometric frame
-    (:func:`photometric_rays`)."""
+    (:func:`photometric_rays`), its lit area that of ``opening`` (a
+    :class:`~lumitrace.photometry.distribution.LuminousOpening`; the bright area without
+    one)."""
     view = frame.directions(np.array(c), np.array(gamma), "Z")  # the frame's own axes
     cos_half = math.cos(math.radians(half_angle))
     keep = directions @ view >= cos_half
@@ -108,14 +118,14 @@ def luminance_image(positions: np.ndarray, directions: np.ndarray, flux: np.ndar
     img = np.bincount(cell, w, pixels * pixels).reshape(pixels, pixels) * scale
     sig = np.sqrt(np.bincount(cell, w * w, pixels * pixels)).reshape(pixels, pixels) * scale
     smooth = _box3(img)  # the mask from a 3 x 3 mean: a noisy pixel does not flip it
-    lit = smooth >= 0.5 * float(np.median(smooth[smooth > 0]))
-    area = float(lit.sum()) * px * py
+    bright = float((smooth >= 0.5 * float(np.median(smooth[smooth > 0]))).sum()) * px * py
+    area = float(projected_area(opening, c, gamma)) if opening is not None else bright
     k = np.unravel_index(int(np.argmax(img)), img.shape)
     total, total_var = float(w.sum()), float((w * w).sum())
     return LuminanceImage(c, gamma, img, sig, (float(px), float(py)), area,
                           total / (omega * area),
                           math.sqrt(total_var) / (omega * area), float(img[k]),
-                          float(sig[k]), int(len(w)))
+                          float(sig[k]), int(len(w)), bright, total / (omega * bright))
 
 
 def _box3(a: np.ndarray) -> np.ndarray:

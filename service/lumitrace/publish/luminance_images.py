@@ -74,8 +74,13 @@ def write_luminance_images(images, out_dir: str | Path, name: str) -> dict[str, 
 def images_from_rays(rays, scene, out_dir: str | Path, name: str) -> list:
     """The standard views' images of a luminaire's exit rays (a
     :class:`~lumitrace.tm25.RayFile` of ``scene``), written into ``out_dir``."""
+    from ..film.goniometer import Goniometer
+    from ..photometry.distribution import opening_of_exits
     from ..photometry.luminance_images import luminance_images, photometric_rays
 
-    images = luminance_images(*photometric_rays(rays, scene))
+    positions, directions, flux = photometric_rays(rays, scene)
+    box = Goniometer.of(scene)
+    opening = opening_of_exits(positions, flux, box.lo, box.hi)
+    images = luminance_images(positions, directions, flux, opening=opening)
     write_luminance_images(images, out_dir, name)
     return images
