@@ -165,6 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (default: beside the stage)")
     v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
                    "untouched (the result layer is written but not sublayered into it)")
+    v.add_argument("--deliverables", action="store_true", help="also write the datasheet "
+                   "(HTML, PDF) and the GLDF container, with each revision's pictures")
     v.add_argument("--quiet", action="store_true", help="no line per event on stderr")
 
     e = sub.add_parser("edits", help="keep or drop the deltas a service accepted",
@@ -374,7 +376,8 @@ def cmd_serve(args) -> int:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
-                 viewer=not args.no_viewer, sublayer=not args.no_sublayer)
+                 viewer=not args.no_viewer, sublayer=not args.no_sublayer,
+                 deliverables=args.deliverables)
 
 
 def cmd_edits(args) -> int:

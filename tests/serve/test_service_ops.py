@@ -5,6 +5,7 @@ commands while it serves, heavy deltas, and the scripts in ``tools/``."""
 from __future__ import annotations
 
 import difflib
+import html
 import json
 import os
 import random
@@ -294,6 +295,35 @@ def test_no_sublayer_leaves_the_stage_file_untouched(stage):
         assert (stage.parent / "downlight.lumitrace.usda").exists()
         assert stage.read_bytes() == before
         assert s.client.status()["revision"] == 1
+
+
+def _datasheet_figures(stage: Path) -> dict:
+    """The figures (``data-key``: ``data-value``) on the datasheet beside ``stage``."""
+    import re
+    page = (stage.parent / "downlight.datasheet.html").read_text()
+    return {k: json.loads(html.unescape(v)) for k, v in
+            re.findall(r'data-key="([^"]+)" data-value="([^"]*)"', page)}
+
+
+def test_serve_deliverables_writes_the_datasheet_and_gldf_of_each_revision(stage):
+    """``serve --deliverables``: each done revision's datasheet and GLDF container are
+    written with its pictures; after an edit they hold the new revision's figures, the
+    container's photometry is the LDT beside them byte for byte."""
+    import zipfile
+    with Service(stage, *QUICK, "--deliverables", "--quiet") as s:
+        s.wait_done(0)
+        before = _datasheet_figures(stage)
+        _flux(stage, 2400)  # the stage saved: twice the flux, a flux-only edit
+        s.wait_done(1)
+        after = _datasheet_figures(stage)
+        record = s.client.results()
+    assert after["luminous_flux"] == pytest.approx(2.0 * before["luminous_flux"], rel=1e-9)
+    assert after["luminous_flux"] == record["photometry"]["luminous_flux"]
+    assert after["input_hash"] == record["input_hash"] != before["input_hash"]
+    with zipfile.ZipFile(stage.parent / "downlight.gldf") as z:
+        ldt = [n for n in z.namelist() if n.endswith(".ldt")]
+        assert ldt and z.read(ldt[0]) == (stage.parent / "downlight.ldt").read_bytes()
+    assert (stage.parent / "downlight.datasheet.pdf").read_bytes()[:5] == b"%PDF-"
 
 
 # ------------------------------------------------------------------------------------------

@@ -56,13 +56,15 @@ class Engine:
 
     def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
                  out_dir: Path | None = None, records_cap: int = RECORDS_CAP,
-                 sublayer: bool = True):
+                 sublayer: bool = True, deliverables: bool = False):
         self.live = live
         self.settings = replace(settings, workers="threads")
         self.events = events
         self.out_dir = out_dir
         #: False: the result layer is written but not sublayered into the stage file
         self.sublayer = sublayer
+        #: the datasheet and the GLDF container are written with each revision's pictures
+        self.deliverables = deliverables
         #: called (on the engine's thread) once an edit's map is refreshed, before its
         #: files are written: the live view makes its preview frame then
         self.refreshed: Callable[[], Any] | None = None
@@ -470,6 +472,7 @@ class Engine:
         try:
             record = write_outputs(result, self.out_dir, pictures=pictures, extra=extra,
                                    sublayer=self.sublayer,
+                                   deliverables=pictures and self.deliverables,
                                    on_stage=lambda step: self.live.call(self.live.write, step))
         except LumitraceError as exc:
             if pictures:

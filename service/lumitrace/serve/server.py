@@ -47,10 +47,11 @@ def check_binding(host: str, token: str | None) -> None:
 def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           port: int = DEFAULT_PORT, token: str | None = None,
           out_dir: Path | None = None, viewer: bool = True, quiet: bool = False,
-          sublayer: bool = True) -> int:
+          sublayer: bool = True, deliverables: bool = False) -> int:
     """Run the service until a signal; return the exit status (0). ``viewer`` serves the
     live view page at ``/``; ``quiet`` says nothing on stderr but the fatal; ``sublayer``
-    False leaves the stage file untouched (the result layer is not sublayered into it)."""
+    False leaves the stage file untouched (the result layer is not sublayered into it);
+    ``deliverables`` writes the datasheet and the GLDF container with the pictures."""
     check_binding(host, token)
     lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
@@ -58,7 +59,8 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
         events = EventLog(first_id=state.first_event_id(), reserve=state.reserve_events,
                           block=EVENT_BLOCK)
         live = LiveStage(stage, state=state)
-        engine = Engine(live, settings, events, out_dir, sublayer=sublayer)
+        engine = Engine(live, settings, events, out_dir, sublayer=sublayer,
+                        deliverables=deliverables)
         try:
             asyncio.run(_main(live, engine, events, host, port, token, lock, viewer, quiet))
         finally:
