@@ -17,8 +17,9 @@ the plane's own largest value where the peak lies out of the plane), on a grid o
 published symmetry
 with gamma every 0.5 deg (the published grid's 2.5 deg would put a step of the
 distribution, such as a mirror's extra reflection, up to a degree off); their errors come
-from redrawing the profiles within their standard errors (a parametric bootstrap, fixed
-seed).
+from redrawing the grid within its standard errors (a parametric bootstrap, fixed seed):
+each value the grid holds is drawn once, so both sides of a symmetric luminaire's profile,
+which are the same values, move together.
 """
 from __future__ import annotations
 
@@ -166,36 +167,69 @@ def crossings(ang: np.ndarray, prof: np.ndarray, level: float) -> tuple[float, .
     return tuple(float(a) for a in ang[i] + t * (ang[i + 1] - ang[i]))
 
 
-def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float,
-                  fraction: float, rng: np.random.Generator, peak: Peak | None = None
-                  ) -> tuple[float | None, float | None, tuple[float, ...]]:
-    """The beam (``fraction`` 0.5) or field (0.1) angle in the plane through ``c_deg``, its
-    standard error, and every crossing of the level (deg from nadir, negative toward
-    C + 180: a profile with a shoulder near the level crosses it more than twice; the
-    angle is between the outermost two, as CIE and IES read it). The level is ``fraction``
-    of ``peak`` where the peak lies in the plane (within its fit's reach), else of the
-    plane's own largest value."""
-    ang, prof = _plane_profile(grid, c_deg)
-    _, sig = _plane_profile(grid, c_deg, grid.sigma)
+def _level(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float,
+           peak: Peak | None) -> tuple[float, float]:
+    """The top (cd, with its error) the plane's beam and field levels are fractions of:
+    ``peak`` where it lies in the plane (within its fit's reach), else the plane's own
+    largest value, picked by each half and measured by the other."""
     if peak is not None and _in_plane(peak, c_deg):
-        top, top_err = peak.value, peak.error
-    else:
-        p0 = (_plane_profile(halves[0], c_deg)[1],
-              _plane_profile(halves[0], c_deg, halves[0].sigma)[1])
-        p1 = (_plane_profile(halves[1], c_deg)[1],
-              _plane_profile(halves[1], c_deg, halves[1].sigma)[1])
-        top, top_err, _, _ = split_peak(p0[0], p0[1], p1[0], p1[1])
-    angle = spread_angle(ang, prof, fraction * top)
-    if angle is None:
-        return None, None, ()
-    draws = []
+        return peak.value, peak.error
+    p0 = (_plane_profile(halves[0], c_deg)[1],
+          _plane_profile(halves[0], c_deg, halves[0].sigma)[1])
+    p1 = (_plane_profile(halves[1], c_deg)[1],
+          _plane_profile(halves[1], c_deg, halves[1].sigma)[1])
+    top, top_err, _, _ = split_peak(p0[0], p0[1], p1[0], p1[1])
+    return top, top_err
+
+
+def redrawn(grid: CGammaGrid, rng: np.random.Generator) -> np.ndarray:
+    """``grid``'s values redrawn within their errors (normal), one draw per value it holds:
+    the mirror images a symmetry folds into one value move together, as do the planes'
+    shared pole values and the 360 deg plane that repeats 0."""
+    noise = grid.sigma * rng.standard_normal(grid.candela.shape)
+    noise[:, 0], noise[:, -1] = noise[0, 0], noise[0, -1]  # gamma 0 and 180: directions
+    if grid.symmetry == "none" and len(grid.c) > 1 and grid.c[-1] >= 360.0 - 1e-9:
+        noise[-1] = noise[0]
+    return grid.candela + noise
+
+
+def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
+                  rng: np.random.Generator, peak: Peak | None = None,
+                  planes: tuple[float, ...] = (0.0, 90.0), fractions: tuple[float, ...] = (
+                      0.5, 0.1)) -> dict:
+    """The beam (``fraction`` 0.5) and field (0.1) angles in the vertical planes through
+    ``planes`` (C, deg): {(c, fraction): (angle, standard error, every crossing of the level
+    (deg from nadir, negative toward C + 180))}. A profile with a shoulder near the level
+    crosses it more than twice; the angle is between the outermost two, as CIE and IES read
+    it. The errors come from :data:`BOOTSTRAP_DRAWS` redraws of the grid within its errors
+    (:func:`redrawn`: both sides of a symmetric profile are the same values and move
+    together) and of the level's top within its error."""
+    tops = {c: _level(grid, halves, c, peak) for c in planes}
+    out, draws = {}, {}
+    for c in planes:
+        ang, prof = _plane_profile(grid, c)
+        for f in fractions:
+            angle = spread_angle(ang, prof, f * tops[c][0])
+            out[c, f] = (angle, None, ()) if angle is None else \
+                (angle, None, crossings(ang, prof, f * tops[c][0]))
+            draws[c, f] = []
     for _ in range(BOOTSTRAP_DRAWS):
-        a = spread_angle(ang, prof + sig * rng.standard_normal(len(prof)),
-                         fraction * (top + top_err * rng.standard_normal()))
-        if a is not None:
-            draws.append(a)
-    err = float(np.std(draws, ddof=1)) if len(draws) > 1 else None
-    return angle, err, crossings(ang, prof, fraction * top)
+        values = redrawn(grid, rng)
+        for c in planes:
+            ang, prof = _plane_profile(grid, c, values)
+            top = tops[c][0] + tops[c][1] * rng.standard_normal()
+            for f in fractions:
+                if out[c, f][0] is not None:
+                    a = spread_angle(ang, prof, f * top)
+                    if a is not None:
+                        draws[c, f].append(a)
+    for key, (angle, _, cross) in out.items():
+        if angle is None:
+            out[key] = (None, None, ())
+        else:
+            d = draws[key]
+            out[key] = (angle, float(np.std(d, ddof=1)) if len(d) > 1 else None, cross)
+    return out
 
 
 def _in_plane(peak: Peak, c_deg: float) -> bool:
@@ -238,8 +272,7 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         top = Peak(peak, peak_err, float(grid.c[i]), float(grid.gamma[j]))
     accuracy = grid_accuracy(grid, c_step)
     rng = np.random.default_rng(0)
-    spreads = {(c, f): plane_spreads(*profiles, c, f, rng, top)
-               for f in (0.5, 0.1) for c in (0.0, 90.0)}
+    spreads = plane_spreads(*profiles, rng, top)
     values, errors = z["cie"]
     code = " ".join(str(int(round(v))) for v in values)
     dff, dff_err = z["dff"]
