@@ -59,7 +59,7 @@ def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: P
     return {"ies": os.path.relpath(ies_path, layer_dir),
             "flux": ph.figures.luminous_flux, "radius": radius / scale,
             "position": tuple(float(x) for x in local), "up_axis": scene.up_axis,
-            "emitters": [e.path for e in scene.emitters if "[" not in e.path]}
+            "emitters": [p for e in scene.emitters for p in e.light_paths if "[" not in p]}
 
 
 def plotting_available() -> bool:

@@ -67,7 +67,8 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     info = scene.info
     luminaire = scene.luminaire_path.rsplit("/", 1)[-1] or name
     err = fig.photometry_error
-    lamps = info.lamp or f"{len(scene.emitters)} UsdLux emitter(s), {lamp:.6g} lm"
+    lights = sum(len(e.light_paths) for e in scene.emitters)
+    lamps = info.lamp or f"{lights} UsdLux emitter(s), {lamp:.6g} lm"
     keywords = {"MANUFAC": info.manufacturer,
                 "LUMCAT": info.catalogue_number or name,
                 "LUMINAIRE": info.name or f"{luminaire} ({Path(scene.stage_path).name})",

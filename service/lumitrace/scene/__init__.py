@@ -4,9 +4,9 @@ Plain dataclasses of numpy arrays in SI units (metres, lumens) and the stage's o
 with the rules of emission shape (one-sided lights, the UsdLux shaping window) kept once.
 """
 from .model import (ABSORBER, DIELECTRIC, DIFFUSE, EMITTER_KINDS, GLOSSY, MIRROR,
-                    SCATTERING_MODELS, TRANSLUCENT, Emitter, IesShaping, LuminaireInfo,
-                    Material, Scene)
+                    SCATTERING_MODELS, TRANSLUCENT, Emitter, IesShaping, LightGroup,
+                    LuminaireInfo, Material, Scene)
 
 __all__ = ["ABSORBER", "DIELECTRIC", "DIFFUSE", "EMITTER_KINDS", "GLOSSY", "MIRROR",
-           "SCATTERING_MODELS", "TRANSLUCENT", "Emitter", "IesShaping", "LuminaireInfo",
-           "Material", "Scene"]
+           "SCATTERING_MODELS", "TRANSLUCENT", "Emitter", "IesShaping", "LightGroup",
+           "LuminaireInfo", "Material", "Scene"]

@@ -114,6 +114,29 @@ class IesShaping:
     stamp: str = ""  # the file's size and modification time when read: a new file, a new light
 
 
+@dataclass(frozen=True, eq=False)
+class LightGroup:
+    """The lights an emitter stands for when it is a group of identical lights that differ
+    only in place and flux (an LED board): each light's prim path, its offset (M, 3; world
+    m) from the group's transform and its share (M,) of the group's flux. The group emits
+    as their flux-weighted mixture: each photon comes from one light, drawn by share."""
+
+    paths: tuple[str, ...]
+    offsets: np.ndarray
+    shares: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, LightGroup) and self.paths == other.paths and \
+            np.array_equal(self.offsets, other.offsets) and \
+            np.array_equal(self.shares, other.shares)
+
+    def __hash__(self) -> int:
+        return hash(self.paths)
+
+
 @dataclass(frozen=True)
 class Emitter:
     """One UsdLux light as a Lambertian emitter of known flux.
@@ -156,6 +179,19 @@ class Emitter:
     spectrum: tuple = ()
     #: a ray file with a wavelength per ray: each photon starts with its ray's colour
     ray_bands: bool = False
+    #: the lights this emitter stands for, when it is a group of them (None: one light);
+    #: ``to_world`` is then the first light's
+    group: LightGroup | None = None
+
+    @property
+    def light_paths(self) -> tuple[str, ...]:
+        """The prim paths of the lights this emitter stands for."""
+        return self.group.paths if self.group is not None else (self.path,)
+
+    def light_origins(self) -> np.ndarray:
+        """World origins (M, 3; m) of the lights this emitter stands for."""
+        origin = np.asarray(self.to_world, np.float64)[:3, 3]
+        return origin + self.group.offsets if self.group is not None else origin[None]
 
     @property
     def key(self) -> int:
@@ -284,6 +320,9 @@ class Scene:
             size = np.linalg.norm(m[:, :3, :3], 2, axis=(1, 2))
             reach = np.array([e.reach for e in self.emitters], dtype=np.float64)
             pts += list(m[:, None, :3, 3] + (size * reach)[:, None, None] * cube)
+            for e, r in zip(self.emitters, size * reach):  # every light of a group
+                if e.group is not None:
+                    pts.append((e.light_origins()[:, None, :] + r * cube).reshape(-1, 3))
         return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
 
     def shape_points(self) -> np.ndarray:
@@ -294,7 +333,8 @@ class Scene:
                           for z in (-1.0, 1.0)])
         for e in self.emitters:
             m = np.asarray(e.to_world, dtype=np.float64)
-            pts.append((signs * e.half_extent) @ m[:3, :3].T + m[:3, 3])
+            box = (signs * e.half_extent) @ m[:3, :3].T
+            pts.append((box[None] + e.light_origins()[:, None, :]).reshape(-1, 3))
         return np.concatenate(pts, axis=0) if pts else np.zeros((1, 3))
 
     def part_geometry(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -333,6 +373,10 @@ class Scene:
             h.update(repr((e.path, e.kind, e.flux, e.radius, e.width, e.height, e.length,
                            e.treat_as_point, e.cone_angle, e.cone_softness, e.focus)).encode())
             h.update(np.ascontiguousarray(e.to_world, dtype=np.float64).tobytes())
+            if e.group is not None:
+                h.update(repr(e.group.paths).encode())
+                h.update(np.ascontiguousarray(e.group.offsets, np.float64).tobytes())
+                h.update(np.ascontiguousarray(e.group.shares, np.float64).tobytes())
             if e.spectrum:
                 h.update(np.asarray(e.spectrum, np.float64).tobytes())
             if e.triangles is not None:

@@ -86,9 +86,8 @@ def geometry_frame(scene: Scene, revision: int) -> bytes:
     order = np.argsort(part, kind="stable")
     counts = np.bincount(part, minlength=len(scene.parts)).tolist() if len(part) else \
         [0] * len(scene.parts)
-    emitters = [{"path": e.path, "position": _photometric_points(
-        scene, np.asarray(e.to_world, np.float64)[:3, 3][None])[0].tolist()}
-        for e in scene.emitters]
+    emitters = [{"path": p, "position": q.tolist()} for e in scene.emitters
+                for p, q in zip(e.light_paths, _photometric_points(scene, e.light_origins()))]
     header = {"revision": revision, "parts": list(scene.parts), "counts": counts,
               "triangles": int(len(tri)), "every": step, "emitters": emitters,
               "units": "m, photometric frame (x C0, y C90, z up)"}
@@ -206,7 +205,8 @@ def editable_scene(scene: Scene, revision: int) -> dict[str, Any]:
     ranges["ior"] = [schema.IOR_EXCLUSIVE_MIN, None]
     return {"revision": revision, "parts": parts, "materials": materials,
             "emitters": [{"path": e.path, "kind": e.kind, "flux": e.flux,
-                          "editable": "[" not in e.path} for e in scene.emitters],
+                          "editable": "[" not in e.path,
+                          "lights": len(e.light_paths)} for e in scene.emitters],
             "properties": {"scattering": schema.SCATTERING, "reflectance": schema.REFLECTANCE,
                            "specularReflectance": schema.SPECULAR_REFLECTANCE,
                            "transmittance": schema.TRANSMITTANCE, "ior": schema.IOR,

@@ -53,6 +53,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux
 from .. import schema
 from ..errors import StageError
 from ..scene import Emitter, LuminaireInfo, Scene
+from ..scene.groups import group_emitters
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
@@ -218,7 +219,7 @@ class _Reader:
             part_index=part_index,
             materials=tuple(self.materials.materials),
             parts=tuple(self.parts),
-            emitters=tuple(self.emitters),
+            emitters=group_emitters(self.emitters),
             up_axis=up_axis,
             meters_per_unit=self.meters_per_unit,
             luminaire_path=root_path,

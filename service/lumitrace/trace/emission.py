@@ -117,6 +117,19 @@ def emission_args(e: Emitter) -> tuple:
             bool(e.two_sided), *rays, lin, t, normal_map)
 
 
+#: The random draw (counter) that picks a group's light for a photon: far above the
+#: draws of emission (0, 1) and of any bounce (4 per bounce up to the depth limit).
+GROUP_DRAW = 1 << 20
+
+
+def group_lights(e: Emitter, hashes: np.ndarray) -> np.ndarray:
+    """Which light of the group ``e`` (index into its lights) each photon with hash
+    ``hashes`` leaves from: drawn by the lights' shares of the flux."""
+    u = rng.uniforms_from(hashes, GROUP_DRAW, 1)[0]
+    cdf = np.cumsum(e.group.shares)
+    return np.minimum(np.searchsorted(cdf, u * cdf[-1], side="right"), len(cdf) - 1)
+
+
 def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,
          out: tuple | None = None, args: tuple | None = None):
     """Start points (3, N; world m) and unit directions (3, N; world) of photons ``index``.
@@ -134,6 +147,8 @@ def emit(e: Emitter, key: np.uint64, index: np.ndarray, normals: bool = False,
     p, d, n, h = out if out is not None else (np.empty((3, k)), np.empty((3, k)),
                                               np.empty((3, k)), np.empty(k, np.uint64))
     compiled.emit_photons(*(args or emission_args(e)), np.uint64(key), index, p, d, n, h)
+    if e.group is not None:  # each photon from one of the group's lights, drawn by share
+        p += e.group.offsets[group_lights(e, h)].T
     if normals:
         return p, d, n
     return p, d
