@@ -134,3 +134,23 @@ def test_dimming_the_board_is_a_rescale_and_one_light_retraces_the_group(tmp_pat
     fresh = run(edited, settings, frame=frame)
     assert np.array_equal(r.accumulator.counts(), fresh.accumulator.counts())
     assert np.array_equal(r.accumulator.emitters[0].cells, fresh.accumulator.emitters[0].cells)
+
+
+def test_the_photometric_variant_turns_every_light_of_the_group_off(tmp_path):
+    import subprocess
+    import sys
+
+    from pxr import Usd
+
+    stage_path = _board(tmp_path / "b.usda", _fluxes())
+    p = subprocess.run([sys.executable, "-m", "lumitrace", "trace", str(stage_path),
+                        "--photons", "20000", "--resolution", "8", "--no-pictures",
+                        "--no-progress"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    stage = Usd.Stage.Open(str(stage_path))
+    vset = stage.GetPrimAtPath("/Luminaire").GetVariantSet("lumitraceRepresentation")
+    leds = [f"/Luminaire/Board/Led_{i}_{j}" for i in range(SIDE) for j in range(SIDE)]
+    assert all(stage.GetPrimAtPath(x).IsActive() for x in leds)
+    vset.SetVariantSelection("photometric")
+    assert not any(stage.GetPrimAtPath(x).IsActive() for x in leds)
+    assert stage.GetPrimAtPath("/Luminaire/lumitracePhotometricLight").IsActive()

@@ -298,8 +298,12 @@ def _photometric_variant(layer, prim_path, light: Mapping) -> None:
         xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*light["position"]))
         if light.get("up_axis", "Z") == "Y":
             xf.AddRotateXOp().Set(-90.0)  # local -Z to -Y (nadir), local +X stays C0
+    # the emitters off, as specs in the variant (one change block: an LED board's 10,000
+    # lights through the stage's API would recompose it once per light)
+    target = vset.GetVariantEditTarget()
+    with Sdf.ChangeBlock():
         for path in light.get("emitters", ()):
-            stage.OverridePrim(path).SetActive(False)
+            Sdf.CreatePrimInLayer(layer, target.MapToSpecPath(Sdf.Path(path))).active = False
     vset.SetVariantSelection("geometry")
 
 
