@@ -147,15 +147,29 @@ def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float) -> float | Non
     sides."""
     if not level > 0:
         return None
-    inside = np.flatnonzero(prof >= level)
-    if not inside.size or inside[0] == 0 or inside[-1] == len(prof) - 1:
-        return None
+    a = spread_angles(ang, prof[None], np.array([level]))[0]
+    return None if np.isnan(a) else float(a)
+
+
+def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """:func:`spread_angle` of every row of ``profs`` (rows, samples) at its ``levels``
+    (rows,), NaN where undefined."""
+    above = profs >= levels[:, None]
+    n = profs.shape[1]
+    first = np.argmax(above, axis=1)
+    last = n - 1 - np.argmax(above[:, ::-1], axis=1)
+    ok = above.any(axis=1) & (first > 0) & (last < n - 1) & (levels > 0)
+    first, last = np.where(ok, first, 1), np.where(ok, last, n - 2)
+    rows = np.arange(len(profs))
 
     def cross(i, j):  # between inside sample i and outside sample j
-        t = (prof[i] - level) / (prof[i] - prof[j])
+        pi, pj = profs[rows, i], profs[rows, j]
+        t = (pi - levels) / (pi - pj)
         return ang[i] + t * (ang[j] - ang[i])
 
-    return float(cross(inside[-1], inside[-1] + 1) - cross(inside[0], inside[0] - 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = cross(last, last + 1) - cross(first, first - 1)
+    return np.where(ok, out, np.nan)
 
 
 def crossings(ang: np.ndarray, prof: np.ndarray, level: float) -> tuple[float, ...]:
@@ -182,15 +196,27 @@ def _level(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float
     return top, top_err
 
 
-def redrawn(grid: CGammaGrid, rng: np.random.Generator) -> np.ndarray:
-    """``grid``'s values redrawn within their errors (normal), one draw per value it holds:
+def redrawn(grid: CGammaGrid, rng: np.random.Generator, draws: int | None = None,
+            rows: np.ndarray | None = None) -> np.ndarray:
+    """``grid``'s values (its planes ``rows``, default all) redrawn within their errors
+    (normal), one draw per value the grid holds (``draws`` of them stacked first, or one):
     the mirror images a symmetry folds into one value move together, as do the planes'
     shared pole values and the 360 deg plane that repeats 0."""
-    noise = grid.sigma * rng.standard_normal(grid.candela.shape)
-    noise[:, 0], noise[:, -1] = noise[0, 0], noise[0, -1]  # gamma 0 and 180: directions
+    rows = np.arange(len(grid.c)) if rows is None else np.asarray(rows)
+    shape = (len(rows), len(grid.gamma)) if draws is None else \
+        (draws, len(rows), len(grid.gamma))
+    noise = grid.sigma[rows] * rng.standard_normal(shape)
+    noise[..., :, 0] = noise[..., :1, 0]  # gamma 0 and 180: directions, one value each
+    noise[..., :, -1] = noise[..., :1, -1]
     if grid.symmetry == "none" and len(grid.c) > 1 and grid.c[-1] >= 360.0 - 1e-9:
-        noise[-1] = noise[0]
-    return grid.candela + noise
+        first, last = np.flatnonzero(rows == 0), np.flatnonzero(rows == len(grid.c) - 1)
+        if len(first) and len(last):
+            noise[..., last[0], :] = noise[..., first[0], :]
+    return grid.candela[rows] + noise
+
+
+#: Redraws made at once (memory: this many copies of the grid).
+DRAW_CHUNK = 50
 
 
 def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
@@ -213,16 +239,23 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             out[c, f] = (angle, None, ()) if angle is None else \
                 (angle, None, crossings(ang, prof, f * tops[c][0]))
             draws[c, f] = []
-    for _ in range(BOOTSTRAP_DRAWS):
-        values = redrawn(grid, rng)
-        for c in planes:
-            ang, prof = _plane_profile(grid, c, values)
-            top = tops[c][0] + tops[c][1] * rng.standard_normal()
+    # each profile's half-planes as weights of the grid's planes (linear across them):
+    # only the planes they use are redrawn
+    weights = grid.at(np.array([a for c in planes for a in (c + 180.0, c)]),
+                      np.eye(len(grid.c)))
+    rows = np.flatnonzero(np.abs(weights).sum(axis=0) > 0)
+    ang = np.concatenate([-grid.gamma[::-1], grid.gamma[1:]])
+    for start in range(0, BOOTSTRAP_DRAWS, DRAW_CHUNK):
+        d = min(DRAW_CHUNK, BOOTSTRAP_DRAWS - start)
+        sides = np.einsum("hk,dkg->dhg", weights[:, rows], redrawn(grid, rng, d, rows))
+        for i, c in enumerate(planes):
+            b, a = sides[:, 2 * i], sides[:, 2 * i + 1]
+            profs = np.concatenate([b[:, ::-1], a[:, 1:]], axis=1)
+            top = tops[c][0] + tops[c][1] * rng.standard_normal(d)
             for f in fractions:
                 if out[c, f][0] is not None:
-                    a = spread_angle(ang, prof, f * top)
-                    if a is not None:
-                        draws[c, f].append(a)
+                    got = spread_angles(ang, profs, f * top)
+                    draws[c, f] += got[~np.isnan(got)].tolist()
     for key, (angle, _, cross) in out.items():
         if angle is None:
             out[key] = (None, None, ())
