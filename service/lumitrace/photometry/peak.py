@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA, cell_solid_angles
+from ..film.goniometer import (C_STEP, GAMMA_EDGES, GAMMA_STEP, N_C, N_CELLS, N_GAMMA,
+                               cell_solid_angles)
 
 #: Radius (deg) of the fit: this share of the beam's half width (to where it halves), within
 #: the bounds below; the widest for a distribution that never halves.
@@ -64,6 +65,29 @@ def _cell_directions() -> np.ndarray:
     d = np.stack([np.cos(c)[:, None] * sg[None, :], np.sin(c)[:, None] * sg[None, :],
                   np.broadcast_to(-np.cos(g), (N_C, N_GAMMA))], axis=-1)
     return d.reshape(-1, 3)
+
+
+@functools.lru_cache(maxsize=1)
+def _cell_omegas() -> np.ndarray:
+    """Solid angles (sr) of the goniometer cells, flat (read-only, made once)."""
+    omega = cell_solid_angles().reshape(-1).copy()
+    omega.flags.writeable = False
+    return omega
+
+
+@functools.lru_cache(maxsize=1)
+def _gamma_centres() -> np.ndarray:
+    return 0.5 * (GAMMA_EDGES[1:] + GAMMA_EDGES[:-1])
+
+
+def _cells_within(centre: np.ndarray, radius_deg: float) -> np.ndarray:
+    """Flat indices of the goniometer cells whose centres lie within ``radius_deg`` of the
+    unit vector ``centre``: looked for only in the gamma band that can hold them."""
+    gamma = math.degrees(math.acos(max(-1.0, min(1.0, -float(centre[2])))))
+    g = np.flatnonzero(np.abs(_gamma_centres() - gamma) <= radius_deg + GAMMA_STEP)
+    cells = (np.arange(N_C)[:, None] * N_GAMMA + g[None, :]).ravel()
+    inside = _cell_directions()[cells] @ centre >= math.cos(math.radians(radius_deg))
+    return np.sort(cells[inside])
 
 
 def _direction(c_deg: float, gamma_deg: float) -> np.ndarray:
@@ -109,17 +133,15 @@ def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg:
     ``centre`` (area-weighted least squares). Returns (value at ``centre``, its standard
     error, the fit's stationary point as a unit vector, within the radius), or None where
     too few cells hold light."""
-    dirs = _cell_directions()
-    cos_r = math.cos(math.radians(radius_deg))
-    near = np.flatnonzero(dirs @ centre >= cos_r)
+    near = _cells_within(centre, radius_deg)
     if near.size < 12:
         return None
     total, spread = float(flux[near].sum()), float(var[near].sum())
     if spread <= 0 or total * total < MIN_FIT_PHOTONS * spread:
         return None  # too few photons in reach for six parameters
-    omega = cell_solid_angles().reshape(-1)[near]
+    omega = _cell_omegas()[near]
     u, v = _tangent_basis(centre)
-    d = dirs[near]
+    d = _cell_directions()[near]
     x, y = np.degrees(d @ u), np.degrees(d @ v)  # gnomonic-like tangent coordinates (deg)
     X = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y], axis=1)
     cd = flux[near] / omega
