@@ -38,7 +38,9 @@ def dl(tmp_path):
     return stage
 
 
-def _many_lights(path: Path, n: int) -> Path:
+def _many_lights(path: Path, n: int, alike: bool = False) -> Path:
+    """``n`` sphere lights of 1 lm in a row: each of its own size (so each is traced as
+    itself), or all ``alike`` (traced as one group)."""
     from pxr import Sdf, Usd, UsdGeom, UsdLux
 
     stage = Usd.Stage.CreateNew(str(path))
@@ -48,7 +50,7 @@ def _many_lights(path: Path, n: int) -> Path:
     stage.SetDefaultPrim(root.GetPrim())
     for i in range(n):
         light = UsdLux.SphereLight.Define(stage, f"/Luminaire/L{i}")
-        light.CreateRadiusAttr(0.001)
+        light.CreateRadiusAttr(0.001 if alike else 0.001 * (1.0 + 1e-3 * i))
         UsdGeom.Xformable(light).AddTranslateOp().Set((0.001 * i, 0, 0))
         light.GetPrim().CreateAttribute("lumitrace:luminousFlux",
                                         Sdf.ValueTypeNames.Float).Set(1.0)
@@ -75,6 +77,16 @@ def test_fewer_photons_than_emitters_is_refused_and_every_emitter_counts(tmp_pat
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["emitted_lm"] == pytest.approx(400.0)
     assert summary["relative_error"] > 0.1  # 2.5 photons a light: honest, and large
+
+
+def test_many_identical_lights_are_one_group_that_needs_no_photon_each(tmp_path):
+    """400 lights alike are traced as one group: 300 photons are enough, every light's flux
+    is there."""
+    stage = _many_lights(tmp_path / "alike.usda", 400, alike=True)
+    code, out, err = trace(stage, "--json", photons=300)
+    assert code == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["emitted_lm"] == pytest.approx(400.0) and summary["photons"] == 300
 
 
 def test_allocation_gives_every_emitter_its_minimum_and_keeps_the_usual_split():
