@@ -1,6 +1,8 @@
-"""Embree through its C API, a geometry per part, against embreex's one geometry: the same
-triangle at the same float32 distance for every ray, an edited part rebuilt alone and
-giving what a fresh build gives, and embreex serving where the library is not found."""
+"""Embree through its C API, a geometry per part (one level, or two: each part its own
+scene, placed by an identity instance), against embreex's one geometry: the same triangle
+at the same float32 distance for every ray, an edited part rebuilt alone and giving what a
+fresh build gives, a two-level trace equal to a one-level one photon for photon, and
+embreex serving where the library is not found."""
 import dataclasses
 from pathlib import Path
 
@@ -31,26 +33,45 @@ def _triangles(ps, scene=None):
     return np.ascontiguousarray(tri, dtype=np.float32)
 
 
-def _same_hits(a, b):
+#: Share of rays whose hit a two-level scene may decide otherwise than one level: a ray
+#: that grazes a triangle's edge (one in about 300,000 of the louvre's) is caught by one
+#: structure and missed by the other.
+EDGE_SHARE = 1e-4
+
+
+def _same_hits(a, b, rare=False):
+    """Whether the hits ``a`` and ``b`` (``b`` one-level) agree: every ray, or all but
+    :data:`EDGE_SHARE` of them where ``rare`` (``a`` two-level)."""
     hit = b["primID"] >= 0
-    assert np.array_equal(a["primID"], b["primID"])
-    assert np.array_equal(a["tfar"][hit], b["tfar"][hit])  # embreex's misses say 1e37
-    assert np.isinf(a["tfar"][~hit]).all()
+    same = (a["primID"] == b["primID"]) & ((a["tfar"] == b["tfar"]) | ~hit)
+    if rare:
+        assert (~same).sum() <= EDGE_SHARE * len(same), (~same).sum()
+    else:
+        assert same.all()
+    assert np.isinf(a["tfar"][(a["primID"] < 0)]).all()  # embreex's misses say 1e37
     return int(hit.sum())
+
+
+@pytest.fixture(params=["one level", "two levels"])
+def levels(request, monkeypatch):
+    """Scenes built one-level, or two-level (each part its own scene) whatever their size."""
+    two = request.param == "two levels"
+    monkeypatch.setattr(embree, "TWO_LEVEL_TRIANGLES", 0 if two else 1 << 62)
+    return two
 
 
 @pytest.mark.parametrize("stage", ["louvre.usda", "downlight.usda",
                                    "reference/integrating_sphere.usda",
                                    "reference/fresnel_slab.usda"])
-def test_a_geometry_per_part_hits_what_embreex_hits(stage):
+def test_a_geometry_per_part_hits_what_embreex_hits(stage, levels):
     ps = prepare(read_stage(STAGES / stage))
-    assert isinstance(ps.embree, embree.PartScene)
+    assert isinstance(ps.embree, embree.PartScene) and ps.embree.two_level == levels
     o, d = _traced_rays(ps)
     bare = embree_scene(_triangles(ps), (), parts=False)
-    assert _same_hits(ps.intersect(o, d), bare.run(o, d, output=1)) > 0.2 * len(o)
+    assert _same_hits(ps.intersect(o, d), bare.run(o, d, output=1), levels) > 0.2 * len(o)
 
 
-def test_an_edited_part_is_rebuilt_alone_and_hits_as_a_fresh_build():
+def test_an_edited_part_is_rebuilt_alone_and_hits_as_a_fresh_build(levels):
     scene = read_stage(STAGES / "louvre.usda")
     ps = prepare(scene)
     o, d = _traced_rays(ps)
@@ -64,12 +85,31 @@ def test_an_edited_part_is_rebuilt_alone_and_hits_as_a_fresh_build():
     fresh = prepare(moved, ps.frame)
     assert fresh.embree is not ps.embree and len(fresh.embree.rebuilt) > 1
     now = updated.intersect(o, d)
-    _same_hits(now, fresh.intersect(o, d))
-    _same_hits(now, embree_scene(_triangles(ps, moved), (), parts=False).run(o, d, output=1))
+    _same_hits(now, fresh.intersect(o, d))  # the same structure: exactly
+    _same_hits(now, embree_scene(_triangles(ps, moved), (), parts=False).run(o, d, output=1),
+               levels)
     assert (now["primID"] != before["primID"]).sum() > 100  # the blade moved in their way
     # unchanged triangles rebuild nothing; a new part layout is not an update
     assert prepare(moved, ps.frame, previous=updated).embree.rebuilt == []
     assert not ps.embree.update(_triangles(ps, moved), np.zeros(len(tri), np.int64))
+
+
+def test_two_levels_trace_what_one_level_traces_but_for_grazing_rays(monkeypatch):
+    """A batch traced two-level: the same photons' counts as one level but for the rare
+    photon a grazing ray sends elsewhere, and the same exactly when traced again."""
+    scene = read_stage(STAGES / "louvre.usda")
+    job = BatchJob(0, 0, 60000, 4, 16)
+    tallies = []
+    for threshold in (1 << 62, 0, 0):  # one level, then two, twice
+        monkeypatch.setattr(embree, "TWO_LEVEL_TRIANGLES", threshold)
+        ps = prepare(scene)
+        assert ps.embree.two_level == (threshold == 0)
+        tallies.append(trace_batch(ps, job, records=True))
+    one, two, again = tallies
+    assert np.array_equal(two.counts, again.counts) and np.array_equal(two.cells, again.cells)
+    assert np.array_equal(two.records.texel, again.records.texel)
+    moved = (one.records.texel != two.records.texel).sum()
+    assert moved <= 20 * EDGE_SHARE * job.count, moved  # a photon's path, not one ray
 
 
 def test_without_the_library_embreex_traces_the_same_photons(monkeypatch):

@@ -1,6 +1,13 @@
 """Embree 4 through its C API, from the library the embreex wheel ships: one geometry per
 part, intersected by a compiled kernel, and the geometries of edited parts rebuilt in place.
 
+A large scene (:data:`TWO_LEVEL_TRIANGLES` or more) is two-level: each part its own Embree
+scene, placed in the top scene by an instance of identity transform, so an edit rebuilds
+the edited parts' own structures and a top level over the parts, not every triangle. An
+identity instance leaves the ray's numbers as they are, so the hits are the one-level
+scene's (tested): a fresh trace and an incremental one meet the same triangles at the same
+distances whichever structure either uses.
+
 embreex builds one geometry of all triangles, rebuilt whole after any edit, and returns six
 freshly allocated arrays per call. Here each part is its own geometry, so an edit detaches
 and attaches only the edited parts', the scene is committed once, and hits are written
@@ -21,6 +28,11 @@ import numpy as np
 
 #: Embree 4 enum values (rtcore_common.h, rtcore_buffer.h, rtcore_scene.h).
 _TRIANGLE, _INDEX, _VERTEX, _UINT3, _FLOAT3, _ROBUST = 0, 0, 1, 0x5003, 0x9003, 1 << 2
+_INSTANCE, _FLOAT3X4_COLUMNS = 121, 0x9234
+#: Triangles from which a scene is built two-level (a part's edit then rebuilds that part
+#: alone; below it a rebuild of all is quick, and one level traces a little faster).
+TWO_LEVEL_TRIANGLES = 200_000
+_IDENTITY = np.array([1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], np.float32)  # 3 x 4, columns
 _P = ctypes.c_size_t  # pointers, passed as addresses
 _API = {"rtcNewDevice": (_P, [ctypes.c_char_p]), "rtcNewScene": (_P, [_P]),
         "rtcSetSceneFlags": (None, [_P, ctypes.c_int]),
@@ -31,7 +43,9 @@ _API = {"rtcNewDevice": (_P, [ctypes.c_char_p]), "rtcNewScene": (_P, [_P]),
         "rtcAttachGeometryByID": (None, [_P, _P, ctypes.c_uint]),
         "rtcDetachGeometry": (None, [_P, ctypes.c_uint]), "rtcCommitScene": (None, [_P]),
         "rtcReleaseScene": (None, [_P]), "rtcGetDeviceError": (ctypes.c_int, [_P]),
-        "rtcIntersect1": (None, [_P, _P, _P])}
+        "rtcIntersect1": (None, [_P, _P, _P]),
+        "rtcSetGeometryInstancedScene": (None, [_P, _P]),
+        "rtcSetGeometryTransform": (None, [_P, ctypes.c_uint, ctypes.c_int, _P])}
 _lock = threading.Lock()
 
 
@@ -74,13 +88,21 @@ class PartScene:
     """The triangles (T, 3, 3) float32 of a prepared scene as an Embree scene with one
     geometry per part (``part_index`` (T,)), hits numbered as the triangles are."""
 
-    def __init__(self, triangles: np.ndarray, part_index: np.ndarray):
+    def __init__(self, triangles: np.ndarray, part_index: np.ndarray,
+                 two_level: bool | None = None):
+        """``two_level``: each part its own scene (default: from
+        :data:`TWO_LEVEL_TRIANGLES` triangles on)."""
         from .compiled import intersect
+
+        self.two_level = len(triangles) >= TWO_LEVEL_TRIANGLES if two_level is None \
+            else bool(two_level)
+        self._scenes: dict[int, int] = {}  # two-level: each part's own Embree scene
 
         self._lib, self._intersect = library(), intersect
         self._fn = ctypes.cast(self._lib.rtcIntersect1, ctypes.c_void_p).value
         self._part = part = _parts(part_index, len(triangles))
         self.order = np.argsort(part, kind="stable").astype(np.int64)
+        self._in_order = bool(np.all(self.order == np.arange(len(part))))
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
         self._buffers: dict[int, tuple] = {}  # the geometries' shared buffers, kept alive
@@ -93,13 +115,16 @@ class PartScene:
 
     def _by_part(self, triangles: np.ndarray):
         """(part, its float32 triangles (t, 3, 3)) for every part that has triangles."""
-        tri = np.asarray(triangles, np.float32)[self.order]
+        tri = np.asarray(triangles, np.float32)
+        if not self._in_order:  # parts laid out one after another need no copy
+            tri = tri[self.order]
         bounds = np.append(self.offsets, len(tri))
         return [(g, tri[bounds[g]:bounds[g + 1]]) for g in range(len(self.offsets))
                 if bounds[g + 1] > bounds[g]]
 
     def _attach(self, g: int, tri: np.ndarray) -> None:
-        """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g``."""
+        """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g`` (two-level: as the
+        instance ``g`` of a scene of its own)."""
         lib = self._lib
         v = np.zeros((3 * len(tri) + 1, 4), np.float32)  # 16-byte rows, one spare
         v[:-1, :3] = tri.reshape(-1, 3)
@@ -110,6 +135,21 @@ class PartScene:
         lib.rtcSetSharedGeometryBuffer(geom, _INDEX, 0, _UINT3, idx.ctypes.data, 0, 12,
                                        len(tri))
         lib.rtcCommitGeometry(geom)
+        if self.two_level:
+            part = lib.rtcNewScene(_device())
+            lib.rtcSetSceneFlags(part, _ROBUST)
+            lib.rtcAttachGeometryByID(part, geom, 0)
+            lib.rtcReleaseGeometry(geom)  # the part's scene holds it
+            with _lock:
+                lib.rtcCommitScene(part)
+            geom = lib.rtcNewGeometry(_device(), _INSTANCE)
+            lib.rtcSetGeometryInstancedScene(geom, part)
+            lib.rtcSetGeometryTransform(geom, 0, _FLOAT3X4_COLUMNS, _IDENTITY.ctypes.data)
+            lib.rtcCommitGeometry(geom)
+            old = self._scenes.pop(g, None)
+            if old is not None:
+                lib.rtcReleaseScene(old)
+            self._scenes[g] = part
         lib.rtcAttachGeometryByID(self.scene, geom, g)
         lib.rtcReleaseGeometry(geom)  # the scene holds it
         self._buffers[g] = (v, idx)
@@ -158,3 +198,5 @@ class PartScene:
         lib = getattr(self, "_lib", None)
         if lib is not None and getattr(self, "scene", None):
             lib.rtcReleaseScene(self.scene)
+            for part in getattr(self, "_scenes", {}).values():
+                lib.rtcReleaseScene(part)

@@ -250,7 +250,9 @@ def prepare(scene: Scene, frame: TracingFrame | None = None,
     e2 = np.ascontiguousarray(tri[:, 2].T) - v0
     nrm = cross(e1, e2)
     length = np.sqrt(dot(nrm, nrm))
-    normals = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normals = nrm / length  # (in place of a zeroed array: page faults of 24 MB at 1M)
+    normals[:, ~(length > 0)] = 0.0
     embree = None
     table = None
     kind = np.zeros(tri.shape[0], np.int8)

@@ -327,13 +327,16 @@ def _closest(fn, scene, addr, f, u, ox, oy, oz, dx, dy, dz, offsets, order):
     _call_void3(fn, scene, addr, numba.uint64(0))
     if u[18] == 0xFFFFFFFF:
         return np.int64(-1), np.inf
-    return np.int64(order[offsets[u[18]] + u[17]]), np.float64(f[8])
+    # the part: the geometry's ID, or in a two-level scene its instance's
+    g = u[18] if u[19] == 0xFFFFFFFF else u[19]
+    return np.int64(order[offsets[g] + u[17]]), np.float64(f[8])
 
 
 @numba.njit(**_JIT)
 def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
-    geometry per part; triangle j of geometry g is ``order[offsets[g] + j]``): triangle
+    geometry, or one instance of a scene of it, per part; triangle j of part g is
+    ``order[offsets[g] + j]``): triangle
     ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``: ``rtcIntersect1``."""
     buf = np.empty(40, np.uint32)  # an RTCRayHit, 16-byte aligned within
     k = ((16 - buf.ctypes.data % 16) % 16) // 4
