@@ -1,6 +1,7 @@
 """The beam and field angles' stated errors are honest where the profile's two sides are the
 same values (a symmetric grid): measured grids drawn around a closed-form Lambertian
-profile, their angles' spread against the errors stated for each."""
+profile, their angles' spread against the errors stated for each; a rotationally symmetric
+luminaire has one beam angle in every plane."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,6 +11,7 @@ from lumitrace.photometry import quantities
 from lumitrace.photometry.grid import CGammaGrid
 from lumitrace.photometry.peak import Peak
 from lumitrace.photometry.quantities import PROFILE_GAMMAS, plane_spreads, redrawn
+from helpers.traced import traced
 
 PEAK = 1000.0 / np.pi  # cd, a 1000 lm Lambertian disc
 
@@ -54,3 +56,16 @@ def test_stated_errors_match_the_spread_of_symmetric_grids(monkeypatch):
         assert a.mean() == pytest.approx(want, abs=3.0 * a.std(ddof=1) / np.sqrt(len(a)))
         ratio = a.std(ddof=1) / np.mean(errors[f])
         assert 0.75 < ratio < 1.3, (f, ratio)
+
+
+def test_a_rotationally_symmetric_luminaire_has_one_beam_in_every_plane():
+    """The demo's peak lies off both planes (a flat top's fit wanders), but a rotational
+    luminaire's peak is a ring in every plane: both planes take it as their level, so their
+    angles and errors are the same numbers."""
+    _, _, ph, _ = traced("demo")
+    f = ph.figures
+    assert ph.grid.symmetry == "rotational"
+    assert (f.beam_angle_c0_c180, f.beam_angle_c0_c180_error) == \
+        (f.beam_angle_c90_c270, f.beam_angle_c90_c270_error)
+    assert (f.field_angle_c0_c180, f.field_angle_c0_c180_error) == \
+        (f.field_angle_c90_c270, f.field_angle_c90_c270_error)

@@ -186,7 +186,7 @@ def _level(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float
     """The top (cd, with its error) the plane's beam and field levels are fractions of:
     ``peak`` where it lies in the plane (within its fit's reach), else the plane's own
     largest value, picked by each half and measured by the other."""
-    if peak is not None and _in_plane(peak, c_deg):
+    if peak is not None and _in_plane(peak, c_deg, grid.symmetry):
         return peak.value, peak.error
     p0 = (_plane_profile(halves[0], c_deg)[1],
           _plane_profile(halves[0], c_deg, halves[0].sigma)[1])
@@ -248,10 +248,11 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     for start in range(0, BOOTSTRAP_DRAWS, DRAW_CHUNK):
         d = min(DRAW_CHUNK, BOOTSTRAP_DRAWS - start)
         sides = np.einsum("hk,dkg->dhg", weights[:, rows], redrawn(grid, rng, d, rows))
+        z = rng.standard_normal(d)  # the top's redraw: one peak, the same in every plane
         for i, c in enumerate(planes):
             b, a = sides[:, 2 * i], sides[:, 2 * i + 1]
             profs = np.concatenate([b[:, ::-1], a[:, 1:]], axis=1)
-            top = tops[c][0] + tops[c][1] * rng.standard_normal(d)
+            top = tops[c][0] + tops[c][1] * z
             for f in fractions:
                 if out[c, f][0] is not None:
                     got = spread_angles(ang, profs, f * top)
@@ -265,15 +266,25 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     return out
 
 
-def _in_plane(peak: Peak, c_deg: float) -> bool:
-    """Whether the peak's direction lies in the vertical plane through ``c_deg`` (within
-    :data:`IN_PLANE_DEG`; every plane holds a peak at a pole)."""
-    if peak.gamma <= IN_PLANE_DEG or peak.gamma >= 180.0 - IN_PLANE_DEG:
+#: The C angles (as functions of the peak's C) that a symmetry makes the same direction.
+MIRROR_IMAGES = {"none": (lambda c: c,), "C0-C180": (lambda c: c, lambda c: -c),
+                 "C90-C270": (lambda c: c, lambda c: 180.0 - c),
+                 "quadrant": (lambda c: c, lambda c: -c, lambda c: 180.0 - c,
+                              lambda c: 180.0 + c)}
+
+
+def _in_plane(peak: Peak, c_deg: float, symmetry: str = "none") -> bool:
+    """Whether the peak's direction, or a mirror image of it under ``symmetry``, lies in the
+    vertical plane through ``c_deg`` (within :data:`IN_PLANE_DEG`; every plane holds a peak
+    at a pole, and of a rotationally symmetric luminaire)."""
+    if symmetry == "rotational" or peak.gamma <= IN_PLANE_DEG \
+            or peak.gamma >= 180.0 - IN_PLANE_DEG:
         return True
-    off = math.radians(peak.c - c_deg)
-    # angular distance of the direction from the plane: asin(sin gamma |sin(C - C_plane)|)
-    return math.degrees(math.asin(min(1.0, math.sin(math.radians(peak.gamma))
-                                      * abs(math.sin(off))))) <= IN_PLANE_DEG
+    sin_gamma = math.sin(math.radians(peak.gamma))
+    # angular distance of a direction from the plane: asin(sin gamma |sin(C - C_plane)|)
+    return any(math.degrees(math.asin(min(1.0, sin_gamma * abs(math.sin(math.radians(
+        image(peak.c) - c_deg)))))) <= IN_PLANE_DEG
+        for image in MIRROR_IMAGES.get(symmetry, MIRROR_IMAGES["none"]))
 
 
 #: A peak this close (deg) to a vertical plane is that plane's top.
