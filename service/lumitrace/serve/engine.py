@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable
@@ -49,6 +49,8 @@ RETRACE_MAX_SHARE = 0.5
 #: Photons of a revision's first round: small, so that the first result after an edit is
 #: on disk quickly (later rounds double up to a full round of batches).
 FIRST_ROUND = 8192
+#: How often (s) a running round looks for a new revision.
+INTERRUPT_POLL = 0.005
 
 
 class Engine:
@@ -391,13 +393,19 @@ class Engine:
                 return  # the round is dropped: its photons never reach the map
         else:
             futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
-            tallies = []
             try:
-                for f in futures:
+                # a new revision is looked for while the batches run, not only between
+                # them: an edit then waits for the running batches alone
+                running = set(futures)
+                while running:
                     if self._interrupted():
                         _drain(futures)
                         return  # the round is dropped: its photons never reach the map
-                    tallies.append(f.result())
+                    done, running = wait(running, timeout=INTERRUPT_POLL,
+                                         return_when=FIRST_COMPLETED)
+                    for f in done:
+                        f.result()  # a failed batch raises here
+                tallies = [f.result() for f in futures]
             except BaseException:
                 _drain(futures)  # a batch failed: none of the round may outlive it
                 raise
