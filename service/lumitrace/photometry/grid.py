@@ -119,3 +119,22 @@ def default_gammas(peak_half_width_deg: float | None = None) -> np.ndarray:
         g = np.sort(np.concatenate([g, fine]))  # np.union1d would load numpy.ma (20 ms)
         g = g[np.append(True, g[1:] != g[:-1])]
     return g
+
+
+def redrawn(grid: CGammaGrid, rng: np.random.Generator, draws: int | None = None,
+            rows: np.ndarray | None = None) -> np.ndarray:
+    """``grid``'s values (its planes ``rows``, default all) redrawn within their errors
+    (normal), one draw per value the grid holds (``draws`` of them stacked first, or one):
+    the mirror images a symmetry folds into one value move together, as do the planes'
+    shared pole values and the 360 deg plane that repeats 0."""
+    rows = np.arange(len(grid.c)) if rows is None else np.asarray(rows)
+    shape = (len(rows), len(grid.gamma)) if draws is None else \
+        (draws, len(rows), len(grid.gamma))
+    noise = grid.sigma[rows] * rng.standard_normal(shape)
+    noise[..., :, 0] = noise[..., :1, 0]  # gamma 0 and 180: directions, one value each
+    noise[..., :, -1] = noise[..., :1, -1]
+    if grid.symmetry == "none" and len(grid.c) > 1 and grid.c[-1] >= 360.0 - 1e-9:
+        first, last = np.flatnonzero(rows == 0), np.flatnonzero(rows == len(grid.c) - 1)
+        if len(first) and len(last):
+            noise[..., last[0], :] = noise[..., first[0], :]
+    return grid.candela[rows] + noise

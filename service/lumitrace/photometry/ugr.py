@@ -28,7 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .grid import CGammaGrid
+from .grid import CGammaGrid, redrawn
 from .guth import table_index
 from .luminance import projected_area, taps
 
@@ -223,11 +223,7 @@ def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> U
     cross, end = model.evaluate(full.candela.reshape(1, -1))
     # redraw the published grid's own values (mirror images move together), then unfold
     rng = np.random.default_rng(seed)
-    noise = rng.standard_normal((draws,) + grid.candela.shape)
-    noise[:, :, [0, -1]] = noise[:, :1, [0, -1]]  # the poles are one value each
-    noise *= grid.sigma[None]
-    unfold = _unfold_index(grid)
-    drawn = (grid.candela[None] + noise)[:, unfold].reshape(draws, -1)
+    drawn = redrawn(grid, rng, draws)[:, _unfold_index(grid)].reshape(draws, -1)
     dc, de = model.evaluate(drawn)
     return UgrTable(cross[0], end[0], _spread(dc), _spread(de))
 
