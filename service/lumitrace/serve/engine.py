@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable
@@ -49,8 +49,6 @@ RETRACE_MAX_SHARE = 0.5
 #: Photons of a revision's first round: small, so that the first result after an edit is
 #: on disk quickly (later rounds double up to a full round of batches).
 FIRST_ROUND = 8192
-#: How often (s) a running round looks for a new revision.
-INTERRUPT_POLL = 0.005
 
 
 class Engine:
@@ -132,6 +130,11 @@ class Engine:
 
     def _interrupted(self) -> bool:
         return self._stopping or self._pending is not None
+
+    def _wake(self, _future) -> None:
+        """A batch ended: the engine's thread, waiting for its round, looks again."""
+        with self._cv:
+            self._cv.notify_all()
 
     # -- the session's knobs ----------------------------------------------------------------
 
@@ -394,18 +397,18 @@ class Engine:
         else:
             futures = [pool.submit(trace_batch, ps, job, records=keep) for job in jobs]
             try:
-                # a new revision is looked for while the batches run, not only between
-                # them: an edit then waits for the running batches alone
-                running = set(futures)
-                while running:
-                    if self._interrupted():
-                        _drain(futures)
-                        return  # the round is dropped: its photons never reach the map
-                    done, running = wait(running, timeout=INTERRUPT_POLL,
-                                         return_when=FIRST_COMPLETED)
-                    for f in done:
-                        f.result()  # a failed batch raises here
-                tallies = [f.result() for f in futures]
+                # the engine's condition wakes at a batch's end as at a new revision: an
+                # edit waits for the running batches alone, not for the round
+                for f in futures:
+                    f.add_done_callback(self._wake)
+                with self._cv:
+                    while not (self._interrupted() or all(f.done() for f in futures)
+                               or any(f.done() and f.exception() for f in futures)):
+                        self._cv.wait()
+                if self._interrupted():
+                    _drain(futures)
+                    return  # the round is dropped: its photons never reach the map
+                tallies = [f.result() for f in futures]  # a failed batch raises here
             except BaseException:
                 _drain(futures)  # a batch failed: none of the round may outlive it
                 raise
