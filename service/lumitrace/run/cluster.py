@@ -315,13 +315,16 @@ class ClusterRunner:
         from distributed.client import FutureCancelledError
 
         try:
-            while interrupted is not None:
-                if interrupted():
-                    return None
-                try:
-                    return unpack(future.result(timeout=POLL_SECONDS))
-                except TimeoutError:
-                    continue
+            if interrupted is not None:
+                # a done-callback, not ``result(timeout=...)``: the latter's timeout races
+                # the result in distributed's ``sync`` and can lose both
+                done = threading.Event()
+                future.add_done_callback(lambda _: done.set())
+                while not done.wait(POLL_SECONDS):
+                    if interrupted():
+                        return None
+                    if self.client.status not in ("running", "connecting"):
+                        break  # the client is closing: ``result`` says how
             return unpack(future.result())
         except KilledWorker as exc:
             raise LumitraceError(f"a batch lost its worker too often ({exc}): the batch "
