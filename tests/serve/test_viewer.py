@@ -121,9 +121,9 @@ def test_the_polar_curve_and_figures_are_the_results_and_the_files(page, served)
 
 
 def _set(page, selector: str, value) -> None:
-    el = page.find_element("css selector", selector)
-    page.execute_script("arguments[0].value = arguments[1];"
-                        "arguments[0].dispatchEvent(new Event('change'));", el, str(value))
+    page.execute_script("const el = document.querySelector(arguments[0]);"  # one script:
+                        "el.value = arguments[1];"  # the rows may be rebuilt between calls
+                        "el.dispatchEvent(new Event('change'));", selector, str(value))
 
 
 def _select_part(page, name: str) -> None:
@@ -170,7 +170,8 @@ def test_an_edit_saved_by_another_program_shows_up_in_the_page(page, served):
                                   "float lumitrace:luminousFlux = 600"))
     until(page, f"lumitrace.scene && lumitrace.scene.revision > {before} && "
                 "lumitrace.scene.emitters[0].flux === 600", timeout=60)
-    shown = page.find_element("css selector", "#emitter-box input").get_attribute("value")
+    # read in one script: the editor may rebuild its rows between two WebDriver calls
+    shown = page.execute_script("return document.querySelector('#emitter-box input').value")
     assert float(shown) == 600.0
 
 
