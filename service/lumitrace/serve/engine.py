@@ -183,6 +183,16 @@ class Engine:
         self.events.publish("settings", **self.session_settings())
         return self.session_settings()
 
+    def snapshot_key(self) -> tuple | None:
+        """What a preview of the current refinement depends on: (revision, photons,
+        threshold, iteration), None before the first round; cheap, unlike
+        :meth:`snapshot`."""
+        with self._cv:
+            r, rev = self.refinement, self.revision
+            if r is None or rev is None or not r.accumulator.photons:
+                return None
+            return (rev.number, r.accumulator.photons, self.settings.threshold, r.iteration)
+
     def snapshot(self) -> dict[str, Any] | None:
         """The current refinement as the preview needs it: a frozen copy of its counts and
         estimate, its revision and photons (None before the first round)."""

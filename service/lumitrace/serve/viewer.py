@@ -111,14 +111,18 @@ class PreviewCache:
         self._cached: _Cached | None = None
 
     def get(self, engine) -> bytes | None:
-        snap = engine.snapshot()
-        if snap is None:
+        # the key first: a client polling an unchanged preview costs no copy of the counts
+        key = engine.snapshot_key()
+        if key is None:
             return None
-        key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
         with self._lock:
             if self._cached is not None and self._cached.key == key:
                 return self._cached.data
         with self._making:
+            snap = engine.snapshot()
+            if snap is None:
+                return None
+            key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
             with self._lock:
                 if self._cached is not None and self._cached.key == key:
                     return self._cached.data
