@@ -102,21 +102,58 @@ def _angles(d: np.ndarray) -> tuple[float, float]:
     return c, gamma
 
 
-def half_cells(acc: Accumulator, half: int) -> tuple[np.ndarray, np.ndarray]:
-    """One half's photon flux (lm) and its binomial variance (lm^2) in every goniometer
-    cell, flat (N_C * N_GAMMA,)."""
-    flux, var = np.zeros(N_CELLS), np.zeros(N_CELLS)
-    for w, total, values, idx in acc.emitter_cells(half):
-        if idx is None:
-            n = values[:N_CELLS].astype(np.float64)
+#: Emitters above which a half's cells are summed over the whole sphere at once: a fit
+#: reads a few thousand of the 207,360 cells, but each new read loops over the emitters.
+LAZY_EMITTERS = 256
+
+
+class HalfCells:
+    """One half's photon flux (lm) and its binomial variance (lm^2) in the goniometer
+    cells, read for the cells a fit asks for (each cell summed once, on first read): the
+    peak's fits reach a few hundred cells, not the whole sphere."""
+
+    def __init__(self, acc: Accumulator, half: int):
+        self._parts = list(acc.emitter_cells(half))
+        self._flux = np.zeros(N_CELLS)
+        self._var = np.zeros(N_CELLS)
+        self._known = np.zeros(N_CELLS, bool)
+        if len(self._parts) > LAZY_EMITTERS:
+            self._add_all()
+
+    def _add_all(self) -> None:
+        """Every cell at once, each emitter's counts added where it has them."""
+        for w, total, values, idx in self._parts:
+            if idx is None:
+                n = values[:N_CELLS].astype(np.float64)
+                self._flux += w * n
+                self._var += w * w * n * np.maximum(1.0 - n / total, 0.0)
+            else:
+                keep = idx < N_CELLS
+                n = values[keep].astype(np.float64)
+                np.add.at(self._flux, idx[keep], w * n)
+                np.add.at(self._var, idx[keep], w * w * n * np.maximum(1.0 - n / total, 0.0))
+        self._known[:] = True
+
+    def _add(self, cells: np.ndarray) -> None:
+        flux, var = np.zeros(cells.size), np.zeros(cells.size)
+        for w, total, values, idx in self._parts:
+            if idx is None:
+                n = values[cells].astype(np.float64)
+            else:  # sorted, unique texel indices
+                at = np.minimum(np.searchsorted(idx, cells), max(len(idx) - 1, 0))
+                n = (np.where(idx[at] == cells, values[at], 0) if len(idx)
+                     else np.zeros(cells.size)).astype(np.float64)
             flux += w * n
             var += w * w * n * np.maximum(1.0 - n / total, 0.0)
-        else:
-            keep = idx < N_CELLS
-            n = values[keep].astype(np.float64)
-            np.add.at(flux, idx[keep], w * n)
-            np.add.at(var, idx[keep], w * w * n * np.maximum(1.0 - n / total, 0.0))
-    return flux, var
+        self._flux[cells], self._var[cells] = flux, var
+        self._known[cells] = True
+
+    def __call__(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(flux, variance) of ``cells`` (flat indices)."""
+        new = cells[~self._known[cells]]
+        if new.size:
+            self._add(new)
+        return self._flux[cells], self._var[cells]
 
 
 def _tangent_basis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +164,7 @@ def _tangent_basis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(p, u)
 
 
-def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg: float
+def local_fit(cells: HalfCells, centre: np.ndarray, radius_deg: float
               ) -> tuple[float, float, np.ndarray] | None:
     """Quadratic fit of the intensity (cd) over the cells within ``radius_deg`` of
     ``centre`` (area-weighted least squares). Returns (value at ``centre``, its standard
@@ -136,7 +173,8 @@ def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg:
     near = _cells_within(centre, radius_deg)
     if near.size < 12:
         return None
-    total, spread = float(flux[near].sum()), float(var[near].sum())
+    flux, var = cells(near)
+    total, spread = float(flux.sum()), float(var.sum())
     if spread <= 0 or total * total < MIN_FIT_PHOTONS * spread:
         return None  # too few photons in reach for six parameters
     omega = _cell_omegas()[near]
@@ -144,8 +182,8 @@ def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg:
     d = _cell_directions()[near]
     x, y = np.degrees(d @ u), np.degrees(d @ v)  # gnomonic-like tangent coordinates (deg)
     X = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y], axis=1)
-    cd = flux[near] / omega
-    sig2 = var[near] / omega ** 2
+    cd = flux / omega
+    sig2 = var / omega ** 2
     W = omega / omega.sum()
     A = X.T @ (W[:, None] * X)
     try:
@@ -180,13 +218,13 @@ def local_fit(flux: np.ndarray, var: np.ndarray, centre: np.ndarray, radius_deg:
     return value, error, p / np.linalg.norm(p)
 
 
-def locate(cells: tuple[np.ndarray, np.ndarray], start: np.ndarray, radius_deg: float
+def locate(cells: HalfCells, start: np.ndarray, radius_deg: float
            ) -> np.ndarray | None:
     """One half's direction of the top: from ``start``, the fit's maximum while it lies
     clearly elsewhere (at most :data:`LOCATE_STEPS` moves, each within the radius)."""
     at = start
     for _ in range(LOCATE_STEPS):
-        fit = local_fit(*cells, at, radius_deg)
+        fit = local_fit(cells, at, radius_deg)
         if fit is None:
             return None if at is start else at
         if float(fit[2] @ at) > math.cos(math.radians(0.01 * radius_deg)):
@@ -207,17 +245,17 @@ def fitted_peak(acc: Accumulator, picks: tuple[tuple[float, float], tuple[float,
     """The peak from the two halves: ``picks`` are each half's (C, gamma) of its top cell;
     each half locates the peak near its own pick and the other half measures it there.
     None where a fit is not possible (too little light near the top)."""
-    cells = [half_cells(acc, h) for h in (0, 1)]
+    cells = [HalfCells(acc, h) for h in (0, 1)]
     radius = fit_radius(half_width_deg)
     while radius < FIT_RADIUS_MAX and any(
-            local_fit(*cells[h], _direction(*picks[h]), radius) is None for h in (0, 1)):
+            local_fit(cells[h], _direction(*picks[h]), radius) is None for h in (0, 1)):
         radius = min(FIT_RADIUS_MAX, 2.0 * radius)  # too few photons in reach: reach further
     values, errors, where = [], [], []
     for h in (0, 1):
         located = locate(cells[h], _direction(*picks[h]), LOCATE_RADIUS * radius)
         if located is None:
             return None
-        measured = local_fit(*cells[1 - h], located, radius)
+        measured = local_fit(cells[1 - h], located, radius)
         if measured is None:
             return None
         values.append(measured[0])
