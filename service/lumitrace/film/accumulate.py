@@ -8,6 +8,7 @@ that emitter's counts, not a retrace.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,6 +23,10 @@ from .tally import BatchTally
 #: emitter keeps only its nonzero texels: memory then follows the photons, not the number
 #: of emitters (10,000 lights at resolution 64 would need 3.9 GB dense).
 DENSE_COUNTS_BYTES = 256 << 20
+
+
+#: Versions of counts (see :attr:`Accumulator.version`).
+_VERSIONS = itertools.count(1)
 
 
 class SparseCounts:
@@ -208,6 +213,10 @@ class Accumulator:
         # a mesh light's own surface: its photons leave it, none need reach it
         self.emitting_parts = frozenset(e.path.split("[")[0] for e in scene.emitters
                                         if e.kind == "mesh")
+        #: a new value (unique in the process) at every batch added or removed: equal
+        #: versions are the same counts (an accumulator's snapshots copy it), whatever the
+        #: lights' fluxes
+        self.version = next(_VERSIONS)
 
     def set_colours(self, scene: Scene) -> None:
         """Take each light's colour (X/Y, Z/Y of its spectrum, D65 without one) from
@@ -248,6 +257,7 @@ class Accumulator:
 
     def _apply(self, batch: BatchTally, sign: int) -> None:
         t = self.emitters[batch.emitter]
+        self.version = next(_VERSIONS)
         if sign > 0 and batch.part_hits is not None and self.part_hits is not None \
                 and len(batch.part_hits) == len(self.part_hits):
             self.part_hits += batch.part_hits
@@ -279,7 +289,14 @@ class Accumulator:
         copy.part_hits = None if self.part_hits is None else self.part_hits.copy()
         copy.parts = self.parts
         copy.emitting_parts = self.emitting_parts
+        copy.version = self.version
         return copy
+
+    def light_state(self) -> tuple:
+        """What the maps depend on besides the counts: each light's flux (lm) and colour."""
+        return tuple((t.flux, tuple(np.asarray(t.ratios, np.float64).tolist()))
+                     for t in self.emitters)
+
 
     def rescale(self, emitter: int, flux: float) -> None:
         """Set an emitter's flux (lm): photons are analog, so its counts stay and every
@@ -407,3 +424,15 @@ class Accumulator:
             out["absorbed"] += t.absorbed * w
             out["cut"] += t.cut * w
         return out
+
+
+def flux_scale(before: tuple, after: tuple) -> float | None:
+    """k where every light's flux in ``after`` (:meth:`Accumulator.light_state`) is k times
+    its flux in ``before`` (to 1e-12) and every colour is the same; None otherwise."""
+    if len(before) != len(after) or not before:
+        return None
+    k = after[0][0] / before[0][0] if before[0][0] > 0 else None
+    if k is None or not all(c0 == c1 and f0 > 0 and abs(f1 / f0 - k) <= 1e-12 * k
+                            for (f0, c0), (f1, c1) in zip(before, after)):
+        return None
+    return k

@@ -14,7 +14,7 @@ and the other half's raw map (independent of it) once both noises are taken out.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -82,6 +82,11 @@ class MapEstimate:
         if self.threshold > 0 and self.filtered_error_bound is not None:
             return self.filtered_error_bound
         return self.error
+
+    def scaled(self, k: float) -> "MapEstimate":
+        """The estimate of the same counts with every light's flux times ``k``: the maps
+        scale, their relative errors stay."""
+        return replace(self, raw=self.raw * k, filtered=self.filtered * k)
 
     def meets(self, target: float) -> bool:
         """Whether the map is converged at ``target`` (relative): its error bound is

@@ -86,6 +86,18 @@ class PhotometricFigures:
         return asdict(self)
 
 
+#: The figures that scale with the lights' flux (lm, cd, and their standard errors).
+FLUX_SCALED = ("luminous_flux", "luminous_flux_error", "lamp_flux", "peak_intensity",
+               "peak_intensity_error")
+
+
+def scaled_figures(figures: dict, k: float) -> dict:
+    """:meth:`PhotometricFigures.as_dict` of the same counts with every light's flux times
+    ``k``: the fluxes and intensities scale, every ratio, angle and relative error stays."""
+    return {name: v * k if name in FLUX_SCALED and v is not None else v
+            for name, v in figures.items()}
+
+
 def _ratio(a: tuple, b: tuple) -> tuple[float, float]:
     """A / B and its standard error for photon fluxes in nested groups (A within B), each
     given as (flux, variance, sum of squared photon fluxes): given B's photons, A's share

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ..errors import LumitraceError, warn
-from ..film.accumulate import Accumulator
+from ..film.accumulate import Accumulator, flux_scale
 from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
@@ -140,6 +140,8 @@ class Refinement:
         self.estimate: MapEstimate | None = None
         self.files: FilesAccuracy | None = None
         self._files_photons = 0  # the photons self.files was judged at
+        #: :attr:`estimate` was scaled from the last one by a rescale, not made afresh
+        self._scaled_estimate = False
 
     def next_jobs(self, most: int | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
@@ -164,6 +166,7 @@ class Refinement:
         t0 = time.perf_counter()
         self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
             else None
+        self._scaled_estimate = False
         self.files = None
         if self.settings.target_error is not None:
             self.current_files()
@@ -206,6 +209,7 @@ class Refinement:
     def reestimate(self) -> MapEstimate:
         """Estimate the map again (after photons were retraced)."""
         self.estimate = estimate(self.accumulator, self.settings.threshold)
+        self._scaled_estimate = False
         self.files = None  # judged again when asked: the counts changed
         return self.estimate
 
@@ -256,16 +260,27 @@ class Refinement:
         """Take ``scene``, which differs from this one in emitter fluxes (and, with no
         coloured surface, lights' colours) only: the counts stay and scale with the new
         fluxes (photons are analog), the lights' colours are taken, nothing is retraced."""
+        acc = self.accumulator
+        before = acc.light_state()
         for i, e in enumerate(scene.emitters):
-            self.accumulator.rescale(i, e.flux)
-        self.accumulator.colour = scene.colour
-        self.accumulator.set_colours(scene)
+            acc.rescale(i, e.flux)
+        acc.colour = scene.colour
+        acc.set_colours(scene)
         self.scene = scene
-        self.estimate = estimate(self.accumulator, self.settings.threshold)
+        k = flux_scale(before, acc.light_state())
+        if k is not None and self.estimate is not None:
+            # every light dimmed alike (one light, say): the maps scale, at once; the
+            # files' estimate is made afresh from the counts (:meth:`result`)
+            self.estimate, self._scaled_estimate = self.estimate.scaled(k), True
+        else:
+            self.estimate = estimate(acc, self.settings.threshold)
         self.files = None  # judged again when asked: the fluxes changed
 
     def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
-        est = self.estimate or estimate(self.accumulator, self.settings.threshold)
+        if self.estimate is None or self._scaled_estimate:
+            self.estimate = estimate(self.accumulator, self.settings.threshold)
+            self._scaled_estimate = False
+        est = self.estimate
         # the files' accuracy of the last round, where no photon came since; else the
         # writer measures it from the grid it writes (a scene of thousands of lights pays
         # for measuring the grid once, not twice)

@@ -16,6 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable
 
+from ..delta.effect import EFFECT_KINDS, classify
 from ..errors import LumitraceError
 from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord, defined
@@ -321,6 +322,11 @@ class Engine:
         edit the tracer does not see, a new refinement otherwise."""
         old = self.refinement if not self._halted else None  # after a failure: afresh
         kind = rev.effect.kind
+        if old is not None and self.revision is not None and \
+                rev.number != self.revision.number + 1:
+            # revisions were skipped (a burst): the edit is what changed since the scene
+            # traced, not since the revision before (a material edit, then a flux edit)
+            kind = max(kind, classify(old.scene, rev.scene).kind, key=EFFECT_KINDS.index)
         self.events.publish("revision", revision=rev.number, source=rev.source,
                             effect=rev.effect.as_dict(), layers=list(rev.layers))
         if old is not None and kind == "none":
@@ -464,6 +470,7 @@ class Engine:
                                 message=f"{len(unreached)} part(s) no traced photon "
                                         f"reached: {', '.join(unreached[:10])}",
                                 parts=unreached)
+        self._refreshed()  # the final map's preview, ready (and a flux edit's to rescale)
         if self._pending is None:
             self._write(pictures=True)
 

@@ -21,10 +21,12 @@ from typing import Any
 import numpy as np
 
 from .. import schema
+from ..film.accumulate import flux_scale
 from ..film.convergence import estimate
 from ..film.cubemap import bilinear_taps, face_size, sample_map
 from ..photometry import frame
 from ..photometry.distribution import photometry_of
+from ..photometry.quantities import scaled_figures
 from ..publish.record import defined
 from ..scene import Scene
 
@@ -98,6 +100,11 @@ def geometry_frame(scene: Scene, revision: int) -> bytes:
 class _Cached:
     key: tuple
     data: bytes
+    #: what the frame was made of: the counts' version, the lights, header and arrays
+    version: int
+    lights: tuple
+    header: dict
+    arrays: dict
 
 
 class PreviewCache:
@@ -124,11 +131,20 @@ class PreviewCache:
                 return None
             key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
             with self._lock:
-                if self._cached is not None and self._cached.key == key:
-                    return self._cached.data
-            data = preview_frame(**snap)
+                last = self._cached
+            if last is not None and last.key == key:
+                return last.data
+            acc = snap["accumulator"]
+            lights = acc.light_state()
+            k = flux_scale(last.lights, lights) if last is not None and \
+                last.version == acc.version and last.key[2] == key[2] else None
+            if k is not None:  # the same counts, every light dimmed alike: a rescale
+                header, arrays = _rescaled(last.header, last.arrays, k, snap)
+            else:
+                header, arrays = preview_parts(**snap)
+            data = frame_bytes(header, arrays)
             with self._lock:
-                self._cached = _Cached(key, data)
+                self._cached = _Cached(key, data, acc.version, lights, header, arrays)
         return data
 
 
@@ -147,12 +163,24 @@ def _latlong_taps(scene: Scene, res: int):
     return _latlong_taps_of(scene.up_axis, key, res)
 
 
-def preview_frame(scene: Scene, accumulator, estimate_, revision: int, photons: int,
+def _rescaled(header: dict, arrays: dict, k: float, snap: dict) -> tuple[dict, dict]:
+    """A preview's header and arrays for the same counts with every light's flux times
+    ``k`` (the snapshot ``snap`` says which revision): intensities and fluxes scale,
+    angles and relative errors stay."""
+    header = {**header, "revision": snap["revision"], "seconds": snap["seconds"],
+              "iterations": snap["iteration"], "target_error": snap["target"],
+              "converged": snap["converged"], "lamp_lumens": header["lamp_lumens"] * k,
+              "figures": scaled_figures(header["figures"], k)}
+    return header, {name: a * k for name, a in arrays.items()}
+
+
+def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
-                  converged: bool, seconds: float) -> bytes:
-    """The preview of a refinement: the map (filtered and raw, cd) on a lat-long grid in
-    the photometric frame, the published C-gamma grid (cd) with its standard errors, and
-    the figures, tagged with revision and photons."""
+                  converged: bool, seconds: float) -> tuple[dict, dict]:
+    """The header and arrays of a refinement's preview (an
+    :meth:`~lumitrace.serve.engine.Engine.snapshot`): the map (filtered and raw, cd) on a
+    lat-long grid in the photometric frame, the published C-gamma grid (cd) with its
+    standard errors, and the figures, tagged with revision and photons."""
     est = estimate_ if estimate_ is not None and estimate_.threshold == threshold \
         else estimate(accumulator, threshold)
     ph = photometry_of(scene, accumulator)
@@ -174,8 +202,7 @@ def preview_frame(scene: Scene, accumulator, estimate_, revision: int, photons: 
         "units": {"map": "cd", "grid": "cd", "sigma": "cd"},
     }
     sigma = full.sigma if full.sigma is not None else np.zeros_like(full.candela)
-    return frame_bytes(header, {"filtered": filtered, "raw": raw, "grid": full.candela,
-                                "sigma": sigma})
+    return header, {"filtered": filtered, "raw": raw, "grid": full.candela, "sigma": sigma}
 
 
 def _plain(value: Any) -> Any:
