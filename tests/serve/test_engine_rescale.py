@@ -97,3 +97,36 @@ def test_a_flux_edits_preview_is_the_last_one_rescaled(engine):
         ph.figures.peak_intensity
     assert scaled_figures({"peak_intensity": 2.0, "beam_angle_c0_c180": 3.0}, 2.0) == \
         {"peak_intensity": 4.0, "beam_angle_c0_c180": 3.0}
+
+
+def test_the_writer_writes_the_newest_and_a_flush_waits_for_it():
+    """Background writes: one not begun when a newer one comes is dropped, a flush returns
+    once the newest is written, and a failing write is reported, not fatal."""
+    import threading
+
+    from lumitrace.serve.engine import _Writer
+
+    done, failures, started = [], [], threading.Event()
+    release = threading.Event()
+
+    def job(name, wait=False):
+        def run():
+            started.set()
+            if wait:
+                release.wait(10)
+            if name == "bad":
+                raise OSError("disk full")
+            done.append(name)
+        return run
+
+    writer = _Writer(failures.append)
+    writer.put(job("first", wait=True))
+    assert started.wait(10)
+    for name in ("second", "bad", "third"):  # while the first is written
+        writer.put(job(name))
+    release.set()
+    writer.flush()
+    assert done == ["first", "third"] and failures == []
+    writer.put(job("bad"))
+    writer.close()
+    assert len(failures) == 1 and isinstance(failures[0], OSError)

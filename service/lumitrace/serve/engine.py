@@ -47,6 +47,9 @@ RECORDS_CAP = 1 << 30
 #: Above this share of the traced photons, an edit is traced afresh rather than retraced:
 #: both give the same map, and a fresh trace shows its first result within one small round.
 RETRACE_MAX_SHARE = 0.5
+#: Photons per batch at most in the service's own rounds (about 25 ms of one thread's work):
+#: what an edit may wait for.
+SERVICE_BATCH = 1 << 15
 #: Photons of a revision's first round: small, so that the first result after an edit is
 #: on disk quickly (later rounds double up to a full round of batches).
 FIRST_ROUND = 8192
@@ -59,7 +62,10 @@ class Engine:
                  out_dir: Path | None = None, records_cap: int = RECORDS_CAP,
                  sublayer: bool = True, deliverables: bool = False):
         self.live = live
-        self.settings = replace(settings, workers="threads")
+        # an edit waits for the batches running when it comes: small ones (the counts are
+        # the same for any batch size, and the rounds still grow with the photons)
+        self.settings = replace(settings, workers="threads",
+                                batch_size=min(settings.batch_size, SERVICE_BATCH))
         self.events = events
         self.out_dir = out_dir
         #: False: the result layer is written but not sublayered into the stage file
@@ -75,6 +81,7 @@ class Engine:
         self._stopping = False
         self._thread = threading.Thread(target=self._main, name="lumitrace-engine",
                                         daemon=True)
+        self._writer = _Writer(self._write_failed)
         # state, read by status() under the lock
         self.revision: Revision | None = None
         self.refinement: Refinement | None = None
@@ -251,7 +258,7 @@ class Engine:
                         self._cv.wait(self._pictures_wait() or None)
                     if self._stopping:
                         break
-                    if self._pending is not None:
+                    if self._pending is not None and not self._rescale_only(self._pending):
                         self._settle_burst()
                     pending, self._pending = self._pending, None
                 try:
@@ -260,6 +267,7 @@ class Engine:
                     self._failed(pending, exc)
         if not self._halted:
             self._final_write()
+        self._writer.close()
         if self._cluster is not None:
             self._cluster.close()
 
@@ -303,6 +311,13 @@ class Engine:
         self.events.publish("error", revision=number, message=message,
                             where=getattr(exc, "where", None))
 
+    def _rescale_only(self, rev: Revision) -> bool:
+        """Whether ``rev`` follows the revision refined with a flux-only (or no) change: a
+        rescale, taken at once, not held back to wait out a burst."""
+        return (self.refinement is not None and not self._halted and self.revision is not None
+                and rev.number == self.revision.number + 1
+                and rev.effect.kind in ("none", "flux"))
+
     def _settle_burst(self) -> None:
         """In a burst of revisions, wait (holding the lock's condition) until it pauses."""
         start = time.monotonic()
@@ -340,8 +355,11 @@ class Engine:
             with self._cv:
                 old.rescale(rev.scene)
                 self.revision = rev
+                self._written_full = False  # this revision's pictures are still to come
             self._refreshed()
-            self._write(pictures=False)  # at once; the pictures follow if it is done
+            # at once, in the background (the next flux edit need not wait for it); the
+            # pictures follow if it is done
+            self._write(pictures=False, background=True)
             return
         if old is not None and self.frame is not None:
             selection = select(old.records, old.scene, rev.scene, self.frame)
@@ -489,12 +507,33 @@ class Engine:
                 self.events.publish("warning", revision=self.revision.number,
                                     message=f"the preview could not be made: {exc}")
 
-    def _write(self, pictures: bool) -> None:
-        """Publish the current refinement's result (one transaction, on the USD thread)."""
+    def _write(self, pictures: bool, background: bool = False) -> None:
+        """Publish the current refinement's result; in the ``background``, by the writer
+        thread from a copy of its counts, the engine going on meanwhile (a rescale's
+        files: the next edit is taken at once, not after them). A write here waits for
+        the writer's first. (A refinement under way writes here: beside its rounds, a
+        background write slows them and the next edit more than it waits for the write.)"""
         r, rev = self.refinement, self.revision
         if r is None or not r.accumulator.photons:
             return
         result = r.result(time.perf_counter() - self.started)
+        self._last_write = time.perf_counter()
+        if not background:
+            self._writer.flush()
+            self._publish(result, rev, pictures=pictures)
+            return
+        copy = replace(result, accumulator=result.accumulator.snapshot())
+        self._writer.put(lambda: self._publish(copy, rev, pictures=False))
+
+    def _write_failed(self, exc: Exception) -> None:
+        """A write on the writer thread that failed other than by a LumitraceError."""
+        message = f"the result could not be written: {type(exc).__name__}: {exc}"
+        with self._cv:
+            self.error = message
+        self.events.publish("error", message=message)
+
+    def _publish(self, result, rev: Revision, pictures: bool) -> None:
+        """Write ``result`` of ``rev`` (one transaction, on the USD thread), and say so."""
         extra = {"revision": rev.number, "tracingFrame": [*self.frame.center, self.frame.scale]}
         t0 = time.perf_counter()
         try:
@@ -509,17 +548,68 @@ class Engine:
             self.events.publish("error", revision=rev.number, message=str(exc))
             return
         now = time.perf_counter()
-        self._last_write = now
         with self._cv:
             self.record = record
             self._written_full = pictures
-            self.written = {"revision": rev.number, "photons": r.accumulator.photons,
+            self.written = {"revision": rev.number, "photons": result.accumulator.photons,
                             "pictures": pictures, "input_hash": record["input_hash"]}
             self.error = None
-        self.events.publish("written", revision=rev.number, photons=r.accumulator.photons,
+            self._cv.notify_all()  # the engine's thread looks again at what is due
+        self.events.publish("written", revision=rev.number,
+                            photons=result.accumulator.photons,
                             relative_error=record["relative_error"], pictures=pictures,
                             input_hash=record["input_hash"], seconds=now - t0,
                             outputs=record.summary().get("outputs", {}))
+
+
+class _Writer:
+    """A thread that writes the newest result handed to it: one not yet begun when a newer
+    one comes is dropped (the newer supersedes it), so writes never queue up."""
+
+    def __init__(self, failed: Callable[[Exception], None]):
+        self._cv = threading.Condition()
+        self._job: Callable[[], None] | None = None
+        self._busy = False
+        self._closed = False
+        self._failed = failed
+        self._thread = threading.Thread(target=self._main, name="lumitrace-writer",
+                                        daemon=True)
+        self._thread.start()
+
+    def put(self, job: Callable[[], None]) -> None:
+        with self._cv:
+            self._job = job
+            self._cv.notify_all()
+
+    def flush(self) -> None:
+        """Wait until what was handed over is written."""
+        with self._cv:
+            while self._job is not None or self._busy:
+                self._cv.wait()
+
+    def close(self) -> None:
+        self.flush()
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+        self._thread.join()
+
+    def _main(self) -> None:
+        while True:
+            with self._cv:
+                while self._job is None and not self._closed:
+                    self._cv.wait()
+                if self._job is None:
+                    return
+                job, self._job, self._busy = self._job, None, True
+            try:
+                job()
+            except Exception as exc:  # the writer never dies: the write is reported
+                self._failed(exc)
+            finally:
+                with self._cv:
+                    self._busy = False
+                    self._cv.notify_all()
 
 
 def _drain(futures) -> None:
