@@ -198,7 +198,10 @@ class _Model:
                                  for refl in REFLECTANCES]))  # (reflectances, gammas)
         self.idx, self.w = np.concatenate(idx), np.concatenate(w)
         self.weight = np.concatenate(weight)
-        self.starts = np.cumsum([0] + [len(a) for a in weight[:-1]])
+        # each sum's taps, as a matrix: one product sums them all (a BLAS call, not a
+        # reduceat over the draws)
+        lengths = [len(a) for a in weight]
+        self.sums = np.repeat(np.eye(len(lengths)), lengths, axis=1)  # (sums, taps)
         self.lb = np.stack(lbs)
 
     def evaluate(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -206,7 +209,7 @@ class _Model:
         (draws, cells)."""
         cells = np.ascontiguousarray(values.T)  # (cells, draws): one gather per tap
         i = np.einsum("pk,pkd->pd", self.w, cells[self.idx])
-        s = np.add.reduceat(i * i * self.weight[:, None], self.starts, axis=0)  # (sums, d)
+        s = self.sums @ (i * i * self.weight[:, None])  # (sums, draws)
         rings = cells.reshape(self.shape + (-1,)).sum(axis=0)  # (gammas, draws)
         back = np.einsum("rfg,gd->rfd", self.lb, rings)  # (rooms, reflectances, draws)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -218,7 +221,7 @@ class _Model:
 def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> UgrTable:
     """The UGR table of ``grid`` (cd, with sigma) with luminous area ``opening`` (a
     :class:`~lumitrace.photometry.distribution.LuminousOpening`)."""
-    model = _Model(grid, opening)
+    model = _model(grid, opening)
     full = grid.full()
     cross, end = model.evaluate(full.candela.reshape(1, -1))
     # redraw the published grid's own values (mirror images move together), then unfold
@@ -226,6 +229,22 @@ def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> U
     drawn = redrawn(grid, rng, draws)[:, _unfold_index(grid)].reshape(draws, -1)
     dc, de = model.evaluate(drawn)
     return UgrTable(cross[0], end[0], _spread(dc), _spread(de))
+
+
+#: The last models made, by grid layout and opening: a service writes the same luminaire's
+#: table again and again.
+_MODELS: dict[tuple, _Model] = {}
+
+
+def _model(grid: CGammaGrid, opening) -> _Model:
+    """The table's model of a grid's layout (C planes, gammas, symmetry) and opening."""
+    key = (tuple(grid.c.tolist()), tuple(grid.gamma.tolist()), grid.symmetry, opening)
+    model = _MODELS.get(key)
+    if model is None:
+        model = _MODELS[key] = _Model(grid, opening)
+        for old in list(_MODELS)[:-8]:
+            _MODELS.pop(old, None)
+    return model
 
 
 def _spread(draws: np.ndarray) -> np.ndarray:
