@@ -198,10 +198,8 @@ class _Model:
                                  for refl in REFLECTANCES]))  # (reflectances, gammas)
         self.idx, self.w = np.concatenate(idx), np.concatenate(w)
         self.weight = np.concatenate(weight)
-        # each sum's taps, as a matrix: one product sums them all (a BLAS call, not a
-        # reduceat over the draws)
-        lengths = [len(a) for a in weight]
-        self.sums = np.repeat(np.eye(len(lengths)), lengths, axis=1)  # (sums, taps)
+        # (not a matrix product: BLAS's threads would spin beside the tracing threads)
+        self.starts = np.cumsum([0] + [len(a) for a in weight[:-1]])
         self.lb = np.stack(lbs)
 
     def evaluate(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -209,7 +207,7 @@ class _Model:
         (draws, cells)."""
         cells = np.ascontiguousarray(values.T)  # (cells, draws): one gather per tap
         i = np.einsum("pk,pkd->pd", self.w, cells[self.idx])
-        s = self.sums @ (i * i * self.weight[:, None])  # (sums, draws)
+        s = np.add.reduceat(i * i * self.weight[:, None], self.starts, axis=0)  # (sums, d)
         rings = cells.reshape(self.shape + (-1,)).sum(axis=0)  # (gammas, draws)
         back = np.einsum("rfg,gd->rfd", self.lb, rings)  # (rooms, reflectances, draws)
         with np.errstate(divide="ignore", invalid="ignore"):
