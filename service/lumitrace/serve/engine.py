@@ -2,8 +2,8 @@
 
 A new revision abandons the round in flight (its photons are dropped, never mixed into the
 new revision's map); a burst of revisions coalesces into the newest. A flux-only edit
-rescales the counts and traces nothing. Results are written after each of the first
-iterations of a revision, then at most every :data:`WRITE_INTERVAL` seconds, and with the
+rescales the counts and traces nothing. Results are written after a revision's first
+iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the
 pictures once the revision is done (converged or its photon budget spent) or the service
 stops.
 """
@@ -28,8 +28,9 @@ from ..trace.tracer import trace_batch
 from .events import EventLog
 from .live import LiveStage, Revision
 
-#: Iterations of a revision after each of which the cheap outputs are written.
-EAGER_WRITES = 3
+#: Iterations of a revision after each of which the cheap outputs are written (more: an
+#: edit made while they are written waits for them, on the demo 85 ms each).
+EAGER_WRITES = 1
 #: Seconds between writes of the cheap outputs after the first iterations.
 WRITE_INTERVAL = 2.0
 #: Revisions closer together than this (s) are a burst: the engine then waits for
