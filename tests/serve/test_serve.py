@@ -81,7 +81,8 @@ def test_an_edit_saved_on_disk_is_a_revision_and_our_own_writes_are_not(stage):
                                                    "lumitrace:luminousFlux = 2400"))
         status = s.wait_status(lambda st: st["revision"] == 1)
         assert status["revision"] == 1
-        revision = [e for e in _events(s, {"revision"}) if e.data["revision"] == 1][0]
+        # the engine's event comes once it takes the revision, after /status counts it
+        revision = s.wait_event(lambda e: e.kind == "revision" and e.data["revision"] == 1)
         assert revision.data["source"] == "file"
         assert revision.data["effect"]["kind"] == "flux"  # a rescale: nothing retraced
         assert revision.data["layers"] == [str(stage)]
@@ -139,7 +140,8 @@ def test_a_lights_ies_file_saved_on_disk_is_a_revision(stage):
         wide = s.client.results()
         _ies(stage.parent / "led.ies", 10.0)
         s.wait_status(lambda st: st["revision"] == 1)
-        revision = [e for e in _events(s, {"revision"}) if e.data["revision"] == 1][0]
+        # the engine's event comes once it takes the revision, after /status counts it
+        revision = s.wait_event(lambda e: e.kind == "revision" and e.data["revision"] == 1)
         assert revision.data["source"] == "file"
         assert revision.data["effect"]["kind"] == "emitter"
         assert revision.data["layers"] == [str(stage.parent / "led.ies")]
