@@ -716,7 +716,7 @@ function fillEditor() {
   });
   const ebox = document.getElementById("emitter-box");
   ebox.innerHTML = `<fieldset><legend>emitters (lm)</legend>${sc.emitters.map((e, i) =>
-    `<div class="row"><label>${esc(e.path)} <input type="number" min="0" step="any" data-emitter="${i}" value="${e.flux}" ${e.editable ? "" : "disabled"}></label><span class="problem"></span></div>`).join("")}</fieldset>`;
+    `<div class="row"><label><span class="name" title="${esc(e.path)}">${esc(e.path)}</span> <input type="number" min="0" step="any" data-emitter="${i}" value="${e.flux}" ${e.editable ? "" : "disabled"}></label><span class="problem"></span></div>`).join("")}</fieldset>`;
   ebox.querySelectorAll("[data-emitter]").forEach((input) => input.addEventListener("change", () => {
     const e = sc.emitters[parseInt(input.dataset.emitter, 10)];
     edit([{ op: "set", path: e.path, property: sc.properties.flux, value: Number(input.value) }],
