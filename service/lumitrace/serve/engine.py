@@ -312,11 +312,15 @@ class Engine:
         self.events.publish("error", revision=number, message=message,
                             where=getattr(exc, "where", None))
 
+    def _follows(self, rev: Revision) -> bool:
+        """Whether ``rev`` comes right after the revision refined (its effect is then what
+        changed since the scene traced)."""
+        return self.revision is not None and rev.number == self.revision.number + 1
+
     def _rescale_only(self, rev: Revision) -> bool:
         """Whether ``rev`` follows the revision refined with a flux-only (or no) change: a
         rescale, taken at once, not held back to wait out a burst."""
-        return (self.refinement is not None and not self._halted and self.revision is not None
-                and rev.number == self.revision.number + 1
+        return (self.refinement is not None and not self._halted and self._follows(rev)
                 and rev.effect.kind in ("none", "flux"))
 
     def _settle_burst(self) -> None:
@@ -338,8 +342,7 @@ class Engine:
         edit the tracer does not see, a new refinement otherwise."""
         old = self.refinement if not self._halted else None  # after a failure: afresh
         kind = rev.effect.kind
-        if old is not None and self.revision is not None and \
-                rev.number != self.revision.number + 1:
+        if old is not None and self.revision is not None and not self._follows(rev):
             # revisions were skipped (a burst): the edit is what changed since the scene
             # traced, not since the revision before (a material edit, then a flux edit)
             kind = max(kind, classify(old.scene, rev.scene).kind, key=EFFECT_KINDS.index)
@@ -509,11 +512,10 @@ class Engine:
                                     message=f"the preview could not be made: {exc}")
 
     def _write(self, pictures: bool, background: bool = False) -> None:
-        """Publish the current refinement's result; in the ``background``, by the writer
-        thread from a copy of its counts, the engine going on meanwhile (a rescale's
-        files: the next edit is taken at once, not after them). A write here waits for
-        the writer's first. (A refinement under way writes here: beside its rounds, a
-        background write slows them and the next edit more than it waits for the write.)"""
+        """Publish the current refinement's result, here (after what the writer thread
+        holds), or in the ``background``: by the writer, from a copy of the counts, while
+        the engine goes on. Only a rescale's files go to the background: beside a
+        refinement's rounds, a background write slows them more than it saves."""
         r, rev = self.refinement, self.revision
         if r is None or not r.accumulator.photons:
             return
