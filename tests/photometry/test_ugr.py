@@ -96,6 +96,23 @@ def test_errors_cover_a_second_seed():
     assert value == one.crosswise[ugr.ROOMS.index((4, 8)), 0] and error > 0
 
 
+@pytest.mark.parametrize("name", ["demo", "louvre"])
+def test_propagated_errors_against_a_bootstrap(name):
+    # the errors are the grid's propagated to first order; 400 redraws of the grid within
+    # its errors (each value it holds once) give the same spread to their own noise (3.5%)
+    from lumitrace.photometry.grid import redrawn
+
+    ph = traced(name)[2]
+    table = ugr.ugr_table(ph.grid, ph.opening)
+    model = ugr._model(ph.grid, ph.opening)
+    drawn = redrawn(ph.grid, np.random.default_rng(5), 400)[:, ugr._unfold_index(ph.grid)]
+    cross, end = model.evaluate(drawn.reshape(400, -1))
+    ratio = np.hstack([table.crosswise_error / cross.std(axis=0, ddof=1),
+                       table.endwise_error / end.std(axis=0, ddof=1)])
+    assert 0.85 < ratio.min() and ratio.max() < 1.15, ratio
+    assert 0.95 < np.median(ratio) < 1.05, np.median(ratio)
+
+
 def test_a_luminaire_sending_nothing_down_has_no_rating():
     from lumitrace.photometry.distribution import LuminousOpening
     from lumitrace.photometry.grid import CGammaGrid, default_gammas

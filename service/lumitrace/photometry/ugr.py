@@ -17,18 +17,21 @@ Lb = E_WID / pi, the indirect illuminance of the walls from a three-surface flux
 CIE 190's transfer factors (its table 5) to their rounding. The flux first reaching the
 floor is the share of the downward flux landing on it from the room's luminaires (their
 positions averaged, the distribution averaged over C), the rest of the downward flux on
-the walls, the upward flux on the ceiling. Errors: the table recomputed from the grid
-redrawn within its standard errors (a parametric bootstrap, fixed seed). UGR does not
-depend on H; H = 2 m.
+the walls, the upward flux on the ceiling. Errors: the grid's standard errors propagated
+to first order (each value the grid holds independent, its mirror images and the poles'
+shared values moving together): UGR is a smooth function of the grid, and at the errors a
+result carries its second-order terms are far below the first (a bootstrap of 400
+redraws agrees, ``tests/photometry/test_ugr.py``). UGR does not depend on H; H = 2 m.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
-from .grid import CGammaGrid, redrawn
+from .grid import CGammaGrid
 from .guth import table_index
 from .luminance import projected_area, taps
 
@@ -44,8 +47,6 @@ SPACING = 0.25
 HEIGHT = 2.0
 #: The catalogue value's room and reflectances.
 CATALOGUE_ROOM, CATALOGUE_REFLECTANCE = (4, 8), 0
-#: Redraws of the grid for the errors.
-DRAWS = 64
 
 
 def counted(t: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
@@ -205,28 +206,67 @@ class _Model:
     def evaluate(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(crosswise, endwise) UGR, each (draws, rooms, reflectances), of grid values
         (draws, cells)."""
-        cells = np.ascontiguousarray(values.T)  # (cells, draws): one gather per tap
-        i = np.einsum("pk,pkd->pd", self.w, cells[self.idx])
-        s = np.add.reduceat(i * i * self.weight[:, None], self.starts, axis=0)  # (sums, d)
-        rings = cells.reshape(self.shape + (-1,)).sum(axis=0)  # (gammas, draws)
-        back = np.einsum("rfg,gd->rfd", self.lb, rings)  # (rooms, reflectances, draws)
+        s, back = self._sums(np.ascontiguousarray(values.T))
         with np.errstate(divide="ignore", invalid="ignore"):
             u = 8.0 * np.log10(0.25 * s.reshape(len(ROOMS), 2, 1, -1) / back[:, None])
         u = np.moveaxis(u, -1, 0)  # (draws, rooms, orientations, reflectances)
         return u[:, :, 0], u[:, :, 1]
 
+    def _sums(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the glare sums (sums, draws), the background luminances (rooms, reflectances,
+        draws)) of grid values (cells, draws)."""
+        i = np.einsum("pk,pkd->pd", self.w, cells[self.idx])  # one gather per tap
+        s = np.add.reduceat(i * i * self.weight[:, None], self.starts, axis=0)
+        rings = cells.reshape(self.shape + (-1,)).sum(axis=0)  # (gammas, draws)
+        return s, np.einsum("rfg,gd->rfd", self.lb, rings)
 
-def ugr_table(grid: CGammaGrid, opening, draws: int = DRAWS, seed: int = 0) -> UgrTable:
+    def gradient(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The derivatives by the full grid's values (cells,) at ``values`` of 8 log10 of
+        the glare sums (sums, planes, gammas) and of the background luminances (rooms,
+        reflectances, gammas; the same for every plane): UGR's is their difference."""
+        cells = values[:, None]
+        s, back = self._sums(cells)
+        i = np.einsum("pk,pk->p", self.w, cells[self.idx][..., 0])
+        row = np.repeat(np.arange(len(self.starts)), np.diff(np.r_[self.starts, len(i)]))
+        coef = (2.0 * i * self.weight)[:, None] * self.w  # d(sum) / d(cell) per tap
+        n = int(np.prod(self.shape))
+        d_s = np.bincount((row[:, None] * n + self.idx).ravel(), weights=coef.ravel(),
+                          minlength=len(self.starts) * n).reshape(len(self.starts), *self.shape)
+        scale = 8.0 / math.log(10.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return scale * d_s / s[:, 0, None, None], scale * self.lb / back[..., 0, None]
+
+
+def ugr_table(grid: CGammaGrid, opening) -> UgrTable:
     """The UGR table of ``grid`` (cd, with sigma) with luminous area ``opening`` (a
-    :class:`~lumitrace.photometry.distribution.LuminousOpening`)."""
+    :class:`~lumitrace.photometry.distribution.LuminousOpening`), its errors propagated
+    from the grid's."""
     model = _model(grid, opening)
     full = grid.full()
     cross, end = model.evaluate(full.candela.reshape(1, -1))
-    # redraw the published grid's own values (mirror images move together), then unfold
-    rng = np.random.default_rng(seed)
-    drawn = redrawn(grid, rng, draws)[:, _unfold_index(grid)].reshape(draws, -1)
-    dc, de = model.evaluate(drawn)
-    return UgrTable(cross[0], end[0], _spread(dc), _spread(de))
+    err = _propagated(grid, *model.gradient(full.candela.ravel()))
+    bad = ~np.isfinite(np.stack([cross[0], end[0]], axis=1)) | ~np.isfinite(err)
+    err = np.where(bad, np.nan, err)
+    return UgrTable(cross[0], end[0], err[:, 0], err[:, 1])
+
+
+def _propagated(grid: CGammaGrid, d_glare: np.ndarray, d_back: np.ndarray) -> np.ndarray:
+    """Standard errors (rooms, orientations, reflectances) of UGR = glare - background,
+    given their derivatives by the full grid's values (:meth:`_Model.gradient`), from the
+    published grid's errors: each value it holds is independent, every plane it stands for
+    moves with it, and each pole is one value."""
+    unfold = _unfold_index(grid)
+    planes = len(grid.c)
+    fold = np.zeros((planes, len(unfold)))
+    fold[unfold, np.arange(len(unfold))] = 1.0
+    glare = np.einsum("mc,scg->smg", fold, d_glare)  # (sums, published planes, gammas)
+    back = fold.sum(axis=1)[:, None] * d_back[:, :, None, :]  # (rooms, refl., planes, g)
+    d = glare.reshape(len(ROOMS), 2, 1, planes, -1) - back[:, None]
+    sigma = np.asarray(grid.sigma, np.float64)
+    with np.errstate(invalid="ignore"):
+        body = np.einsum("rofmg,mg->rof", d[..., 1:-1] ** 2, sigma[:, 1:-1] ** 2)
+        poles = sum((d[..., j].sum(axis=-1) * sigma[0, j]) ** 2 for j in (0, -1))
+    return np.sqrt(body + poles)
 
 
 #: The last models made, by grid layout and opening: a service writes the same luminaire's
@@ -243,15 +283,6 @@ def _model(grid: CGammaGrid, opening) -> _Model:
         for old in list(_MODELS)[:-8]:
             _MODELS.pop(old, None)
     return model
-
-
-def _spread(draws: np.ndarray) -> np.ndarray:
-    """Standard deviation over the draws (axis 0); NaN for a cell with an undefined draw
-    (no glare at all: UGR is minus infinity)."""
-    ok = np.isfinite(draws).all(axis=0)
-    out = np.full(draws.shape[1:], np.nan)
-    out[ok] = draws[:, ok].std(axis=0, ddof=1)
-    return out
 
 
 def _unfold_index(grid: CGammaGrid) -> np.ndarray:
