@@ -188,8 +188,7 @@ def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
     deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
     rings = emitter_rings(acc)
     half_width = beam_half_width(rings)
-    grid, halves, departures = symmetric_grid(acc, default_gammas(half_width),
-                                              C_STEP, SYMMETRY_TOLERANCE)
+    grid, halves, departures = _files_grid(acc, default_gammas(half_width))
     fig = figures(acc, grid, halves, C_STEP, rings, half_width)
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)
 
@@ -201,5 +200,22 @@ def files_accuracy(acc: Accumulator) -> FilesAccuracy:
     if not acc.photons or not acc.spread_known:
         return FilesAccuracy(None, None, None)
     gammas = default_gammas(beam_half_width(emitter_rings(acc)))
-    grid, _, _ = symmetric_grid(acc, gammas, C_STEP, SYMMETRY_TOLERANCE)
+    grid, _, _ = _files_grid(acc, gammas)
     return grid_accuracy(grid, C_STEP)
+
+
+#: The files' grids last measured, by counts and lights' fluxes: a session judges the
+#: files on the same counts it then writes them from.
+_GRIDS: dict[tuple, tuple] = {}
+
+
+def _files_grid(acc: Accumulator, gammas: np.ndarray) -> tuple:
+    """:func:`~lumitrace.photometry.measured.symmetric_grid` of the files' layout, made
+    once per counts (:attr:`~lumitrace.film.accumulate.Accumulator.version`) and fluxes."""
+    key = (acc.version, tuple(t.flux for t in acc.emitters), tuple(gammas.tolist()))
+    got = _GRIDS.get(key)
+    if got is None:
+        got = _GRIDS[key] = symmetric_grid(acc, gammas, C_STEP, SYMMETRY_TOLERANCE)
+        for old in list(_GRIDS)[:-2]:
+            _GRIDS.pop(old, None)
+    return got
