@@ -1,13 +1,15 @@
 """What an edit of one part costs Embree's structure: a luminaire of one large part (a finely
 tessellated reflector) and one small one (a baffle), built one-level and two-level (each
-part its own scene, placed by an identity instance) in one run.
+part its own scene, placed by its transform) in one run.
 
     python tools/part_edit_bench.py [--triangles 1000000] [--repeats 3] [--json]
 
 Timed per structure, medians of ``--repeats``: the first build (``prepare``), moving the
-small part and moving the large one (``prepare(..., previous=...)``: the edited parts
-rebuilt), and casting the same 200,000 rays the tracer sends (photons of the luminaire's
-light, recorded on the first bounces), with the hits the two structures disagree on.
+small part and moving the large one by 1 mm, as a stage edit of its transform gives them
+(``prepare(..., previous=...)``: one level rebuilds the moved part's triangles, two levels
+place its structure anew), and casting the same 200,000 rays the tracer sends (photons of
+the luminaire's light, recorded on the first bounces), with the hits the two structures
+disagree on.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import time
 
 import numpy as np
 
-from lumitrace.scene import Emitter, Material, Scene
+from lumitrace.scene import Emitter, Material, PartFrame, Scene
 from lumitrace.trace import embree
 from lumitrace.trace.job import BatchJob
 from lumitrace.trace.prepared import prepare
@@ -46,31 +48,48 @@ def luminaire(triangles: int) -> Scene:
     and a small white baffle ring below it."""
     n_down = max(2, int(math.sqrt(triangles / 8)))
     reflector = _cone(4 * n_down, n_down, 0.02, 0.06, 0.05)
-    baffle = _cone(64, 2, 0.061, 0.063, 0.004) + (0.0, 0.0, -0.05)
-    tri = np.concatenate([reflector, baffle])
+    baffle = _cone(64, 2, 0.061, 0.063, 0.004)
+    # each part in its own space (float32, as a stage's points are), placed by its frame
+    frames = tuple(PartFrame(np.ascontiguousarray(t, np.float32), np.eye(3),
+                             np.array([0.0, 0.0, z])) for t, z in ((reflector, 0.0),
+                                                                   (baffle, -0.05)))
+    tri = np.concatenate([f.local.astype(np.float64) @ f.linear + f.offset for f in frames])
     part = np.r_[np.zeros(len(reflector), np.int32), np.ones(len(baffle), np.int32)]
     materials = (Material("/Reflector", "glossy", specular_reflectance=0.9, roughness=0.1),
                  Material("/Baffle", "diffuse", reflectance=0.8))
     led = Emitter(path="/Led", kind="disk", flux=1000.0, to_world=np.eye(4), radius=0.01)
-    return Scene(tri, part.copy(), part, materials, ("/Reflector", "/Baffle"), (led,))
+    return Scene(tri, part.copy(), part, materials, ("/Reflector", "/Baffle"), (led,),
+                 part_frames=frames)
 
 
 def _moved(scene: Scene, part: int, dz: float) -> Scene:
+    """``scene`` with ``part`` moved ``dz`` (m) along z, as the stage reader reads a new
+    translation of it: its own triangles the same, its frame's offset and world ones new."""
+    frames = list(scene.part_frames)
+    f = frames[part]
+    frames[part] = dataclasses.replace(f, offset=f.offset + (0.0, 0.0, dz))
     tri = np.array(scene.triangles, np.float64)
-    tri[np.asarray(scene.part_index) == part] += (0.0, 0.0, dz)
-    return dataclasses.replace(scene, triangles=tri)
+    tri[np.asarray(scene.part_index) == part] = \
+        frames[part].local.astype(np.float64) @ f.linear + frames[part].offset
+    return dataclasses.replace(scene, triangles=tri, part_frames=tuple(frames))
 
 
 def measure(scene: Scene, two_level: bool, rays) -> dict:
     """Build, the two edits and the rays' cast, in seconds, for one structure."""
     embree.TWO_LEVEL_TRIANGLES = 0 if two_level else 1 << 62
+    baffle_moved = _moved(scene, 1, -0.001)
+    both_moved = _moved(baffle_moved, 0, -0.001)
     t0 = time.perf_counter()
     ps = prepare(scene)
     t1 = time.perf_counter()
-    small = prepare(_moved(scene, 1, -0.001), ps.frame, previous=ps)
+    small = prepare(baffle_moved, ps.frame, previous=ps)
     t2 = time.perf_counter()
-    large = prepare(_moved(scene, 0, -0.001), ps.frame, previous=small)
+    edits = [(small.embree.rebuilt, small.embree.moved)]
+    large = prepare(both_moved, ps.frame, previous=small)
     t3 = time.perf_counter()
+    edits.append((large.embree.rebuilt, large.embree.moved))
+    # one level rebuilds the moved part; two levels place it anew
+    assert edits == ([([], [1]), ([], [0])] if two_level else [([1], []), ([0], [])]), edits
     fresh = prepare(scene, ps.frame)
     o, d = rays
     fresh.intersect(o, d)

@@ -112,6 +112,31 @@ def test_incremental_retrace_equals_a_fresh_trace(edits):
                 assert sel.photons == 0  # nothing the tracer sees: nothing retraced
 
 
+def test_moved_parts_of_a_two_level_scene_retrace_as_a_fresh_trace(tmp_path, monkeypatch):
+    # each part its own Embree scene: a move is a new transform of the part's structure,
+    # and the fresh trace builds the same structure from the same frames
+    from lumitrace.trace import embree
+
+    monkeypatch.setattr(embree, "TWO_LEVEL_TRIANGLES", 0)
+    path, scene, frame, r, stage = _traced_luminaire(tmp_path / "lum.usda")
+    ps = prepare(scene, frame)
+    assert ps.embree.two_level
+    for kind, part, x in (("move", PARTS[0], 0.3), ("move", PARTS[1], 0.7),
+                          ("material", PARTS[0], 0.6), ("move", PARTS[0], 0.9)):
+        _edit(stage, kind, part, x)
+        stage.GetRootLayer().Save()
+        new = read_stage(path)
+        sel = select(r.records, r.scene, new, frame)
+        ps = prepare(new, frame, previous=ps)
+        g = new.parts.index(part)
+        assert (ps.embree.rebuilt, ps.embree.moved) == ([], [g] if kind == "move" else [])
+        retrace(r, new, sel, lambda work: [trace_batch(ps, j, photons=ids, records=True)
+                                           for j, ids in work], 4096)
+        fresh = run(new, SETTINGS, frame=frame)
+        assert np.array_equal(r.accumulator.counts(), fresh.accumulator.counts()), kind
+        assert np.array_equal(r.accumulator.emitters[0].cells, fresh.accumulator.emitters[0].cells)
+
+
 def _traced_luminaire(path: Path, records_cap: int = 1 << 30):
     """The test luminaire traced with records: (path, scene, frame, refinement, stage)."""
     _luminaire(path)

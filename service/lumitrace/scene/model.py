@@ -254,6 +254,17 @@ class LuminaireInfo:
     colour_rendering_index: float | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class PartFrame:
+    """A part's triangles in its own space and the placement that puts them in the world:
+    ``world = local @ linear + offset`` (row vectors, m); what lets a moved part be a new
+    transform of the same structure, not new triangles."""
+
+    local: np.ndarray   # (T, 3, 3) float32, the part's own units, in the scene's order
+    linear: np.ndarray  # (3, 3) float64, own units to m
+    offset: np.ndarray  # (3,) float64, m
+
+
 @dataclass(frozen=True)
 class Scene:
     """A luminaire as flat arrays, ready to trace.
@@ -285,6 +296,9 @@ class Scene:
     layer_files: tuple[str, ...] = field(default=(), compare=False)
     #: the luminaire's manufacturer, names, lamp, power and colour rendering
     info: LuminaireInfo = field(default_factory=LuminaireInfo, compare=False)
+    #: per part, its own triangles and placement where it has one placement (else None;
+    #: empty: none known): the same world triangles, as the tracer's structure takes them
+    part_frames: tuple = field(default=(), compare=False, repr=False)
 
     @property
     def photometric_axes(self) -> np.ndarray:

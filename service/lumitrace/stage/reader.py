@@ -52,7 +52,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux
 
 from .. import schema
 from ..errors import StageError
-from ..scene import Emitter, LuminaireInfo, Scene
+from ..scene import Emitter, LuminaireInfo, PartFrame, Scene
 from ..scene.groups import group_emitters
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
@@ -159,6 +159,9 @@ class _Reader:
         self.emitters: list[Emitter] = []
         self.warnings: dict[str, None] = {}
         self.local_meshes: dict[str, LocalMesh | None] = {}
+        #: per part, its triangles in its own space and the one placement that puts them in
+        #: the world (None for a part placed more than once, or a light's body)
+        self.part_frames: dict[int, PartFrame | None] = {}
         self.meters_per_unit = 1.0
 
     # -- top level ----------------------------------------------------------------------
@@ -219,6 +222,7 @@ class _Reader:
             part_index=part_index,
             materials=tuple(self.materials.materials),
             parts=tuple(self.parts),
+            part_frames=tuple(self.part_frames.get(i) for i in range(len(self.parts))),
             emitters=group_emitters(self.emitters),
             up_axis=up_axis,
             meters_per_unit=self.meters_per_unit,
@@ -405,11 +409,13 @@ class _Reader:
             return
         part = self.parts.setdefault(path, len(self.parts))
         flat = local.triangles.reshape(-1, 3)
-        for matrix, _ in placements(self.xf, prim, frame):
+        where = placements(self.xf, prim, frame)
+        for matrix, _ in where:
             world = (flat @ matrix[:3, :3] + matrix[3, :3]) * self.meters_per_unit
             world = world.reshape(-1, 3, 3)
             validate.check_extent(world, path, "points")
-            if np.linalg.det(matrix[:3, :3]) < 0.0:  # a mirroring transform flips winding
+            flip = np.linalg.det(matrix[:3, :3]) < 0.0  # a mirroring transform flips winding
+            if flip:
                 world = world[:, [0, 2, 1]]
             keep = non_degenerate(world)
             dropped = int(keep.size - np.count_nonzero(keep))
@@ -418,6 +424,11 @@ class _Reader:
             self.triangles.append(world[keep])
             self.material_index.append(local.material_index[keep])
             self.part_index.append(np.full(int(np.count_nonzero(keep)), part, dtype=np.int32))
+            own = local.triangles[:, [0, 2, 1]] if flip else local.triangles
+            self.part_frames[part] = None if part in self.part_frames or len(where) > 1 else \
+                PartFrame(np.ascontiguousarray(own[keep], np.float32),
+                          matrix[:3, :3] * self.meters_per_unit,
+                          matrix[3, :3] * self.meters_per_unit)
 
     def _light_body(self, prim: Usd.Prim, kind: str, emitters: list[Emitter]) -> None:
         """The light's own surface as a part of the material bound to the light, at each of

@@ -2,11 +2,15 @@
 part, intersected by a compiled kernel, and the geometries of edited parts rebuilt in place.
 
 A large scene (:data:`TWO_LEVEL_TRIANGLES` or more) is two-level: each part its own Embree
-scene, placed in the top scene by an instance of identity transform, so an edit rebuilds
-the edited parts' own structures and a top level over the parts, not every triangle. An
-identity instance leaves the ray's numbers as they are, so the hits are the one-level
-scene's (tested): a fresh trace and an incremental one meet the same triangles at the same
-distances whichever structure either uses.
+scene, placed in the top scene by an instance, so an edit rebuilds the edited parts' own
+structures and a top level over the parts, not every triangle. A part with a frame of its
+own (:class:`~lumitrace.scene.PartFrame`: one placement, as the stage reader gives) is
+built from its own triangles and placed by its transform, so moving it changes that
+transform alone: no triangle is rebuilt. Rays then meet it in its own space, which changes
+the last bits of their distances against a one-level scene (and a grazing ray's hit, about
+one in 10^4), but a fresh build of the same frames is the same structure: a fresh trace
+and an incremental one meet the same triangles at the same distances. A part without one
+is placed by the identity, which leaves the ray's numbers as they are.
 
 embreex builds one geometry of all triangles, rebuilt whole after any edit, and returns six
 freshly allocated arrays per call. Here each part is its own geometry, so an edit detaches
@@ -89,9 +93,11 @@ class PartScene:
     geometry per part (``part_index`` (T,)), hits numbered as the triangles are."""
 
     def __init__(self, triangles: np.ndarray, part_index: np.ndarray,
-                 two_level: bool | None = None):
+                 two_level: bool | None = None, frames: list | None = None):
         """``two_level``: each part its own scene (default: from
-        :data:`TWO_LEVEL_TRIANGLES` triangles on)."""
+        :data:`TWO_LEVEL_TRIANGLES` triangles on); ``frames``: per part, None or its own
+        triangles (t, 3, 3) float32 and the transform (12,) float32, columns of 3 x 4, that
+        places them among ``triangles`` (two-level only)."""
         from .compiled import intersect
 
         self.two_level = len(triangles) >= TWO_LEVEL_TRIANGLES if two_level is None \
@@ -106,12 +112,22 @@ class PartScene:
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
         self._buffers: dict[int, tuple] = {}  # the geometries' shared buffers, kept alive
+        self._placed: dict[int, np.ndarray] = {}  # two-level: the transforms of framed parts
         self.scene = self._lib.rtcNewScene(_device())
         self._lib.rtcSetSceneFlags(self.scene, _ROBUST)
+        frames = self._frames(frames)
         for g, tri in self._by_part(triangles):
-            self._attach(g, tri)
+            self._attach(g, tri, frames[g])
         self._commit()
         self.rebuilt = sorted(self._buffers)  # the parts the last build or update built
+        self.moved: list[int] = []  # the parts the last update placed anew, unbuilt
+
+    def _frames(self, frames: list | None) -> list:
+        """Every part's frame, None where it has none or the scene is one-level."""
+        n = len(self.offsets)
+        if not self.two_level or not frames:
+            return [None] * n
+        return [frames[g] if g < len(frames) else None for g in range(n)]
 
     def _by_part(self, triangles: np.ndarray):
         """(part, its float32 triangles (t, 3, 3)) for every part that has triangles."""
@@ -122,10 +138,13 @@ class PartScene:
         return [(g, tri[bounds[g]:bounds[g + 1]]) for g in range(len(self.offsets))
                 if bounds[g + 1] > bounds[g]]
 
-    def _attach(self, g: int, tri: np.ndarray) -> None:
+    def _attach(self, g: int, tri: np.ndarray, frame=None) -> None:
         """Attach part ``g``'s triangles (t, 3, 3) as geometry ``g`` (two-level: as the
-        instance ``g`` of a scene of its own)."""
+        instance ``g`` of a scene of its own; with a ``frame``, its own triangles placed by
+        its transform)."""
         lib = self._lib
+        if frame is not None:
+            tri = frame[0]
         v = np.zeros((3 * len(tri) + 1, 4), np.float32)  # 16-byte rows, one spare
         v[:-1, :3] = tri.reshape(-1, 3)
         idx = np.arange(3 * len(tri), dtype=np.uint32).reshape(-1, 3)
@@ -142,17 +161,30 @@ class PartScene:
             lib.rtcReleaseGeometry(geom)  # the part's scene holds it
             with _lock:
                 lib.rtcCommitScene(part)
-            geom = lib.rtcNewGeometry(_device(), _INSTANCE)
-            lib.rtcSetGeometryInstancedScene(geom, part)
-            lib.rtcSetGeometryTransform(geom, 0, _FLOAT3X4_COLUMNS, _IDENTITY.ctypes.data)
-            lib.rtcCommitGeometry(geom)
             old = self._scenes.pop(g, None)
             if old is not None:
                 lib.rtcReleaseScene(old)
             self._scenes[g] = part
+            self._place(g, _IDENTITY if frame is None else frame[1])
+        else:
+            lib.rtcAttachGeometryByID(self.scene, geom, g)
+            lib.rtcReleaseGeometry(geom)  # the scene holds it
+        self._buffers[g] = (v, idx, frame is not None)
+
+    def _place(self, g: int, transform: np.ndarray) -> None:
+        """Place part ``g``'s own scene in the top scene by ``transform`` (12,) float32,
+        columns of 3 x 4: an instance, new or in place of the one before."""
+        lib = self._lib
+        if g in self._placed:
+            lib.rtcDetachGeometry(self.scene, g)
+        t = np.ascontiguousarray(transform, np.float32)
+        geom = lib.rtcNewGeometry(_device(), _INSTANCE)
+        lib.rtcSetGeometryInstancedScene(geom, self._scenes[g])
+        lib.rtcSetGeometryTransform(geom, 0, _FLOAT3X4_COLUMNS, t.ctypes.data)
+        lib.rtcCommitGeometry(geom)
         lib.rtcAttachGeometryByID(self.scene, geom, g)
         lib.rtcReleaseGeometry(geom)  # the scene holds it
-        self._buffers[g] = (v, idx)
+        self._placed[g] = t
 
     def _commit(self) -> None:
         with _lock:
@@ -161,20 +193,38 @@ class PartScene:
         if err:
             raise RuntimeError(f"Embree error {err} while building the scene")
 
-    def update(self, triangles: np.ndarray, part_index) -> bool:
-        """Take the scene's new triangles (T, 3, 3) float32 where the parts are laid out
-        as before (the same part of every triangle): rebuild the parts whose triangles
-        changed, commit once, and say True; False (nothing done) when the layout differs."""
+    def update(self, triangles: np.ndarray, part_index, frames: list | None = None) -> bool:
+        """Take the scene's new triangles (T, 3, 3) float32 (and parts' ``frames``, as the
+        constructor takes them) where the parts are laid out as before (the same part of
+        every triangle): place anew the framed parts whose own triangles are the same and
+        whose transform changed, rebuild the parts whose triangles changed, commit once,
+        and say True; False (nothing done) when the layout differs."""
         if not np.array_equal(_parts(part_index, len(triangles)), self._part):
             return False
-        changed = [(g, tri) for g, tri in self._by_part(triangles)
-                   if not np.array_equal(self._buffers[g][0][:-1, :3], tri.reshape(-1, 3))]
-        for g, tri in changed:
-            self._lib.rtcDetachGeometry(self.scene, g)
-            self._attach(g, tri)
-        if changed:
+        frames = self._frames(frames)
+        changed, moved = [], []
+        for g, tri in self._by_part(triangles):
+            v, _, framed = self._buffers[g]
+            frame = frames[g]
+            own = tri if frame is None else frame[0]
+            if framed != (frame is not None) or not np.array_equal(v[:-1, :3],
+                                                                    own.reshape(-1, 3)):
+                changed.append((g, tri, frame))
+            elif frame is not None and not np.array_equal(self._placed[g], frame[1]):
+                moved.append((g, frame[1]))
+        for g, tri, frame in changed:
+            if g in self._placed:
+                self._lib.rtcDetachGeometry(self.scene, g)
+                del self._placed[g]
+            elif not self.two_level:
+                self._lib.rtcDetachGeometry(self.scene, g)
+            self._attach(g, tri, frame)
+        for g, transform in moved:
+            self._place(g, transform)
+        if changed or moved:
             self._commit()
-        self.rebuilt = [g for g, _ in changed]
+        self.rebuilt = [g for g, _, _ in changed]
+        self.moved = [g for g, _ in moved]
         return True
 
     @property

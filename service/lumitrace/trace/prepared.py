@@ -19,6 +19,7 @@ from ..scene import DIELECTRIC, Scene
 from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
 from .vectors import cross, dot
+from . import embree as _embree
 from .embree import PartScene, library
 from .emission import emission_args
 from .records import CellGrid, _axis_masks, part_bits
@@ -219,18 +220,60 @@ def normalised(scene: Scene, center: np.ndarray, scale: float) -> np.ndarray:
     return (np.asarray(scene.triangles, dtype=np.float64) - center) / scale
 
 
-def embree_scene(triangles: np.ndarray, part_index, parts: bool = True):
+def embree_scene(triangles: np.ndarray, part_index, parts: bool = True,
+                 frames: list | None = None):
     """The Embree scene of float32 triangles (T, 3, 3): one geometry per part through
-    Embree's C API (:class:`~lumitrace.trace.embree.PartScene`) where its library is found
-    and ``parts``, else embreex's one geometry. Both give the same hits."""
+    Embree's C API (:class:`~lumitrace.trace.embree.PartScene`, the parts' ``frames`` as
+    :func:`part_frames` makes them) where its library is found and ``parts``, else
+    embreex's one geometry. Both give the same hits."""
     if parts and library() is not None:
-        return PartScene(triangles, part_index)
+        return PartScene(triangles, part_index, frames=frames)
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
     embree = rtcore_scene.EmbreeScene(robust=True)
     TriangleMesh(embree, triangles)
     return embree
+
+
+#: A part's frame stands for its triangles where it puts these many of them, spread over
+#: the part, within this share of the scene's size of where the scene has them: a part
+#: whose triangles were moved or replaced, its frame not, is traced from its triangles.
+FRAME_SAMPLE = 256
+FRAME_TOLERANCE = 1e-9
+
+
+def part_frames(scene: Scene, center: np.ndarray, scale: float) -> list | None:
+    """Per part, None or (its own triangles (t, 3, 3) float32, the transform (12,) float32,
+    columns of 3 x 4, from them to the tracing frame) where the scene is large enough to be
+    two-level and the part's frame places its triangles, one run of them, where the scene
+    has them (checked on :data:`FRAME_SAMPLE` of them)."""
+    if not scene.part_frames or len(scene.triangles) < _embree.TWO_LEVEL_TRIANGLES:
+        return None
+    parts = np.asarray(scene.part_index)
+    tri = np.asarray(scene.triangles)
+    cut = np.flatnonzero(parts[1:] != parts[:-1]) + 1
+    runs: dict[int, tuple | None] = {}  # each part's one run of triangles
+    for a, b in zip(np.r_[0, cut].tolist(), np.r_[cut, len(parts)].tolist()):
+        g = int(parts[a])
+        runs[g] = None if g in runs else (a, b)
+    size = FRAME_TOLERANCE * max(float(np.abs(tri[::max(1, len(tri) // 4096)]).max()), 1e-12)
+    out = []
+    for g, f in enumerate(scene.part_frames):
+        run = runs.get(g)
+        if f is None or run is None or run[1] - run[0] != len(f.local):
+            out.append(None)
+            continue
+        n = len(f.local)
+        pick = np.unique(np.linspace(0, n - 1, min(n, FRAME_SAMPLE)).astype(np.int64))
+        placed = f.local[pick].astype(np.float64) @ f.linear + f.offset
+        if not np.allclose(placed, tri[run[0] + pick], rtol=0.0, atol=size):
+            out.append(None)
+            continue
+        m = np.asarray(f.linear, np.float64) / scale  # row i: where own axis i goes
+        t = (np.asarray(f.offset, np.float64) - center) / scale
+        out.append((f.local, np.concatenate([m[0], m[1], m[2], t]).astype(np.float32)))
+    return out
 
 
 def prepare(scene: Scene, frame: TracingFrame | None = None,
@@ -259,9 +302,11 @@ def prepare(scene: Scene, frame: TracingFrame | None = None,
     if tri.shape[0]:
         tri32 = np.ascontiguousarray(tri, dtype=np.float32)
         embree = previous.embree if previous is not None else None
+        frames = part_frames(scene, center, scale)
         if not (isinstance(embree, PartScene) and previous.center.tolist() == center.tolist()
-                and previous.scale == scale and embree.update(tri32, scene.part_index)):
-            embree = embree_scene(tri32, scene.part_index)
+                and previous.scale == scale and embree.update(tri32, scene.part_index,
+                                                              frames)):
+            embree = embree_scene(tri32, scene.part_index, frames=frames)
         table = MaterialTable.from_materials(scene.materials,
                                              spectral=scene.colour == "spectral")
         kind = np.take(table.kind, np.asarray(scene.material_index))
