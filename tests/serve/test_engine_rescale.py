@@ -3,7 +3,9 @@ the scene traced, not the revision before it; a flux edit's preview is the last 
 rescaled, equal to one made afresh from the rescaled counts."""
 from __future__ import annotations
 
+import contextlib
 import shutil
+import threading
 import time
 
 import numpy as np
@@ -27,15 +29,25 @@ def _set(path: str, prop: str, value) -> list[dict]:
     return [{"op": "set", "path": path, "property": prop, "value": value}]
 
 
+@contextlib.contextmanager
+def _running(folder, refreshed=None):
+    """The demo's engine, started (``refreshed`` its live view's hook from the start)."""
+    shutil.copy(ROOT / "stages" / "downlight.usda", folder / "downlight.usda")
+    live = LiveStage(folder / "downlight.usda")
+    eng = Engine(live, SETTINGS, EventLog(first_id=1), folder / "out")
+    eng.refreshed = refreshed
+    eng.start(live.start())
+    try:
+        yield live, eng
+    finally:
+        eng.stop()
+        live.close()
+
+
 @pytest.fixture
 def engine(tmp_path):
-    shutil.copy(ROOT / "stages" / "downlight.usda", tmp_path / "downlight.usda")
-    live = LiveStage(tmp_path / "downlight.usda")
-    eng = Engine(live, SETTINGS, EventLog(first_id=1), tmp_path / "out")
-    eng.start(live.start())
-    yield live, eng
-    eng.stop()
-    live.close()
+    with _running(tmp_path) as running:
+        yield running
 
 
 def _done(eng: Engine, revision: int) -> None:
@@ -63,6 +75,61 @@ def test_a_flux_edit_after_a_skipped_material_edit_is_traced_with_the_material(e
     assert eng.refinement.accumulator.emitters[0].flux == 1500.0
 
 
+def _same_preview(frame, fresh) -> None:
+    """A frame (header, arrays) holds what a preview made afresh holds: its arrays to
+    float32, every figure to 1e-9."""
+    (header, arrays), (fresh_header, fresh_arrays) = frame, fresh
+    for name, a in fresh_arrays.items():  # the frame's arrays are float32
+        np.testing.assert_allclose(arrays[name], a, rtol=2e-7, atol=1e-9 * a.max())
+    for name, v in fresh_header["figures"].items():
+        if name == "photometry_worst_at":
+            continue  # cells of one relative error (near the pole) tie either way
+        shown = header["figures"][name]
+        if isinstance(v, float):
+            assert shown == pytest.approx(v, rel=1e-9), name
+        elif isinstance(v, (list, tuple)) and v and isinstance(v[0], float):
+            assert shown == pytest.approx(list(v), rel=1e-9), name
+        else:
+            assert shown == (list(v) if isinstance(v, tuple) else v), name
+    assert header["lamp_lumens"] == pytest.approx(fresh_header["lamp_lumens"], rel=1e-12)
+    assert header["photons"] == fresh_header["photons"]
+
+
+def test_a_flux_edits_first_preview_is_an_earlier_one_rescaled(tmp_path):
+    """A flux edit after more rounds than the last preview saw: its first frame is the last
+    one rescaled, of the photons that one had (what a preview of the new revision at those
+    photons holds), and the current photons' frame follows."""
+    previews, first = PreviewCache(), []
+
+    def refreshed():  # the first round's preview, then none: the cache falls behind
+        if not first:
+            first.append(eng.snapshot())
+            previews.get(eng)
+    with _running(tmp_path, refreshed) as (live, eng):
+        _first_preview_rescaled(live, eng, previews, first)
+
+
+def _first_preview_rescaled(live, eng, previews, first) -> None:
+    _done(eng, 0)
+    early = first[0]
+    assert early["photons"] < eng.refinement.accumulator.photons
+    rev = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    eng.submit(rev)
+    _done(eng, 1)
+    header, arrays = read_frame(previews.get(eng))
+    assert header["revision"] == 1 and header["photons"] == early["photons"]
+    early["accumulator"].rescale(0, 1500.0)
+    _same_preview((header, arrays), preview_parts(**{**early, "scene": rev.scene,
+                                                     "estimate_": None, "revision": 1}))
+    header, _ = read_frame(previews.get(eng))  # then the frame of the photons now
+    assert (header["revision"], header["photons"]) == (1, eng.refinement.accumulator.photons)
+    # a retrace takes photons out: no earlier frame stands for the edited revision
+    material = live.call(live.apply, _set(REFLECTOR, "lumitrace:specularReflectance", 0.5))
+    eng.submit(material)
+    _done(eng, 2)
+    assert read_frame(previews.get(eng))[0]["photons"] == eng.refinement.accumulator.photons
+
+
 def test_a_flux_edits_preview_is_the_last_one_rescaled(engine):
     live, eng = engine
     _done(eng, 0)
@@ -76,21 +143,9 @@ def test_a_flux_edits_preview_is_the_last_one_rescaled(engine):
     assert header["revision"] == 1 and header["photons"] == before[0]["photons"]
     k = 1500.0 / 1200.0
     # what a preview made afresh from the rescaled counts holds
-    fresh_header, fresh = preview_parts(**eng.snapshot())
-    for name, a in fresh.items():  # the frame's arrays are float32
-        np.testing.assert_allclose(arrays[name], a, rtol=2e-7, atol=1e-9 * a.max())
-        np.testing.assert_allclose(arrays[name], before[1][name] * k, rtol=2e-7)
-    for name, v in fresh_header["figures"].items():
-        if name == "photometry_worst_at":
-            continue  # cells of one relative error (near the pole) tie either way
-        shown = header["figures"][name]
-        if isinstance(v, float):
-            assert shown == pytest.approx(v, rel=1e-9), name
-        elif isinstance(v, (list, tuple)) and v and isinstance(v[0], float):
-            assert shown == pytest.approx(list(v), rel=1e-9), name
-        else:
-            assert shown == (list(v) if isinstance(v, tuple) else v), name
-    assert header["lamp_lumens"] == pytest.approx(fresh_header["lamp_lumens"], rel=1e-12)
+    _same_preview((header, arrays), preview_parts(**eng.snapshot()))
+    for name, a in arrays.items():
+        np.testing.assert_allclose(a, before[1][name] * k, rtol=2e-7)
     # the files are written from an estimate made afresh, not the rescaled one
     ph = photometry_of(rev.scene, eng.refinement.accumulator)
     assert eng.record.summary()["photometry"]["peak_intensity"] == \
@@ -130,3 +185,47 @@ def test_the_writer_writes_the_newest_and_a_flush_waits_for_it():
     writer.put(job("bad"))
     writer.close()
     assert len(failures) == 1 and isinstance(failures[0], OSError)
+
+
+def test_a_flux_edit_is_taken_while_a_round_runs_and_the_round_is_kept(tmp_path,
+                                                                       monkeypatch):
+    """The first round's batches are held until the flux edit is taken: the engine takes
+    it while they run (a batch counts photons, whatever the lights' flux), keeps the round
+    (no photon is traced twice) and ends with a fresh trace's counts."""
+    import lumitrace.serve.engine as engine_module
+
+    held, running, traced = threading.Event(), [], []
+    original = engine_module.trace_batch
+
+    def trace_batch(ps, job, **kw):
+        running.append(job)
+        assert held.wait(60)
+        traced.append((job.emitter, job.first, job.count))
+        return original(ps, job, **kw)
+
+    monkeypatch.setattr(engine_module, "trace_batch", trace_batch)
+    with _running(tmp_path) as (live, eng):
+        try:
+            _taken_while_held(live, eng, held, running, traced)
+        finally:
+            held.set()
+
+
+def _taken_while_held(live, eng, held, running, traced) -> None:
+    deadline = time.monotonic() + 60
+    while not running:
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    rev = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    eng.submit(rev)
+    while eng.status()["traced_revision"] != 1:  # taken, the batches still held
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    assert eng.refinement.accumulator.photons == 0 and not traced
+    held.set()
+    _done(eng, 1)
+    fresh = run(rev.scene, SETTINGS, frame=eng.frame).accumulator
+    np.testing.assert_array_equal(eng.refinement.accumulator.counts(), fresh.counts())
+    assert eng.refinement.accumulator.emitters[0].flux == 1500.0
+    assert len(set(traced)) == len(traced) and \
+        sum(n for _, _, n in traced) == fresh.photons  # the round kept, none again

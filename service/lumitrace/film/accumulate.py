@@ -217,6 +217,9 @@ class Accumulator:
         #: versions are the same counts (an accumulator's snapshots copy it), whatever the
         #: lights' fluxes
         self.version = next(_VERSIONS)
+        #: a new value (unique in the process) whenever counts are taken out (a retrace):
+        #: counts of one lineage hold every photon of earlier counts of it, as traced
+        self.lineage = next(_VERSIONS)
 
     def set_colours(self, scene: Scene) -> None:
         """Take each light's colour (X/Y, Z/Y of its spectrum, D65 without one) from
@@ -253,6 +256,7 @@ class Accumulator:
         if batch.photons > t.photons or not covered:
             raise ValueError(f"batch of emitter {batch.emitter} from photon {batch.start} "
                              "was not added to this accumulator")
+        self.lineage = next(_VERSIONS)
         self._apply(batch, -1)
 
     def _apply(self, batch: BatchTally, sign: int) -> None:
@@ -290,6 +294,7 @@ class Accumulator:
         copy.parts = self.parts
         copy.emitting_parts = self.emitting_parts
         copy.version = self.version
+        copy.lineage = self.lineage
         return copy
 
     def light_state(self) -> tuple:

@@ -138,6 +138,8 @@ class Refinement:
         self.round_photons = min(first_round, self.full_round)
         self.iteration = 0
         self.estimate: MapEstimate | None = None
+        self._estimated_version = self.accumulator.version  # the counts it is of
+        self._t_trace = 0.0  # seconds the last round's tallies took to come
         self.files: FilesAccuracy | None = None
         self._files_photons = 0  # the photons self.files was judged at
         #: :attr:`estimate` was scaled from the last one by a rescale, not made afresh
@@ -154,27 +156,48 @@ class Refinement:
         (nobody looks at it before the end: :meth:`result` estimates then). The tallies are
         all traced before any is added: adding while the tracing threads run makes every
         small step of the many small additions of a many-emitter scene wait for the GIL."""
+        self.add_counts(tallies)
+        return self.settle(estimated)
+
+    def add_counts(self, tallies) -> None:
+        """The first half of :meth:`add_round`: the round's counts in (what a lock around a
+        refinement other threads read must cover); :attr:`estimate` is then of the counts
+        before, until :meth:`settle` (:meth:`estimate_current` says which)."""
         t0 = time.perf_counter()
         tallies = list(tallies)
-        t_trace = time.perf_counter() - t0
+        self._t_trace = time.perf_counter() - t0
         for tally in tallies:
             self.accumulator.add(tally)
             self.done[tally.emitter] += tally.photons
             if self.records is not None:
                 self._keep_records(tally)
         self.iteration += 1
+
+    def settle(self, estimated: bool = True) -> MapEstimate | None:
+        """The second half of :meth:`add_round`: the map's estimate (unless not
+        ``estimated``), the files judged where the target is theirs, the next round's
+        size. It reads the counts only."""
         t0 = time.perf_counter()
-        self.estimate = estimate(self.accumulator, self.settings.threshold) if estimated \
-            else None
-        self._scaled_estimate = False
+        est = estimate(self.accumulator, self.settings.threshold) if estimated else None
+        if est is not None and est.threshold != self.settings.threshold:
+            est = estimate(self.accumulator, self.settings.threshold)  # changed meanwhile
+        self._set_estimate(est)
         self.files = None
         if self.settings.target_error is not None:
             self.current_files()
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
-                t_estimate > ESTIMATE_SHARE * t_trace and t_trace < ROUND_SECONDS):
+                t_estimate > ESTIMATE_SHARE * self._t_trace and self._t_trace < ROUND_SECONDS):
             self.round_photons *= 2
         return self.estimate
+
+    def _set_estimate(self, est: MapEstimate | None, scaled: bool = False) -> None:
+        self.estimate, self._scaled_estimate = est, scaled
+        self._estimated_version = self.accumulator.version
+
+    def estimate_current(self) -> MapEstimate | None:
+        """:attr:`estimate` where it is of the counts as they are, else None."""
+        return self.estimate if self._estimated_version == self.accumulator.version else None
 
     def _keep_records(self, tally) -> None:
         rec = self.records[tally.emitter]
@@ -208,8 +231,7 @@ class Refinement:
 
     def reestimate(self) -> MapEstimate:
         """Estimate the map again (after photons were retraced)."""
-        self.estimate = estimate(self.accumulator, self.settings.threshold)
-        self._scaled_estimate = False
+        self._set_estimate(estimate(self.accumulator, self.settings.threshold))
         self.files = None  # judged again when asked: the counts changed
         return self.estimate
 
@@ -268,18 +290,17 @@ class Refinement:
         acc.set_colours(scene)
         self.scene = scene
         k = flux_scale(before, acc.light_state())
-        if k is not None and self.estimate is not None:
+        if k is not None and self.estimate_current() is not None:
             # every light dimmed alike (one light, say): the maps scale, at once; the
             # files' estimate is made afresh from the counts (:meth:`result`)
-            self.estimate, self._scaled_estimate = self.estimate.scaled(k), True
+            self._set_estimate(self.estimate.scaled(k), scaled=True)
         else:
-            self.estimate = estimate(acc, self.settings.threshold)
+            self._set_estimate(estimate(acc, self.settings.threshold))
         self.files = None  # judged again when asked: the fluxes changed
 
     def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
-        if self.estimate is None or self._scaled_estimate:
-            self.estimate = estimate(self.accumulator, self.settings.threshold)
-            self._scaled_estimate = False
+        if self.estimate_current() is None or self._scaled_estimate:
+            self._set_estimate(estimate(self.accumulator, self.settings.threshold))
         est = self.estimate
         # the files' accuracy of the last round, where no photon came since; else the
         # writer measures it from the grid it writes (a scene of thousands of lights pays

@@ -52,7 +52,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     ``viewer`` is False)."""
     previews = PreviewCache()
     if viewer:  # an edit's first preview is made as soon as its map is, before its files
-        engine.refreshed = lambda: previews.get(engine)
+        engine.refreshed = lambda: previews.get(engine, hold=False)
 
     @web.middleware
     async def guard(request: web.Request, handler):

@@ -202,6 +202,25 @@ class Engine:
                 return None
             return (rev.number, r.accumulator.photons, self.settings.threshold, r.iteration)
 
+    def preview_waits(self) -> bool:
+        """Whether a preview made now would be replaced at once: a revision waits to be
+        taken, or the engine is estimating the map of new counts (its preview follows)."""
+        with self._cv:
+            r = self.refinement
+            return self._pending is not None or (
+                r is not None and r.accumulator.photons > 0 and r.estimate_current() is None)
+
+    def preview_basis(self) -> tuple | None:
+        """(the revision, the counts' lineage, the lights' fluxes and colours, whether it
+        is done) of the current refinement (:attr:`~lumitrace.film.accumulate.Accumulator.
+        lineage`, ``light_state``): whether an earlier preview, rescaled, shows the
+        current revision; cheap."""
+        with self._cv:
+            r, rev = self.refinement, self.revision
+            if r is None or rev is None:
+                return None
+            return rev.number, r.accumulator.lineage, r.accumulator.light_state(), self.done
+
     def snapshot(self) -> dict[str, Any] | None:
         """The current refinement as the preview needs it: a frozen copy of its counts and
         estimate, its revision and photons (None before the first round)."""
@@ -209,7 +228,7 @@ class Engine:
             r, rev = self.refinement, self.revision
             if r is None or rev is None or not r.accumulator.photons:
                 return None
-            est = r.estimate
+            est = r.estimate_current()  # None while the engine estimates new counts
             return {"scene": r.scene, "accumulator": r.accumulator.snapshot(),
                     "estimate_": est, "revision": rev.number,
                     "photons": r.accumulator.photons, "iteration": r.iteration,
@@ -439,10 +458,10 @@ class Engine:
                 # edit waits for the running batches alone, not for the round
                 for f in futures:
                     f.add_done_callback(self._wake)
-                with self._cv:
-                    while not (self._interrupted() or all(f.done() for f in futures)
-                               or any(f.done() and f.exception() for f in futures)):
-                        self._cv.wait()
+                while (rescale := self._await(futures)) is not None:
+                    # a flux edit is taken while the batches run, and the round kept: they
+                    # count photons, which do not depend on the lights' flux
+                    self._take(rescale)
                 if self._interrupted():
                     _drain(futures)
                     return  # the round is dropped: its photons never reach the map
@@ -451,7 +470,10 @@ class Engine:
                 _drain(futures)  # a batch failed: none of the round may outlive it
                 raise
         with self._cv:
-            est = r.add_round(tallies)
+            r.add_counts(tallies)
+        # the estimate outside the lock (this thread alone changes the counts): a preview
+        # or status request need not wait for it
+        est = r.settle()
         acc = r.accumulator
         elapsed = time.perf_counter() - self.started
         self.events.publish("iteration", revision=self.revision.number,
@@ -462,9 +484,24 @@ class Engine:
             self._refreshed()
         if self._reached():
             self._finish()
-        elif r.iteration <= EAGER_WRITES or \
-                time.perf_counter() - self._last_write >= WRITE_INTERVAL:
+        elif self._pending is None and (  # a newer revision's files would replace these
+                r.iteration <= EAGER_WRITES or
+                time.perf_counter() - self._last_write >= WRITE_INTERVAL):
             self._write(pictures=False)
+
+    def _await(self, futures) -> Revision | None:
+        """Wait until the round's batches are done, one failed or the engine is
+        interrupted; a revision that is a rescale (:meth:`_rescale_only`) ends the wait
+        early and is handed back, no longer pending."""
+        with self._cv:
+            while not (self._interrupted() or all(f.done() for f in futures)
+                       or any(f.done() and f.exception() for f in futures)):
+                self._cv.wait()
+            rev = self._pending
+            if rev is None or self._stopping or not self._rescale_only(rev):
+                return None
+            self._pending = None
+            return rev
 
     @staticmethod
     def _judged(r) -> dict[str, Any]:
@@ -494,7 +531,11 @@ class Engine:
                                 parts=unreached)
         self._refreshed()  # the final map's preview, ready (and a flux edit's to rescale)
         if self._pending is None:
-            self._write(pictures=True)
+            # the pictures now if the edits have paused, else after they do, and the files
+            # then in the background (no round follows): a designer's next edit does not
+            # wait behind them
+            pictures = not self._pictures_wait()
+            self._write(pictures=pictures, background=not pictures)
 
     def _final_write(self) -> None:
         if self.refinement is not None and self.refinement.accumulator.photons and \
@@ -514,8 +555,9 @@ class Engine:
     def _write(self, pictures: bool, background: bool = False) -> None:
         """Publish the current refinement's result, here (after what the writer thread
         holds), or in the ``background``: by the writer, from a copy of the counts, while
-        the engine goes on. Only a rescale's files go to the background: beside a
-        refinement's rounds, a background write slows them more than it saves."""
+        the engine goes on. Only a rescale's files and a done revision's go to the
+        background: beside a refinement's rounds, a background write slows them more than
+        it saves."""
         r, rev = self.refinement, self.revision
         if r is None or not r.accumulator.photons:
             return

@@ -100,8 +100,10 @@ def geometry_frame(scene: Scene, revision: int) -> bytes:
 class _Cached:
     key: tuple
     data: bytes
-    #: what the frame was made of: the counts' version, the lights, header and arrays
+    #: what the frame was made of: the counts' version and lineage, the lights, header and
+    #: arrays
     version: int
+    lineage: int
     lights: tuple
     header: dict
     arrays: dict
@@ -117,7 +119,10 @@ class PreviewCache:
         self._making = threading.Lock()
         self._cached: _Cached | None = None
 
-    def get(self, engine) -> bytes | None:
+    def get(self, engine, hold: bool = True) -> bytes | None:
+        """The current preview frame of ``engine``; with ``hold`` (a client's request) the
+        last frame while the engine is about to replace it (:meth:`Engine.preview_waits`),
+        without (the engine's own refresh) always the current one."""
         # the key first: a client polling an unchanged preview costs no copy of the counts
         key = engine.snapshot_key()
         if key is None:
@@ -125,6 +130,13 @@ class PreviewCache:
         with self._lock:
             if self._cached is not None and self._cached.key == key:
                 return self._cached.data
+        early = self._earlier_rescaled(engine, key)
+        if early is not None:
+            return early
+        with self._lock:
+            last = self._cached
+        if last is not None and hold and engine.preview_waits():
+            return last.data  # not a frame the engine is about to replace
         with self._making:
             snap = engine.snapshot()
             if snap is None:
@@ -139,12 +151,43 @@ class PreviewCache:
             k = flux_scale(last.lights, lights) if last is not None and \
                 last.version == acc.version and last.key[2] == key[2] else None
             if k is not None:  # the same counts, every light dimmed alike: a rescale
-                header, arrays = _rescaled(last.header, last.arrays, k, snap)
+                header, arrays = _rescaled(last.header, last.arrays, k, snap["revision"],
+                                           snap["seconds"], iterations=snap["iteration"],
+                                           target_error=snap["target"],
+                                           converged=snap["converged"])
             else:
                 header, arrays = preview_parts(**snap)
             data = frame_bytes(header, arrays)
             with self._lock:
-                self._cached = _Cached(key, data, acc.version, lights, header, arrays)
+                if self._cached is None or self._cached.key[0] <= key[0]:  # none newer
+                    self._cached = _Cached(key, data, acc.version, acc.lineage, lights,
+                                           header, arrays)
+        return data
+
+    def _earlier_rescaled(self, engine, key: tuple) -> bytes | None:
+        """A new revision's first frame, where it is the last one's with every light
+        dimmed alike: the last frame rescaled, of the photons it had (a preview of the new
+        revision at those photons, as its counts do not depend on the flux). It serves
+        until the next round's counts (once the revision is done: until the next request,
+        which makes the frame of all its photons). None where that does not hold."""
+        with self._lock:
+            last = self._cached
+        if last is None or last.key[0] == key[0] or last.key[2] != key[2]:
+            return None
+        basis = engine.preview_basis()
+        if basis is None or basis[:2] != (key[0], last.lineage):
+            return None
+        revision, _, lights, done = basis
+        k = flux_scale(last.lights, lights)
+        if k is None:
+            return None
+        header, arrays = _rescaled(last.header, last.arrays, k, revision,
+                                   last.header["seconds"])
+        data = frame_bytes(header, arrays)
+        with self._lock:
+            if self._cached is last:  # no newer frame was made meanwhile
+                self._cached = _Cached((revision, *last.key[1:]) if done else key, data,
+                                       last.version, last.lineage, lights, header, arrays)
         return data
 
 
@@ -163,13 +206,13 @@ def _latlong_taps(scene: Scene, res: int):
     return _latlong_taps_of(scene.up_axis, key, res)
 
 
-def _rescaled(header: dict, arrays: dict, k: float, snap: dict) -> tuple[dict, dict]:
+def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: float,
+              **changes) -> tuple[dict, dict]:
     """A preview's header and arrays for the same counts with every light's flux times
-    ``k`` (the snapshot ``snap`` says which revision): intensities and fluxes scale,
-    angles and relative errors stay."""
-    header = {**header, "revision": snap["revision"], "seconds": snap["seconds"],
-              "iterations": snap["iteration"], "target_error": snap["target"],
-              "converged": snap["converged"], "lamp_lumens": header["lamp_lumens"] * k,
+    ``k``, as revision ``revision`` (and the header's fields ``changes``): intensities and
+    fluxes scale, angles and relative errors stay."""
+    header = {**header, **changes, "revision": revision, "seconds": seconds,
+              "lamp_lumens": header["lamp_lumens"] * k,
               "figures": scaled_figures(header["figures"], k)}
     return header, {name: a * k for name, a in arrays.items()}
 
