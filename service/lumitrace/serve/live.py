@@ -31,6 +31,7 @@ from ..scene import Scene
 from ..stage import validate
 from ..stage.diagnostics import tf_message
 from ..stage.reader import scene_from_stage
+from ..stage.reuse import ReadCache
 from ..trace.profiles import profile_table
 from .state import ServiceState
 
@@ -88,6 +89,7 @@ class LiveStage:
         self.luminaire = luminaire
         #: where each revision handed out is recorded, so that revisions only grow
         self.state = state
+        self._reads = ReadCache()  # each read hands the next what it made
         self._usd = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lumitrace-usd")
         self.call(self._open)
 
@@ -118,7 +120,7 @@ class LiveStage:
             self._check_folder_rule(self.edits, root)
         self.stage = open_with_edits(self.stage_path, self.edits)
         self.changes = ChangedPaths(self.stage)
-        self.scene = scene_from_stage(self.stage, self.luminaire)
+        self.scene = scene_from_stage(self.stage, self.luminaire, cache=self._reads)
         self.revision = revision_of(self.edits)
         if self.state is not None:
             self.revision = self.state.start_revision(self.revision,
@@ -201,7 +203,7 @@ class LiveStage:
         self.changes.take()
         apply_deltas(self.stage, self.edits, deltas, self.stage_path.parent)
         try:
-            scene = scene_from_stage(self.stage, self.luminaire)
+            scene = scene_from_stage(self.stage, self.luminaire, cache=self._reads)
             check_profiles(scene)
         except StageError as exc:
             self.edits.ImportFromString(backup)
@@ -248,7 +250,7 @@ class LiveStage:
             self.known[path] = digest
         if self.edits_path in {p for p, _ in changed}:
             self.revision = max(self.revision, revision_of(self.edits))
-        scene = scene_from_stage(self.stage, self.luminaire)
+        scene = scene_from_stage(self.stage, self.luminaire, cache=self._reads)
         check_profiles(scene)
         self.troubled.difference_update(p for p, _ in changed)
         effect = classify(self.scene, scene, self.changes.take())

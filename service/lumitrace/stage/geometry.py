@@ -12,6 +12,7 @@ from pxr import Usd, UsdGeom
 
 from . import validate
 from .materials import BoundMaterials
+from .reuse import ReadCache
 from .validate import check_array
 
 #: Tessellation of implicit gprims: segments around, rings from pole to pole.
@@ -35,9 +36,11 @@ class LocalMesh:
 
 
 def local_mesh(prim: Usd.Prim, time: Usd.TimeCode, materials: BoundMaterials,
-               warn: Callable[[str], None]) -> LocalMesh | None:
+               warn: Callable[[str], None], cache: ReadCache | None = None
+               ) -> LocalMesh | None:
     """The triangles of a gprim and their materials (bound into ``materials``), or None
-    (with a warning) when it has nothing to trace."""
+    (with a warning) when it has nothing to trace; a mesh's triangulation taken from
+    ``cache`` where an earlier read made it of the same arrays."""
     path = str(prim.GetPath())
     type_name = str(prim.GetTypeName())
     if prim.IsA(UsdGeom.Mesh):
@@ -51,11 +54,20 @@ def local_mesh(prim: Usd.Prim, time: Usd.TimeCode, materials: BoundMaterials,
     if polygons is None:
         return None
     points, counts, indices, keep_face = polygons
-    triangles, face_of_triangle = _triangulate(points, counts, indices, keep_face)
     orientation = validate.check_token(UsdGeom.Gprim(prim).GetOrientationAttr().Get(time),
                                        _ORIENTATIONS, path, "orientation")
-    if orientation == UsdGeom.Tokens.leftHanded:
-        triangles = triangles[:, [0, 2, 1]]
+
+    def triangulated():
+        triangles, face = _triangulate(points, counts, indices, keep_face)
+        if orientation == UsdGeom.Tokens.leftHanded:
+            triangles = triangles[:, [0, 2, 1]]
+        return triangles, face
+
+    if cache is not None and prim.IsA(UsdGeom.Mesh):
+        triangles, face_of_triangle = cache.triangulated(
+            path, (points, counts, indices, keep_face, str(orientation)), triangulated)
+    else:
+        triangles, face_of_triangle = triangulated()
     if len(triangles) == 0:
         warn(f"{path}: no faces: skipped")
         return None

@@ -59,6 +59,7 @@ from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_
 from .geometry import LocalMesh, local_mesh, non_degenerate
 from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
 from .materials import BoundMaterials
+from .reuse import ReadCache
 from .representation import is_stand_in_light, modelled_luminaire
 from .timing import read_time, requested_time, scene_time_code
 from .transforms import Frame, placements
@@ -112,16 +113,20 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
 
 
 def scene_from_stage(stage: Usd.Stage, luminaire: str | None = None, *,
-                     time: Usd.TimeCode | float | None = None) -> Scene:
+                     time: Usd.TimeCode | float | None = None,
+                     cache: ReadCache | None = None) -> Scene:
     """Read the luminaire of an open stage into a :class:`Scene` (see :func:`read_stage`).
 
-    The stage's composed state is read as it is, unsaved edits included.
+    The stage's composed state is read as it is, unsaved edits included. ``cache``: what
+    the last read of it made, taken again where it is made of the same (a stage read
+    after every edit, :class:`~lumitrace.stage.reuse.ReadCache`).
     """
     with UsdDiagnostics() as diagnostics:
-        return _read(stage, luminaire, time, diagnostics)
+        return _read(stage, luminaire, time, diagnostics, cache)
 
 
-def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: UsdDiagnostics) -> Scene:
+def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: UsdDiagnostics,
+          cache: ReadCache | None = None) -> Scene:
     layer = stage.GetRootLayer()
     stage_file = str(Path(layer.realPath).resolve()) if layer.realPath else ""
     label = stage_file or layer.identifier
@@ -130,7 +135,7 @@ def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: UsdDiagnos
         # overflow those checks catch would only add lines to the one error a user sees
         with np.errstate(all="ignore"):
             return _Reader(stage, requested_time(time), stage_file, label,
-                           diagnostics).read(luminaire)
+                           diagnostics, cache).read(luminaire)
     except Tf.ErrorException as exc:
         raise StageError(f"USD error while reading the stage: {tf_message(exc)}",
                          label) from exc
@@ -142,8 +147,9 @@ def _read(stage: Usd.Stage, luminaire: str | None, time, diagnostics: UsdDiagnos
 
 class _Reader:
     def __init__(self, stage: Usd.Stage, time: Usd.TimeCode | None, stage_file: str,
-                 label: str, diagnostics: UsdDiagnostics):
+                 label: str, diagnostics: UsdDiagnostics, cache: ReadCache | None = None):
         self.stage = stage
+        self.cache = cache
         self.diagnostics = diagnostics
         self.requested_time = time  # None: chosen by read_time
         self.root_path = Sdf.Path.emptyPath
@@ -208,6 +214,8 @@ class _Reader:
 
         for note in self.diagnostics.take():
             self._warn(f"{self.label}: USD: {note}")
+        if self.cache is not None:
+            self.cache.keep_only(set(self.local_meshes))
         if self.triangles:
             triangles = np.concatenate(self.triangles)
             material_index = np.concatenate(self.material_index).astype(np.int32)
@@ -403,7 +411,8 @@ class _Reader:
         world, at every placement of ``frame``."""
         path = str(prim.GetPath())
         if path not in self.local_meshes:
-            self.local_meshes[path] = local_mesh(prim, self.time, self.materials, self._warn)
+            self.local_meshes[path] = local_mesh(prim, self.time, self.materials, self._warn,
+                                                 self.cache)
         local = self.local_meshes[path]
         if local is None or len(local.triangles) == 0:
             return
@@ -411,23 +420,34 @@ class _Reader:
         flat = local.triangles.reshape(-1, 3)
         where = placements(self.xf, prim, frame)
         for matrix, _ in where:
-            world = (flat @ matrix[:3, :3] + matrix[3, :3]) * self.meters_per_unit
-            world = world.reshape(-1, 3, 3)
-            validate.check_extent(world, path, "points")
-            flip = np.linalg.det(matrix[:3, :3]) < 0.0  # a mirroring transform flips winding
-            if flip:
-                world = world[:, [0, 2, 1]]
-            keep = non_degenerate(world)
+
+            def placed():
+                world = (flat @ matrix[:3, :3] + matrix[3, :3]) * self.meters_per_unit
+                world = world.reshape(-1, 3, 3)
+                validate.check_extent(world, path, "points")
+                flip = np.linalg.det(matrix[:3, :3]) < 0.0  # a mirror flips the winding
+                if flip:
+                    world = world[:, [0, 2, 1]]
+                keep = non_degenerate(world)
+                own = None  # the part's own triangles, for its frame (one placement)
+                if len(where) == 1:
+                    own = local.triangles[:, [0, 2, 1]] if flip else local.triangles
+                    own = np.ascontiguousarray(own[keep], np.float32)
+                return world[keep], keep, own
+
+            if self.cache is not None and len(where) == 1:
+                world, keep, own = self.cache.placed(path, local.triangles, matrix,
+                                                     self.meters_per_unit, placed)
+            else:
+                world, keep, own = placed()
             dropped = int(keep.size - np.count_nonzero(keep))
             if dropped:
                 self._warn(f"{path}: {dropped} zero-area triangle(s) dropped")
-            self.triangles.append(world[keep])
+            self.triangles.append(world)
             self.material_index.append(local.material_index[keep])
-            self.part_index.append(np.full(int(np.count_nonzero(keep)), part, dtype=np.int32))
-            own = local.triangles[:, [0, 2, 1]] if flip else local.triangles
-            self.part_frames[part] = None if part in self.part_frames or len(where) > 1 else \
-                PartFrame(np.ascontiguousarray(own[keep], np.float32),
-                          matrix[:3, :3] * self.meters_per_unit,
+            self.part_index.append(np.full(len(world), part, dtype=np.int32))
+            self.part_frames[part] = None if part in self.part_frames or own is None else \
+                PartFrame(own, matrix[:3, :3] * self.meters_per_unit,
                           matrix[3, :3] * self.meters_per_unit)
 
     def _light_body(self, prim: Usd.Prim, kind: str, emitters: list[Emitter]) -> None:
