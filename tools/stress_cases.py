@@ -275,6 +275,29 @@ def cylinder(radius: float, z0: float, z1: float, n: int = 48):
     return pts, faces
 
 
+#: The parts of :func:`four_part_luminaire`.
+FOUR_PARTS = ("/Luminaire/Reflector", "/Luminaire/Lens", "/Luminaire/Board",
+              "/Luminaire/Baffle")
+
+
+def four_part_luminaire(path: Path) -> Usd.Stage:
+    """A disk LED in a glossy cone reflector over a dielectric lens, a diffuse board above
+    and a small diffuse baffle below the lens (:data:`FOUR_PARTS`), saved at ``path``."""
+    stage = new_stage(path)
+    add_disk_light(stage, "/Luminaire/Led", 0.005)
+    p, f = cone_frustum(0.01, 0.0, 0.03, -0.04)
+    add_mesh(stage, FOUR_PARTS[0], p, f, 1.0, "glossy", specularReflectance=0.9,
+             roughness=0.2)
+    p, f = cylinder(0.03, -0.046, -0.042)
+    add_mesh(stage, FOUR_PARTS[1], p, f, 1.0, "dielectric", ior=1.5, transmittance=1.0)
+    p, f = square(0.05, 0.001, up=False)
+    add_mesh(stage, FOUR_PARTS[2], p, f, 1.0, "diffuse", reflectance=0.5)
+    p, f = cylinder(0.006, -0.06, -0.05)
+    add_mesh(stage, FOUR_PARTS[3], p, f, 1.0, "diffuse", reflectance=0.7)
+    stage.GetRootLayer().Save()
+    return stage
+
+
 def aim(prim_schema, direction, translate=(0.0, 0.0, 0.0), unit: float = 1.0) -> None:
     """Place a light at ``translate`` (m) with its emission axis (local -Z) along
     ``direction``, as one double-precision transform op (built here: Gf.Rotation takes

@@ -11,8 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pxr import Gf, Usd, UsdGeom
-from stress_cases import (add_disk_light, add_mesh, cone_frustum, cylinder, new_stage,
-                          square)
+from stress_cases import FOUR_PARTS, add_disk_light, four_part_luminaire
 
 from lumitrace.run.incremental import retrace, select
 from lumitrace.run.session import Refinement, run
@@ -23,21 +22,11 @@ from lumitrace.trace.records import RECORD_BYTES
 from lumitrace.trace.tracer import trace_batch
 
 SETTINGS = TraceSettings(photons=30_000, resolution=8, seed=11, threads=1, batch_size=4096)
-PARTS = ("/Luminaire/Reflector", "/Luminaire/Lens", "/Luminaire/Board", "/Luminaire/Baffle")
+PARTS = FOUR_PARTS
 
 
 def _luminaire(path: Path) -> Path:
-    stage = new_stage(path)
-    add_disk_light(stage, "/Luminaire/Led", 0.005)
-    p, f = cone_frustum(0.01, 0.0, 0.03, -0.04)
-    add_mesh(stage, PARTS[0], p, f, 1.0, "glossy", specularReflectance=0.9, roughness=0.2)
-    p, f = cylinder(0.03, -0.046, -0.042)
-    add_mesh(stage, PARTS[1], p, f, 1.0, "dielectric", ior=1.5, transmittance=1.0)
-    p, f = square(0.05, 0.001, up=False)
-    add_mesh(stage, PARTS[2], p, f, 1.0, "diffuse", reflectance=0.5)
-    p, f = cylinder(0.006, -0.06, -0.05)
-    add_mesh(stage, PARTS[3], p, f, 1.0, "diffuse", reflectance=0.7)
-    stage.GetRootLayer().Save()
+    four_part_luminaire(path)
     return path
 
 

@@ -6,25 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pxr import Gf, UsdGeom
-from stress_cases import add_disk_light, add_mesh, cone_frustum, cylinder, new_stage, square
+from stress_cases import FOUR_PARTS, four_part_luminaire
 
 from lumitrace.stage.reader import scene_from_stage
 from lumitrace.stage.reuse import ReadCache
 
-PARTS = ("/Luminaire/Reflector", "/Luminaire/Lens", "/Luminaire/Board")
+PARTS = FOUR_PARTS
 
 
 @pytest.fixture
 def stage(tmp_path):
-    stage = new_stage(tmp_path / "lum.usda")
-    add_disk_light(stage, "/Luminaire/Led", 0.005)
-    p, f = cone_frustum(0.01, 0.0, 0.03, -0.04)
-    add_mesh(stage, PARTS[0], p, f, 1.0, "glossy", specularReflectance=0.9, roughness=0.2)
-    p, f = cylinder(0.03, -0.046, -0.042)
-    add_mesh(stage, PARTS[1], p, f, 1.0, "dielectric", ior=1.5, transmittance=1.0)
-    p, f = square(0.05, 0.001, up=False)
-    add_mesh(stage, PARTS[2], p, f, 1.0, "diffuse", reflectance=0.5)
-    return stage
+    return four_part_luminaire(tmp_path / "lum.usda")
 
 
 def _same_scene(a, b) -> None:
