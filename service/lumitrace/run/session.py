@@ -73,10 +73,19 @@ class Progress:
 MIN_JOB_PHOTONS = 256
 
 
+#: A round smaller than a batch per thread is split among the threads in jobs of at
+#: least this many photons.
+MIN_SPLIT_PHOTONS = 4096
+
+
 def _round_jobs(done: list[int], targets: list[float], shares: list[float],
                 round_photons: int, settings: TraceSettings) -> list[BatchJob]:
-    """Batch jobs of the next round, batch-sized."""
-    batch = settings.batch_size
+    """Batch jobs of the next round, batch-sized, or split among the threads where the
+    round is smaller than a batch per thread (a first round on one core of two took twice
+    its time); jobs of at least :data:`MIN_SPLIT_PHOTONS`. The counts are the same for any
+    split."""
+    threads = max(1, int(settings.threads))
+    batch = min(settings.batch_size, max(MIN_SPLIT_PHOTONS, -(-round_photons // threads)))
     floor = MIN_JOB_PHOTONS if settings.seconds is None and settings.target_error is None \
         else 0
     jobs = []
