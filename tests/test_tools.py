@@ -36,7 +36,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "generate_schema.py": ("--check",),
     "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
                          "--resolution", "8", "--threads", "1"),
-    "live_loop_bench.py": ("--edits", "1"),
+    "live_loop_bench.py": ("--edits", "1", "--client", "page"),
     "part_edit_bench.py": ("--triangles", "20000", "--repeats", "1"),
     "make_stages.py": ("--check",),
     "photometry_accuracy.py": ("--photons", "20000", "--stages", "isotropic"),

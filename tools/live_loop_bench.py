@@ -1,15 +1,19 @@
 """The live loop's latencies against a real ``lumitrace serve``: from a delta's arrival to
 the first refreshed preview a client can read, and to the cheap outputs on disk.
 
-    python tools/live_loop_bench.py [--stage stages/downlight.usda] [--edits 20] [--json]
+    python tools/live_loop_bench.py [--stage stages/downlight.usda] [--edits 20]
+                                    [--client poll|page] [--json]
 
 The service traces the stage (a copy) until it is converged; then, ``--edits`` times each,
 a material edit (the reflector's specular reflectance) and a flux-only edit (the source's
 flux) are sent, each once the previous one is written. Timed on the client, from the send:
 ``accepted``, the service's answer to the delta (applied, the stage read again);
-``preview``, the first ``/preview`` frame that carries the new revision (polled every
-2 ms); ``written``, the ``written`` event of the revision (the IES, LDT, EXR and result
-layer on disk). Printed: median and 90th percentile of each, in ms.
+``preview``, the first ``/preview`` frame that carries the new revision: with ``--client
+poll`` fetched every 2 ms (a client that loads the service as hard as it can), with
+``--client page`` fetched as the live view's page fetches it, at each event of the
+revision (its ``revision``, ``iteration``, ``retrace``, ``written`` and ``done``);
+``written``, the ``written`` event of the revision (the IES, LDT, EXR and result layer on
+disk). Printed: median and 90th percentile of each, in ms.
 """
 from __future__ import annotations
 
@@ -44,13 +48,38 @@ def _preview_revision(url: str) -> int | None:
         return None
 
 
-def _watch_written(service: Service, seen: dict, stop: threading.Event) -> None:
-    """Record the arrival time of every ``written`` event by revision."""
+#: The events the live view's page fetches a preview at.
+PAGE_EVENTS = ("revision", "iteration", "retrace", "written", "done")
+
+
+def _watch(service: Service, seen: dict, arrived: threading.Condition,
+           stop: threading.Event) -> None:
+    """Record the arrival time of every ``written`` event by revision (``seen``), and
+    count the events the page fetches at (``seen["page"]``: the last revision of one)."""
     for event in service.client.events(timeout=600):
         if stop.is_set():
             return
         if event.kind == "written":
             seen.setdefault(event.data.get("revision"), time.perf_counter())
+        if event.kind in PAGE_EVENTS:
+            with arrived:
+                seen["page"] = (seen.get("page", (0, None))[0] + 1,
+                                event.data.get("revision"))
+                arrived.notify_all()
+
+
+def _await_preview(url: str, revision: int, client: str, seen: dict,
+                   arrived: threading.Condition) -> None:
+    """Until a ``/preview`` frame carries ``revision``: fetched every 2 ms (``poll``) or
+    at each event the page fetches at (``page``)."""
+    count = -1
+    while (_preview_revision(url) or 0) < revision:
+        if client == "poll":
+            time.sleep(0.002)
+            continue
+        with arrived:  # the next event (one may have come while fetching: fetch again)
+            arrived.wait_for(lambda: seen.get("page", (0, None))[0] != count, timeout=5)
+            count = seen.get("page", (0, None))[0]
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -58,15 +87,15 @@ def _percentile(values: list[float], q: float) -> float:
     return v[min(len(v) - 1, int(round(q * (len(v) - 1))))]
 
 
-def measure(stage: Path, edits: int) -> dict:
+def measure(stage: Path, edits: int, client: str = "poll") -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / stage.name
         shutil.copy(stage, copy)
         service = Service(copy, "--out", Path(tmp) / "out", "--no-sublayer", "--quiet",
                           "--target-error", "0.02")
         seen: dict = {}
-        stop = threading.Event()
-        threading.Thread(target=_watch_written, args=(service, seen, stop),
+        stop, arrived = threading.Event(), threading.Condition()
+        threading.Thread(target=_watch, args=(service, seen, arrived, stop),
                          daemon=True).start()
         try:
             service.wait_status(lambda s: s.get("state") == "done", timeout=300)
@@ -85,8 +114,7 @@ def measure(stage: Path, edits: int) -> dict:
                     t0 = time.perf_counter()
                     revision = service.client.send([delta])["revision"]
                     accepted.append(1000.0 * (time.perf_counter() - t0))
-                    while (_preview_revision(service.url) or 0) < revision:
-                        time.sleep(0.002)
+                    _await_preview(service.url, revision, client, seen, arrived)
                     preview.append(1000.0 * (time.perf_counter() - t0))
                     deadline = time.monotonic() + 60
                     while revision not in seen and time.monotonic() < deadline:
@@ -108,8 +136,9 @@ def main(argv=None) -> int:
     p.add_argument("--stage", type=Path, default=ROOT / "stages" / "downlight.usda")
     p.add_argument("--edits", type=int, default=20)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--client", choices=("poll", "page"), default="poll")
     a = p.parse_args(argv)
-    result = measure(a.stage, a.edits)
+    result = measure(a.stage, a.edits, a.client)
     if a.json:
         print(json.dumps(result, indent=1))
     else:

@@ -529,8 +529,8 @@ class Engine:
                                 message=f"{len(unreached)} part(s) no traced photon "
                                         f"reached: {', '.join(unreached[:10])}",
                                 parts=unreached)
-        self._refreshed()  # the final map's preview, ready (and a flux edit's to rescale)
         if self._pending is None:
+            self._refreshed()  # the final map's preview, ready (and a flux edit's to rescale)
             # the pictures now if the edits have paused, else after they do, and the files
             # then in the background (no round follows): a designer's next edit does not
             # wait behind them
