@@ -35,8 +35,10 @@ EAGER_WRITES = 1
 WRITE_INTERVAL = 2.0
 #: Revisions closer together than this (s) are a burst: the engine then waits for
 #: :data:`BURST_QUIET` s without a new one (at most :data:`BURST_WAIT` s) before tracing,
-#: so that a burst costs a few restarts, while a single edit starts at once.
-BURST_GAP = 0.15
+#: so that a burst costs a few restarts, while a single edit starts at once. It is about
+#: the time a revision takes to its first preview on the demo (60-100 ms): edits further
+#: apart each get their preview before the next comes, so waiting would only delay them.
+BURST_GAP = 0.1
 BURST_QUIET = 0.05
 BURST_WAIT = 0.5
 #: The pictures of a done revision are drawn once this many seconds passed without a new
