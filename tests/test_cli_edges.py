@@ -281,3 +281,26 @@ def test_the_polar_curve_of_no_light_is_not_a_circle(tmp_path):
 
     assert red_spread(lit, "lit.png") > 200  # a circle of 100 cd/klm fills the plot
     assert red_spread(dark, "dark.png") < 20  # zeros stay at the centre
+
+
+def test_a_signal_a_finalizer_swallows_is_not_printed_as_a_traceback():
+    """A signal's :class:`Interrupted` raised inside a weakref callback (a plotting library's,
+    during the write) cannot propagate: the command acts on the recorded signal, so the
+    ignored exception is not printed; any other ignored exception still is."""
+    code = (
+        "import sys, weakref\n"
+        "from lumitrace import cli\n"
+        "from lumitrace.errors import Interrupted\n"
+        "sys.unraisablehook = cli._unraisable(sys.unraisablehook)\n"
+        "class A: pass\n"
+        "def stop(_): raise Interrupted(15)\n"
+        "def fail(_): raise ValueError('kept')\n"
+        "a, b = A(), A()\n"
+        "r, s = weakref.ref(a, stop), weakref.ref(b, fail)\n"
+        "del a, b\n"
+        "print('ran on')\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
+    assert p.returncode == 0 and p.stdout == "ran on\n", p.stderr
+    assert "Interrupted" not in p.stderr
+    assert "ValueError: kept" in p.stderr and p.stderr.count("Exception ignored") == 1

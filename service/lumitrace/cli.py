@@ -484,6 +484,16 @@ def _raise_interrupted(signum, frame) -> None:
         raise Interrupted(signum)
 
 
+def _unraisable(hook):
+    """``sys.unraisablehook`` that keeps quiet about an :class:`Interrupted` raised where
+    Python cannot pass it on (a finalizer or weakref callback, say a plotting library's
+    during the write): the signal is recorded, and the command acts on it between phases."""
+    def quiet(unraisable) -> None:
+        if not isinstance(unraisable.exc_value, Interrupted):
+            hook(unraisable)
+    return quiet
+
+
 def check_interrupted(defer: bool = False) -> None:
     """Raise :class:`Interrupted` for a signal received earlier; from now on (unless
     ``defer``) signals raise at once."""
@@ -596,6 +606,7 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
         if getattr(sys, name) is None:
             setattr(sys, name, open(os.devnull, "w"))
     previous = {s: signal.signal(s, _raise_interrupted) for s in HANDLED_SIGNALS}
+    hook, sys.unraisablehook = sys.unraisablehook, _unraisable(sys.unraisablehook)
     args = None
     try:
         _RECEIVED.extend(early_signals or ())
@@ -615,6 +626,7 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+        sys.unraisablehook = hook
 
 
 if __name__ == "__main__":  # pragma: no cover
