@@ -291,14 +291,17 @@ def test_a_signal_a_finalizer_swallows_is_not_printed_as_a_traceback():
         "import sys, weakref\n"
         "from lumitrace import cli\n"
         "from lumitrace.errors import Interrupted\n"
-        "sys.unraisablehook = cli._unraisable(sys.unraisablehook)\n"
         "class A: pass\n"
         "def stop(_): raise Interrupted(15)\n"
         "def fail(_): raise ValueError('kept')\n"
-        "a, b = A(), A()\n"
-        "r, s = weakref.ref(a, stop), weakref.ref(b, fail)\n"
-        "del a, b\n"
-        "print('ran on')\n")
+        "def dispatch(args):\n"  # the command's work, within main's hooks
+        "    a, b = A(), A()\n"
+        "    r, s = weakref.ref(a, stop), weakref.ref(b, fail)\n"
+        "    del a, b\n"
+        "    print('ran on')\n"
+        "    return 0\n"
+        "cli._dispatch = dispatch\n"
+        "sys.exit(cli.main(['check', 'any.usda']))\n")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
     assert p.returncode == 0 and p.stdout == "ran on\n", p.stderr
