@@ -16,7 +16,8 @@ angles are the outermost crossings of plane profiles with half (a tenth) of the 
 the plane's own largest value where the peak lies out of the plane), on a grid of the
 published symmetry
 with gamma every 0.5 deg (the published grid's 2.5 deg would put a step of the
-distribution, such as a mirror's extra reflection, up to a degree off); their errors come
+distribution, such as a mirror's extra reflection, up to a degree off), and where the profile
+steps at a crossing the crossing is at the step (:func:`_outer_crossing`); their errors come
 from redrawing the grid within its standard errors (a parametric bootstrap, fixed seed):
 each value the grid holds is drawn once, so both sides of a symmetric luminaire's profile,
 which are the same values, move together.
@@ -136,8 +137,9 @@ def split_peak(h0: np.ndarray, s0: np.ndarray, h1: np.ndarray, s1: np.ndarray
     """The largest value of two half-photon grids' mean, without the bias of a maximum: each
     half picks a cell, the other half measures it (a choice independent of the measurement
     leaves it unbiased). The pick is the largest lower bound, value - :data:`PICK_SIGMAS`
-    sigma, so a large cell measured well wins over a tiny noisy one on a flat top. Returns (value, standard
-    error, cell picked by half 0, cell picked by half 1), cells as flat indices."""
+    sigma, so a large cell measured well wins over a tiny noisy one on a flat top. Returns
+    (value, standard error, cell picked by half 0, cell picked by half 1), cells as flat
+    indices."""
     a0, a1 = int(np.argmax(h0 - PICK_SIGMAS * s0)), int(np.argmax(h1 - PICK_SIGMAS * s1))
     value = 0.5 * (h1.flat[a0] + h0.flat[a1])
     error = 0.5 * math.hypot(s1.flat[a0], s0.flat[a1])
@@ -152,36 +154,100 @@ def _plane_profile(grid: CGammaGrid, c_deg: float, values=None):
     return np.concatenate([-grid.gamma[::-1], grid.gamma[1:]]), np.concatenate([b[::-1], a[1:]])
 
 
-def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float) -> float | None:
-    """Full angle (deg) between the outermost crossings of ``level`` (linear between
-    samples): a noisy sample dipping below the level inside the beam (a tiny cell next to
-    nadir) does not cut it short. None where the profile does not fall below it on both
-    sides."""
+def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float,
+                 sigma: np.ndarray | None = None) -> float | None:
+    """Full angle (deg) between the outermost crossings of ``level``
+    (:func:`spread_angles`): a noisy sample dipping below the level inside the beam (a tiny
+    cell next to nadir) does not cut it short. None where the profile does not fall below it
+    on both sides."""
     if not level > 0:
         return None
-    a = spread_angles(ang, prof[None], np.array([level]))[0]
+    a = spread_angles(ang, prof[None], np.array([level]), sigma)[0]
     return None if np.isnan(a) else float(a)
 
 
-def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """:func:`spread_angle` of every row of ``profs`` (rows, samples) at its ``levels``
-    (rows,), NaN where undefined."""
+def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
+                  sigma: np.ndarray | None = None) -> np.ndarray:
+    """:func:`spread_angle` of every row of ``profs`` (rows, samples on a uniform raster
+    symmetric about nadir) at its ``levels`` (rows,), NaN where undefined; ``sigma``: the
+    samples' standard errors, which let a step at a crossing be read as one
+    (:func:`_outer_crossing`)."""
     above = profs >= levels[:, None]
     n = profs.shape[1]
     first = np.argmax(above, axis=1)
     last = n - 1 - np.argmax(above[:, ::-1], axis=1)
     ok = above.any(axis=1) & (first > 0) & (last < n - 1) & (levels > 0)
     first, last = np.where(ok, first, 1), np.where(ok, last, n - 2)
-    rows = np.arange(len(profs))
-
-    def cross(i, j):  # between inside sample i and outside sample j
-        pi, pj = profs[rows, i], profs[rows, j]
-        t = (pi - levels) / (pi - pj)
-        return ang[i] + t * (ang[j] - ang[i])
-
+    back = None if sigma is None else sigma[::-1]
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = cross(last, last + 1) - cross(first, first - 1)
+        out = (_outer_crossing(ang, profs, levels, last, sigma)
+               + _outer_crossing(ang, profs[:, ::-1], levels, n - 1 - first, back))
     return np.where(ok, out, np.nan)
+
+
+#: Samples each side's line is fitted to where a step is looked for at a crossing.
+STEP_SAMPLES = 8
+#: The lines fitted on either side of a crossing, met between its two samples, differ by
+#: at least this many standard errors where the profile steps there.
+STEP_SIGMAS = 3.0
+
+
+def _line(y: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares lines through rows ``y`` at offsets ``u`` (samples): their values at
+    the offsets' mean, their slopes (per sample) and that mean."""
+    du = u - u.mean()
+    return y.mean(axis=1), (y * du).sum(axis=1) / (du * du).sum(), u.mean()
+
+
+def _outer_crossing(ang, profs, levels, i, sigma):
+    """Where each row falls through its level beyond sample ``i`` (its last at or above the
+    level), in deg from nadir toward increasing index: linear between samples i and i + 1,
+    unless the lines fitted to the :data:`STEP_SAMPLES` samples inside and outside differ
+    where they meet by :data:`STEP_SIGMAS` standard errors. Then the profile steps between
+    them: two samples are means over cells, so the step sits where the two lines, each up to
+    it, give the two cells' sum, and the crossing is at the step when the level lies in it
+    (linear interpolation across a step puts it up to a cell outward)."""
+    rows = np.arange(len(profs))
+    h = ang[1] - ang[0]
+    pi, pj = profs[rows, i], profs[rows, i + 1]
+    linear = ang[i] + h * (pi - levels) / (pi - pj)
+    m, n = STEP_SAMPLES, profs.shape[1]
+    if sigma is None:
+        return linear
+    ok = (i - m > n // 2) & (i + 1 + m < n)  # inside samples past nadir (its cap is wider)
+    k = np.where(ok, i, n // 2 + m + 1)[:, None]
+    u_in, u_out = np.arange(-m, 0), np.arange(2, m + 2)
+    k_in, k_out = np.minimum(k + u_in, n - 1), np.minimum(k + u_out, n - 1)
+    a_in, b_in, c_in = _line(profs[rows[:, None], k_in], u_in)
+    a_out, b_out, c_out = _line(profs[rows[:, None], k_out], u_out)
+
+    def weights(u, at):  # a fitted line's value at ``at`` as weights of its samples
+        du = u - u.mean()
+        return 1.0 / len(u) + du * (at - u.mean()) / (du * du).sum()
+
+    var = ((weights(u_in, 0.5) * sigma[k_in]) ** 2).sum(axis=1) \
+        + ((weights(u_out, 0.5) * sigma[k_out]) ** 2).sum(axis=1)
+    step = a_in + b_in * (0.5 - c_in) - a_out - b_out * (0.5 - c_out)
+    ok &= step > STEP_SIGMAS * np.sqrt(var)
+    if not ok.any():
+        return linear
+
+    def phi(s):  # the two lines' integral over both cells, stepping at s, less the cells'
+        inner = a_in * (s + 0.5) + 0.5 * b_in * ((s - c_in) ** 2 - (0.5 + c_in) ** 2)
+        outer = a_out * (1.5 - s) + 0.5 * b_out * ((1.5 - c_out) ** 2 - (s - c_out) ** 2)
+        return inner + outer - pi - pj
+
+    # phi is quadratic in s and rises through its one root in the cells (a step down)
+    c0 = phi(0.0)
+    b0 = a_in - b_in * c_in - a_out + b_out * c_out  # phi'(0)
+    root = 2.0 * c0 / (-b0 - np.sqrt(np.maximum(b0 * b0 - 2.0 * (b_in - b_out) * c0, 0.0)))
+    s = np.where(phi(-0.5) >= 0, -0.5, np.where(phi(1.5) <= 0, 1.5, np.clip(root, -0.5, 1.5)))
+    top, bottom = a_in + b_in * (s - c_in), a_out + b_out * (s - c_out)
+    falling_in, falling_out = np.where(b_in < 0, b_in, -np.inf), np.where(b_out < 0, b_out, -np.inf)
+    u = np.where(levels > top, np.minimum(c_in + (levels - a_in) / falling_in, s),
+                 np.where(levels < bottom,
+                          np.maximum(c_out + (levels - a_out) / falling_out, s), s))
+    return np.where(ok, ang[i] + h * u, linear)
 
 
 def crossings(ang: np.ndarray, prof: np.ndarray, level: float) -> tuple[float, ...]:
@@ -224,11 +290,12 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     (:func:`redrawn`: both sides of a symmetric profile are the same values and move
     together) and of the level's top within its error."""
     tops = {c: _level(grid, halves, c, peak) for c in planes}
+    sigmas = {c: _plane_profile(grid, c, grid.sigma)[1] for c in planes}
     out, draws = {}, {}
     for c in planes:
         ang, prof = _plane_profile(grid, c)
         for f in fractions:
-            angle = spread_angle(ang, prof, f * tops[c][0])
+            angle = spread_angle(ang, prof, f * tops[c][0], sigmas[c])
             out[c, f] = (angle, None, ()) if angle is None else \
                 (angle, None, crossings(ang, prof, f * tops[c][0]))
             draws[c, f] = []
@@ -248,7 +315,7 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             top = tops[c][0] + tops[c][1] * z
             for f in fractions:
                 if out[c, f][0] is not None:
-                    got = spread_angles(ang, profs, f * top)
+                    got = spread_angles(ang, profs, f * top, sigmas[c])
                     draws[c, f] += got[~np.isnan(got)].tolist()
     for key, (angle, _, cross) in out.items():
         if angle is None:
