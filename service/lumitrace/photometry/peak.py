@@ -30,6 +30,11 @@ from ..film.goniometer import (C_STEP, GAMMA_EDGES, GAMMA_STEP, N_C, N_CELLS, N_
 FIT_SHARE = 0.5
 FIT_RADIUS_MIN = 1.5
 FIT_RADIUS_MAX = 10.0
+#: Near a pole, where a C cell spans only 1.25 sin(gamma) deg of arc, the least radius is
+#: this many cells across (the wider of a gamma cell and a C cell at the top), no less than
+#: two gamma cells: a beam a few degrees wide along the axis is fitted within half its
+#: half width, not across all of it.
+FIT_CELLS = 2.0
 #: Photons (effective: flux^2 / variance) a half must hold within a fit's reach; with fewer,
 #: the fit reaches further (to :data:`FIT_RADIUS_MAX`), and without them the cells' split
 #: estimate serves.
@@ -233,11 +238,14 @@ def locate(cells: HalfCells, start: np.ndarray, radius_deg: float
     return at
 
 
-def fit_radius(half_width_deg: float | None) -> float:
-    """The fit's radius (deg) for a beam of half width ``half_width_deg`` (None: no beam)."""
+def fit_radius(half_width_deg: float | None, gamma_deg: float = 90.0) -> float:
+    """The fit's radius (deg) for a beam of half width ``half_width_deg`` (None: no beam)
+    whose top lies ``gamma_deg`` from nadir."""
     if half_width_deg is None:
         return FIT_RADIUS_MAX
-    return min(FIT_RADIUS_MAX, max(FIT_RADIUS_MIN, FIT_SHARE * half_width_deg))
+    cell = max(GAMMA_STEP, C_STEP * abs(math.sin(math.radians(gamma_deg))))
+    least = min(FIT_RADIUS_MIN, FIT_CELLS * cell)
+    return min(FIT_RADIUS_MAX, max(least, FIT_SHARE * half_width_deg))
 
 
 def fitted_peak(acc: Accumulator, picks: tuple[tuple[float, float], tuple[float, float]],
@@ -246,7 +254,8 @@ def fitted_peak(acc: Accumulator, picks: tuple[tuple[float, float], tuple[float,
     each half locates the peak near its own pick and the other half measures it there.
     None where a fit is not possible (too little light near the top)."""
     cells = [HalfCells(acc, h) for h in (0, 1)]
-    radius = fit_radius(half_width_deg)
+    radius = fit_radius(half_width_deg, max((g for _, g in picks),
+                                            key=lambda g: math.sin(math.radians(g))))
     while radius < FIT_RADIUS_MAX and any(
             local_fit(cells[h], _direction(*picks[h]), radius) is None for h in (0, 1)):
         radius = min(FIT_RADIUS_MAX, 2.0 * radius)  # too few photons in reach: reach further
