@@ -66,18 +66,18 @@ class _Errors:
 
 
 async def _reload(live: LiveStage, paths: set[Path], submit, events: _Errors) -> None:
-    waited = 0.0
+    clock = asyncio.get_running_loop().time
+    since = clock()  # the retries' window is wall time, however long each read takes
     while True:
         try:
             revision = await live.acall(live.reload, paths)
         except LayerUnreadable as exc:
-            if waited >= RETRY_SECONDS:
+            if clock() - since >= RETRY_SECONDS:
                 await live.acall(live.trouble, exc.path)  # its return is a revision
                 events.publish("error", message=f"{exc} (keeping revision {live.revision})",
                                where=exc.where)
                 return
             await asyncio.sleep(RETRY_STEP)
-            waited += RETRY_STEP
             continue
         except StageError as exc:
             events.publish("error", message=f"the edited stage cannot be traced: {exc} "
