@@ -5,7 +5,8 @@ new revision's map); a burst of revisions coalesces into the newest. A flux-only
 rescales the counts and traces nothing. Results are written after a revision's first
 iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the
 pictures once the revision is done (converged or its photon budget spent) or the service
-stops.
+stops; a done revision's are drawn by the writer thread, so an edit made meanwhile is traced
+at once.
 """
 from __future__ import annotations
 
@@ -94,6 +95,8 @@ class Engine:
         self.record: ResultRecord | None = None
         self._last_write = 0.0
         self._written_full = False
+        #: the revision whose pictures the writer is drawing (an edit need not wait for them)
+        self._pictures_for: int | None = None
         self.error: str | None = None
         #: a revision failed: nothing is refined until the next one (the last result
         #: written stays served), and the next one is traced afresh
@@ -315,7 +318,7 @@ class Engine:
             self._halted = False
         elif self._pictures_due():
             if not self._pictures_wait():
-                self._write(pictures=True)
+                self._write(pictures=True, background=True)
         else:
             self._round(pool)
 
@@ -355,8 +358,10 @@ class Engine:
             self._cv.wait(BURST_QUIET - quiet)
 
     def _pictures_due(self) -> bool:
-        """A done revision whose last write had no pictures (after a rescale, say)."""
-        return self.refinement is not None and self.done and not self._written_full
+        """A done revision whose last write had no pictures (after a rescale, say), nor
+        are they being drawn."""
+        return self.refinement is not None and self.done and not self._written_full \
+            and self._pictures_for != self.revision.number
 
     def _take(self, rev: Revision) -> None:
         """Start refining ``rev``: a rescale for a flux-only edit, the same photons for an
@@ -536,10 +541,10 @@ class Engine:
             # the pictures now if the edits have paused, else after they do, and the files
             # then in the background (no round follows): a designer's next edit does not
             # wait behind them
-            pictures = not self._pictures_wait()
-            self._write(pictures=pictures, background=not pictures)
+            self._write(pictures=not self._pictures_wait(), background=True)
 
     def _final_write(self) -> None:
+        self._writer.flush()  # pictures being drawn may be this revision's
         if self.refinement is not None and self.refinement.accumulator.photons and \
                 not self._written_full:
             self._write(pictures=True)
@@ -557,9 +562,9 @@ class Engine:
     def _write(self, pictures: bool, background: bool = False) -> None:
         """Publish the current refinement's result, here (after what the writer thread
         holds), or in the ``background``: by the writer, from a copy of the counts, while
-        the engine goes on. Only a rescale's files and a done revision's go to the
-        background: beside a refinement's rounds, a background write slows them more than
-        it saves."""
+        the engine goes on. Only a rescale's files and a done revision's files and pictures
+        go to the background (an edit made while they are drawn is taken at once): beside a
+        refinement's rounds, a background write slows them more than it saves."""
         r, rev = self.refinement, self.revision
         if r is None or not r.accumulator.photons:
             return
@@ -570,7 +575,9 @@ class Engine:
             self._publish(result, rev, pictures=pictures)
             return
         copy = replace(result, accumulator=result.accumulator.snapshot())
-        self._writer.put(lambda: self._publish(copy, rev, pictures=False))
+        with self._cv:
+            self._pictures_for = rev.number if pictures else self._pictures_for
+        self._writer.put(lambda: self._publish(copy, rev, pictures=pictures))
 
     def _write_failed(self, exc: Exception) -> None:
         """A write on the writer thread that failed other than by a LumitraceError."""
@@ -589,15 +596,19 @@ class Engine:
                                    deliverables=pictures and self.deliverables,
                                    on_stage=lambda step: self.live.call(self.live.write, step))
         except LumitraceError as exc:
-            if pictures:
-                self._written_full = True  # not retried in a loop: the next revision will
+            with self._cv:
+                if pictures and rev is self.revision:
+                    self._written_full = True  # not retried in a loop: the next revision will
+                self._drawn(rev, pictures)
             self.error = str(exc)
             self.events.publish("error", revision=rev.number, message=str(exc))
             return
         now = time.perf_counter()
         with self._cv:
             self.record = record
-            self._written_full = pictures
+            if rev is self.revision:  # not a revision the engine has since left
+                self._written_full = pictures
+            self._drawn(rev, pictures)
             self.written = {"revision": rev.number, "photons": result.accumulator.photons,
                             "pictures": pictures, "input_hash": record["input_hash"]}
             self.error = None
@@ -607,6 +618,13 @@ class Engine:
                             relative_error=record["relative_error"], pictures=pictures,
                             input_hash=record["input_hash"], seconds=now - t0,
                             outputs=record.summary().get("outputs", {}))
+
+    def _drawn(self, rev: Revision, pictures: bool) -> None:
+        """A write of ``rev`` ended: its pictures are no longer being drawn (under the
+        lock)."""
+        if pictures and self._pictures_for == rev.number:
+            self._pictures_for = None
+            self._cv.notify_all()
 
 
 class _Writer:

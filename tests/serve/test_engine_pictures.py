@@ -1,0 +1,47 @@
+"""The engine in process: a done revision's pictures are drawn by the writer, so an edit
+made while they are drawn is traced at once (its preview does not wait seconds behind
+them), and the edit gets pictures of its own, not the revision's it replaced."""
+from __future__ import annotations
+
+import threading
+import time
+
+from lumitrace.publish import photometric
+from lumitrace.serve import engine as engine_module
+from test_engine_rescale import REFLECTOR, _running, _set
+
+DRAWING_S = 3.0
+
+
+def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path,
+                                                                        monkeypatch):
+    monkeypatch.setattr(engine_module, "PICTURES_QUIET", 0.0)  # pictures as soon as done
+    drawing, drawn = threading.Event(), []
+    real = photometric.polar_diagram
+
+    def slow_polar(path, *args, **kwargs):  # a slow picture (as the first, with imports)
+        drawing.set()
+        time.sleep(DRAWING_S)
+        drawn.append(path)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(photometric, "polar_diagram", slow_polar)
+    previews = []
+    with _running(tmp_path, refreshed=lambda: previews.append(time.monotonic())) as (live, eng):
+        assert drawing.wait(120), eng.status()  # revision 0 done, its pictures being drawn
+        assert eng.status()["traced_revision"] == 0
+        edit = live.call(live.apply, _set(REFLECTOR, "lumitrace:specularReflectance", 0.5))
+        sent, before = time.monotonic(), len(previews)
+        eng.submit(edit)
+        deadline = sent + 60
+        while not (len(previews) > before and eng.status()["traced_revision"] == 1):
+            assert time.monotonic() < deadline, eng.status()
+            time.sleep(0.005)
+        assert previews[before] - sent < 0.5 * DRAWING_S  # not behind the drawing
+        assert not drawn or drawn == [drawn[0]]  # revision 0's still being drawn meanwhile
+        # revision 1's own pictures follow (the slow picture twice: 0's, then 1's)
+        deadline = time.monotonic() + 120
+        while not (len(drawn) == 2 and eng.status()["written_revision"] == 1
+                   and eng.status()["written_pictures"]):
+            assert time.monotonic() < deadline, (eng.status(), drawn)
+            time.sleep(0.02)
