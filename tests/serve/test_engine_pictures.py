@@ -8,7 +8,7 @@ import time
 
 from lumitrace.publish import photometric
 from lumitrace.serve import engine as engine_module
-from test_engine_rescale import REFLECTOR, _running, _set
+from helpers.engine import REFLECTOR, running_engine, set_delta
 
 DRAWING_S = 3.0
 
@@ -27,10 +27,10 @@ def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path
 
     monkeypatch.setattr(photometric, "polar_diagram", slow_polar)
     previews = []
-    with _running(tmp_path, refreshed=lambda: previews.append(time.monotonic())) as (live, eng):
+    with running_engine(tmp_path, refreshed=lambda: previews.append(time.monotonic())) as (live, eng):
         assert drawing.wait(120), eng.status()  # revision 0 done, its pictures being drawn
         assert eng.status()["traced_revision"] == 0
-        edit = live.call(live.apply, _set(REFLECTOR, "lumitrace:specularReflectance", 0.5))
+        edit = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance", 0.5))
         sent, before = time.monotonic(), len(previews)
         eng.submit(edit)
         deadline = sent + 60

@@ -3,8 +3,6 @@ the scene traced, not the revision before it; a flux edit's preview is the last 
 rescaled, equal to one made afresh from the rescaled counts."""
 from __future__ import annotations
 
-import contextlib
-import shutil
 import threading
 import time
 
@@ -14,39 +12,14 @@ import pytest
 from lumitrace.photometry.distribution import photometry_of
 from lumitrace.photometry.quantities import scaled_figures
 from lumitrace.run.session import run
-from lumitrace.run.settings import TraceSettings
 from lumitrace.serve.engine import Engine
-from lumitrace.serve.events import EventLog
-from lumitrace.serve.live import LiveStage
 from lumitrace.serve.viewer import PreviewCache, preview_parts, read_frame
-from helpers.paths import ROOT
-
-REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
-SETTINGS = TraceSettings(photons=40_000, resolution=16, threads=2, seed=5)
-
-
-def _set(path: str, prop: str, value) -> list[dict]:
-    return [{"op": "set", "path": path, "property": prop, "value": value}]
-
-
-@contextlib.contextmanager
-def _running(folder, refreshed=None):
-    """The demo's engine, started (``refreshed`` its live view's hook from the start)."""
-    shutil.copy(ROOT / "stages" / "downlight.usda", folder / "downlight.usda")
-    live = LiveStage(folder / "downlight.usda")
-    eng = Engine(live, SETTINGS, EventLog(first_id=1), folder / "out")
-    eng.refreshed = refreshed
-    eng.start(live.start())
-    try:
-        yield live, eng
-    finally:
-        eng.stop()
-        live.close()
+from helpers.engine import REFLECTOR, SETTINGS, running_engine, set_delta
 
 
 @pytest.fixture
 def engine(tmp_path):
-    with _running(tmp_path) as running:
+    with running_engine(tmp_path) as running:
         yield running
 
 
@@ -65,8 +38,8 @@ def test_a_flux_edit_after_a_skipped_material_edit_is_traced_with_the_material(e
     live, eng = engine
     _done(eng, 0)
     frame = eng.frame
-    live.call(live.apply, _set(REFLECTOR, "lumitrace:specularReflectance", 0.1))
-    second = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance", 0.1))
+    second = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
     assert second.effect.kind == "flux"
     eng.submit(second)
     _done(eng, 2)
@@ -105,7 +78,7 @@ def test_a_flux_edits_first_preview_is_an_earlier_one_rescaled(tmp_path):
         if not first:
             first.append(eng.snapshot())
             previews.get(eng)
-    with _running(tmp_path, refreshed) as (live, eng):
+    with running_engine(tmp_path, refreshed) as (live, eng):
         _first_preview_rescaled(live, eng, previews, first)
 
 
@@ -113,7 +86,7 @@ def _first_preview_rescaled(live, eng, previews, first) -> None:
     _done(eng, 0)
     early = first[0]
     assert early["photons"] < eng.refinement.accumulator.photons
-    rev = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    rev = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
     eng.submit(rev)
     _done(eng, 1)
     header, arrays = read_frame(previews.get(eng))
@@ -124,7 +97,7 @@ def _first_preview_rescaled(live, eng, previews, first) -> None:
     header, _ = read_frame(previews.get(eng))  # then the frame of the photons now
     assert (header["revision"], header["photons"]) == (1, eng.refinement.accumulator.photons)
     # a retrace takes photons out: no earlier frame stands for the edited revision
-    material = live.call(live.apply, _set(REFLECTOR, "lumitrace:specularReflectance", 0.5))
+    material = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance", 0.5))
     eng.submit(material)
     _done(eng, 2)
     assert read_frame(previews.get(eng))[0]["photons"] == eng.refinement.accumulator.photons
@@ -136,7 +109,7 @@ def test_a_flux_edits_preview_is_the_last_one_rescaled(engine):
     previews = PreviewCache()
     eng.refreshed = lambda: previews.get(eng)
     before = read_frame(previews.get(eng))
-    rev = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    rev = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
     eng.submit(rev)
     _done(eng, 1)
     header, arrays = read_frame(previews.get(eng))
@@ -204,7 +177,7 @@ def test_a_flux_edit_is_taken_while_a_round_runs_and_the_round_is_kept(tmp_path,
         return original(ps, job, **kw)
 
     monkeypatch.setattr(engine_module, "trace_batch", trace_batch)
-    with _running(tmp_path) as (live, eng):
+    with running_engine(tmp_path) as (live, eng):
         try:
             _taken_while_held(live, eng, held, running, traced)
         finally:
@@ -216,7 +189,7 @@ def _taken_while_held(live, eng, held, running, traced) -> None:
     while not running:
         assert time.monotonic() < deadline
         time.sleep(0.005)
-    rev = live.call(live.apply, _set("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
+    rev = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux", 1500.0))
     eng.submit(rev)
     while eng.status()["traced_revision"] != 1:  # taken, the batches still held
         assert time.monotonic() < deadline
