@@ -2,7 +2,7 @@
 the first refreshed preview a client can read, and to the cheap outputs on disk.
 
     python tools/live_loop_bench.py [--stage stages/downlight.usda] [--edits 20]
-                                    [--client poll|page] [--json]
+                                    [--client poll|page] [--pause S] [--json]
 
 The service traces the stage (a copy) until it is converged; then, ``--edits`` times each,
 a material edit (the reflector's specular reflectance) and a flux-only edit (the source's
@@ -13,7 +13,10 @@ poll`` fetched every 2 ms (a client that loads the service as hard as it can), w
 ``--client page`` fetched as the live view's page fetches it, at each event of the
 revision (its ``revision``, ``iteration``, ``retrace``, ``written`` and ``done``);
 ``written``, the ``written`` event of the revision (the IES, LDT, EXR and result layer on
-disk). Printed: median and 90th percentile of each, in ms.
+disk). ``--pause S``: each edit S seconds after the last one was sent, its revision done
+first, as a designer pausing between edits (past the service's 1 s quiet, an edit lands
+while the last one's pictures are drawn). Printed: median and 90th percentile of each, in
+ms.
 """
 from __future__ import annotations
 
@@ -87,7 +90,7 @@ def _percentile(values: list[float], q: float) -> float:
     return v[min(len(v) - 1, int(round(q * (len(v) - 1))))]
 
 
-def measure(stage: Path, edits: int, client: str = "poll") -> dict:
+def measure(stage: Path, edits: int, client: str = "poll", pause: float = 0.0) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / stage.name
         shutil.copy(stage, copy)
@@ -120,7 +123,9 @@ def measure(stage: Path, edits: int, client: str = "poll") -> dict:
                     while revision not in seen and time.monotonic() < deadline:
                         time.sleep(0.002)
                     written.append(1000.0 * (seen.get(revision, time.perf_counter()) - t0))
-                    service.wait_status(lambda s: s.get("state") in ("done", "tracing"))
+                    service.wait_status(lambda s: s.get("state") in (
+                        ("done",) if pause else ("done", "tracing")))
+                    time.sleep(max(0.0, pause - (time.perf_counter() - t0)))
                 out[kind] = {name: {"median_ms": statistics.median(v),
                                     "p90_ms": _percentile(v, 0.9)}
                              for name, v in (("accepted", accepted), ("preview", preview),
@@ -137,8 +142,10 @@ def main(argv=None) -> int:
     p.add_argument("--edits", type=int, default=20)
     p.add_argument("--json", action="store_true")
     p.add_argument("--client", choices=("poll", "page"), default="poll")
+    p.add_argument("--pause", type=float, default=0.0,
+                   help="seconds from one edit's send to the next's, each done first")
     a = p.parse_args(argv)
-    result = measure(a.stage, a.edits, a.client)
+    result = measure(a.stage, a.edits, a.client, a.pause)
     if a.json:
         print(json.dumps(result, indent=1))
     else:
