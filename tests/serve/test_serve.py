@@ -171,7 +171,8 @@ def test_a_half_written_layer_is_retried_and_a_broken_one_reported(stage):
         while not errors and time.monotonic() < deadline:
             errors = [e for e in _events(s, {"error"}) if "keeping revision 1" in e.data["message"]]
             time.sleep(0.1)
-        assert errors and "Expected )" in errors[0].data["message"]
+        assert errors and "Expected )" in errors[0].data["message"], \
+            [(e.kind, e.data.get("revision"), e.data.get("message")) for e in _events(s)]
         assert s.client.status()["revision"] == 1
 
 

@@ -205,8 +205,11 @@ async function refreshStatus() {
 
 async function refreshScene() {
   try {
-    LT.scene = await getJSON("/scene");
+    // the scene, the parts and the editor change together (a test, or a user, reading
+    // LT.scene sees the editor that shows it)
+    const scene = await getJSON("/scene");
     const geo = await getFrame("/geometry");
+    LT.scene = scene;
     if (geo) { LT.geometry = geo; buildParts(); }
     fillEditor();
   } catch (e) { /* not yet */ }
