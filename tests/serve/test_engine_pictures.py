@@ -1,6 +1,7 @@
 """The engine in process: a done revision's pictures are drawn by the writer, so an edit
 made while they are drawn is traced at once (its preview does not wait seconds behind
-them), and the edit gets pictures of its own, not the revision's it replaced."""
+them); the old revision's are given up at the next picture (its set left as it was), and
+the edit gets pictures of its own, not those of the revision it replaced."""
 from __future__ import annotations
 
 import threading
@@ -26,6 +27,10 @@ def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path
         return real(path, *args, **kwargs)
 
     monkeypatch.setattr(photometric, "polar_diagram", slow_polar)
+    solids = []
+    real_solid = photometric.photometric_solid
+    monkeypatch.setattr(photometric, "photometric_solid",
+                        lambda path, *a, **k: solids.append(path) or real_solid(path, *a, **k))
     previews = []
     with running_engine(tmp_path, refreshed=lambda: previews.append(time.monotonic())) as (live, eng):
         assert drawing.wait(120), eng.status()  # revision 0 done, its pictures being drawn
@@ -45,3 +50,4 @@ def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path
                    and eng.status()["written_pictures"]):
             assert time.monotonic() < deadline, (eng.status(), drawn)
             time.sleep(0.02)
+        assert len(solids) == 1  # revision 0's write given up after its polar curve

@@ -132,7 +132,7 @@ def test_the_writer_writes_the_newest_and_a_flush_waits_for_it():
     once the newest is written, and a failing write is reported, not fatal."""
     import threading
 
-    from lumitrace.serve.engine import _Writer
+    from lumitrace.serve.writer import Writer
 
     done, failures, started = [], [], threading.Event()
     release = threading.Event()
@@ -147,7 +147,7 @@ def test_the_writer_writes_the_newest_and_a_flush_waits_for_it():
             done.append(name)
         return run
 
-    writer = _Writer(failures.append)
+    writer = Writer(failures.append)
     writer.put(job("first", wait=True))
     assert started.wait(10)
     for name in ("second", "bad", "third"):  # while the first is written

@@ -152,8 +152,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   wait: float = DEFAULT_LOCK_WAIT, *, name: str | None = None,
                   sublayer: bool = True, pictures: bool = True,
                   extra: dict | None = None, deliverables: bool = False,
-                  on_stage: Callable[[Callable[[], None]], None] | None = None
-                  ) -> ResultRecord:
+                  on_stage: Callable[[Callable[[], None]], None] | None = None,
+                  checkpoint: Callable[[], None] = lambda: None) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
     :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage file
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
@@ -165,7 +165,9 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     ``on_stage(step)`` runs the steps that touch layers open in this process (reloading
     the result layer, sublayering it) and returns what ``step`` returns (the stage's
     :class:`~.sublayer.RootEdit`, None without one): a service passes the runner of its USD
-    thread; by default they run here. Only files lumitrace wrote for this stage are replaced
+    thread; by default they run here. ``checkpoint`` runs before each picture and the
+    deliverables: what it raises abandons the write (the transaction rolled back, the last
+    set left whole). Only files lumitrace wrote for this stage are replaced
     (:mod:`.ownership`)."""
     scene = result.scene
     stage_path, name, paths = planned_outputs(scene, out_dir, name)
@@ -209,11 +211,13 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         try:
             staged = {k: tx.staged(v) for k, v in paths.items()}
             write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id,
-                                    cct_K=col.total["cct_K"] if col is not None else None)
+                                    cct_K=col.total["cct_K"] if col is not None else None,
+                                    checkpoint=checkpoint)
             if col is not None:
                 write_colour_files(col, staged, name, pictures, run_id=tx.run_id,
-                                   title=scene.info.name)
+                                   title=scene.info.name, checkpoint=checkpoint)
             if deliverables:
+                checkpoint()
                 write_deliverables(scene, ph, record, staged, paths, run_id=tx.run_id)
             acc = result.accumulator
             channels = {"Y": est.filtered, "raw.Y": est.raw,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Callable
 
 from ..atomic import write_text
 from ..filenames import (COLOUR_DIAGRAM_SUFFIX, COLOUR_SUFFIX, IES_SUFFIX, LDT_SUFFIX,
@@ -57,12 +58,14 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
 
 def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path], name: str,
                             pictures: bool = True, run_id: str = "",
-                            cct_K: float | None = None) -> None:
+                            cct_K: float | None = None,
+                            checkpoint: Callable[[], None] = lambda: None) -> None:
     """Write the IES and LDT files, the JSON of the grid and figures with their errors
     (and, with ``pictures``, the polar curve and the photometric solid) of ``ph`` to
     ``paths`` (see :func:`photometric_paths`). The luminaire's own data (``scene.info``)
     and ``cct_K`` (the traced colour's CCT, where the stage has colour) go into both
-    files; a round opening is written as round."""
+    files; a round opening is written as round. ``checkpoint`` runs before each picture
+    (it may raise to abandon the write)."""
     fig, opening, grid, lamp = ph.figures, ph.opening, ph.grid, ph.lamp_flux
     info = scene.info
     luminaire = scene.luminaire_path.rsplit("/", 1)[-1] or name
@@ -110,7 +113,9 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     if pictures:
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \
                 f"LOR {fig.light_output_ratio:.2f}"
+        checkpoint()
         polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
+        checkpoint()
         # VTK does not survive a Python exception raised inside it by a signal handler:
         # a signal waits until the picture is drawn
         with signals_held():
@@ -118,12 +123,14 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
 
 
 def write_colour_files(col: ColourOverAngle, paths: dict[str, Path], name: str,
-                       pictures: bool = True, run_id: str = "", title: str = "") -> None:
+                       pictures: bool = True, run_id: str = "", title: str = "",
+                       checkpoint: Callable[[], None] = lambda: None) -> None:
     """Write the colour over angle as JSON and, with ``pictures``, its diagram (titled
-    ``title``, the luminaire's name, else ``name``)."""
+    ``title``, the luminaire's name, else ``name``; ``checkpoint`` runs before it)."""
     write_text(paths["colour_data"], json.dumps({"runId": run_id, **col.table()}, indent=1)
                + "\n")
     if pictures:
         from ..photometry.diagrams import colour_diagram
 
+        checkpoint()
         colour_diagram(paths["colour_diagram"], col, title or name)

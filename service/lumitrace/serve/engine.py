@@ -28,6 +28,7 @@ from ..trace.prepared import TracingFrame, prepare
 from ..trace.tracer import trace_batch
 from .events import EventLog
 from .live import LiveStage, Revision
+from .writer import Writer
 
 #: Iterations of a revision after each of which the cheap outputs are written (more: an
 #: edit made while they are written waits for them, on the demo 85 ms each).
@@ -85,7 +86,7 @@ class Engine:
         self._stopping = False
         self._thread = threading.Thread(target=self._main, name="lumitrace-engine",
                                         daemon=True)
-        self._writer = _Writer(self._write_failed)
+        self._writer = Writer(self._write_failed)
         # state, read by status() under the lock
         self.revision: Revision | None = None
         self.refinement: Refinement | None = None
@@ -577,7 +578,7 @@ class Engine:
         copy = replace(result, accumulator=result.accumulator.snapshot())
         with self._cv:
             self._pictures_for = rev.number if pictures else self._pictures_for
-        self._writer.put(lambda: self._publish(copy, rev, pictures=pictures))
+        self._writer.put(lambda: self._publish(copy, rev, pictures, abandon=pictures))
 
     def _write_failed(self, exc: Exception) -> None:
         """A write on the writer thread that failed other than by a LumitraceError."""
@@ -586,15 +587,26 @@ class Engine:
             self.error = message
         self.events.publish("error", message=message)
 
-    def _publish(self, result, rev: Revision, pictures: bool) -> None:
-        """Write ``result`` of ``rev`` (one transaction, on the USD thread), and say so."""
+    def _publish(self, result, rev: Revision, pictures: bool, abandon: bool = False) -> None:
+        """Write ``result`` of ``rev`` (one transaction, on the USD thread), and say so;
+        ``abandon``: give the pictures up, the old set left, if a newer revision comes
+        before they are all drawn (they follow once the edits pause again)."""
+
+        def checkpoint() -> None:
+            if abandon and (self._pending is not None or self.revision is not rev):
+                raise _Superseded
         extra = {"revision": rev.number, "tracingFrame": [*self.frame.center, self.frame.scale]}
         t0 = time.perf_counter()
         try:
             record = write_outputs(result, self.out_dir, pictures=pictures, extra=extra,
                                    sublayer=self.sublayer,
                                    deliverables=pictures and self.deliverables,
-                                   on_stage=lambda step: self.live.call(self.live.write, step))
+                                   on_stage=lambda step: self.live.call(self.live.write, step),
+                                   checkpoint=checkpoint)
+        except _Superseded:
+            with self._cv:
+                self._drawn(rev, pictures)
+            return
         except LumitraceError as exc:
             with self._cv:
                 if pictures and rev is self.revision:
@@ -627,54 +639,8 @@ class Engine:
             self._cv.notify_all()
 
 
-class _Writer:
-    """A thread that writes the newest result handed to it: one not yet begun when a newer
-    one comes is dropped (the newer supersedes it), so writes never queue up."""
-
-    def __init__(self, failed: Callable[[Exception], None]):
-        self._cv = threading.Condition()
-        self._job: Callable[[], None] | None = None
-        self._busy = False
-        self._closed = False
-        self._failed = failed
-        self._thread = threading.Thread(target=self._main, name="lumitrace-writer",
-                                        daemon=True)
-        self._thread.start()
-
-    def put(self, job: Callable[[], None]) -> None:
-        with self._cv:
-            self._job = job
-            self._cv.notify_all()
-
-    def flush(self) -> None:
-        """Wait until what was handed over is written."""
-        with self._cv:
-            while self._job is not None or self._busy:
-                self._cv.wait()
-
-    def close(self) -> None:
-        self.flush()
-        with self._cv:
-            self._closed = True
-            self._cv.notify_all()
-        self._thread.join()
-
-    def _main(self) -> None:
-        while True:
-            with self._cv:
-                while self._job is None and not self._closed:
-                    self._cv.wait()
-                if self._job is None:
-                    return
-                job, self._job, self._busy = self._job, None, True
-            try:
-                job()
-            except Exception as exc:  # the writer never dies: the write is reported
-                self._failed(exc)
-            finally:
-                with self._cv:
-                    self._busy = False
-                    self._cv.notify_all()
+class _Superseded(Exception):
+    """A newer revision came while a done revision's pictures were being drawn."""
 
 
 def _drain(futures) -> None:

@@ -1,0 +1,56 @@
+"""The service's writer: one thread that writes the newest result handed to it, so that the
+engine goes on tracing while a done revision's files and pictures are written."""
+from __future__ import annotations
+
+import threading
+from typing import Callable
+
+
+class Writer:
+    """A thread that writes the newest result handed to it: one not yet begun when a newer
+    one comes is dropped (the newer supersedes it), so writes never queue up."""
+
+    def __init__(self, failed: Callable[[Exception], None]):
+        self._cv = threading.Condition()
+        self._job: Callable[[], None] | None = None
+        self._busy = False
+        self._closed = False
+        self._failed = failed
+        self._thread = threading.Thread(target=self._main, name="lumitrace-writer",
+                                        daemon=True)
+        self._thread.start()
+
+    def put(self, job: Callable[[], None]) -> None:
+        with self._cv:
+            self._job = job
+            self._cv.notify_all()
+
+    def flush(self) -> None:
+        """Wait until what was handed over is written."""
+        with self._cv:
+            while self._job is not None or self._busy:
+                self._cv.wait()
+
+    def close(self) -> None:
+        self.flush()
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+        self._thread.join()
+
+    def _main(self) -> None:
+        while True:
+            with self._cv:
+                while self._job is None and not self._closed:
+                    self._cv.wait()
+                if self._job is None:
+                    return
+                job, self._job, self._busy = self._job, None, True
+            try:
+                job()
+            except Exception as exc:  # the writer never dies: the write is reported
+                self._failed(exc)
+            finally:
+                with self._cv:
+                    self._busy = False
+                    self._cv.notify_all()
