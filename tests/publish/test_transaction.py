@@ -355,3 +355,26 @@ def test_signals_held_holds_a_signal_another_thread_takes():
             finished.append(True)
     helper.join()
     assert finished == [True]
+
+
+def test_a_signal_after_the_commit_says_the_outputs_are_published(disc, monkeypatch):
+    """A signal landing after the set is committed (while the result layer is reloaded,
+    before the stage is sublayered) leaves the new set, and the interruption says so."""
+    import signal as sig
+
+    from lumitrace.errors import Interrupted
+    from lumitrace.publish import outputs
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+    from lumitrace.stage.reader import read_stage
+
+    result = run(read_stage(disc), TraceSettings(photons=20_000, resolution=8, seed=3))
+
+    def signalled(path):
+        raise Interrupted(sig.SIGTERM)
+
+    monkeypatch.setattr(outputs, "reload_if_open", signalled)
+    with pytest.raises(Interrupted) as stop:
+        outputs.write_outputs(result, disc.parent, sublayer=False)
+    assert stop.value.published
+    assert_one_complete_set(disc.parent, "disc")

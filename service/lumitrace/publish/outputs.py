@@ -201,58 +201,63 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     except OSError as exc:
         raise OutputError(f"cannot create the output folder: {exc.strerror}",
                           str(layer_dir)) from exc
-    with locked(folders, name, wait):
-        for note in recover(folders, name, [p.name for p in paths.values()]):
-            warn(note, OutputWarning)
-        claim = claim_outputs(stage_path, paths, scene.input_files())
-        for note in claim.notes:
-            warn(note, OutputWarning)
-        tx = Transaction(name, layer_dir, removals=list(claim.dropped))
-        try:
-            staged = {k: tx.staged(v) for k, v in paths.items()}
-            write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id,
-                                    cct_K=col.total["cct_K"] if col is not None else None,
-                                    checkpoint=checkpoint)
-            if col is not None:
-                write_colour_files(col, staged, name, pictures, run_id=tx.run_id,
-                                   title=scene.info.name, checkpoint=checkpoint)
-            if deliverables:
-                checkpoint()
-                write_deliverables(scene, ph, record, staged, paths, run_id=tx.run_id)
-            acc = result.accumulator
-            channels = {"Y": est.filtered, "raw.Y": est.raw,
-                        "count": acc.counts().astype(np.float64),
-                        "relativeError": np.minimum(est.texel_error, MAX_TEXEL_ERROR),
-                        **colour_maps(acc, est)}
-            meta = {**exr_metadata(result, record), **(extra or {}), "runId": tx.run_id,
-                    "stagePath": str(stage_path or "")}
-            write_intensity_exr(staged["intensity_map"], channels, meta)
-            write_latlong_texture(staged["latlong_map"], est.filtered, scene.up_axis)
-            owned = ownership_record(stage_path, layer_dir,
-                                     {paths[k].name: f for k, f in staged.items()
-                                      if k != "result_layer"})
-            text = result_layer_text(stage_path, scene.luminaire_path,
-                                     record.layer_values(layer_dir),
-                                     photometric_light(scene, ph, paths["ies"], layer_dir),
-                                     layer_dir,
-                                     {**(extra or {}), "runId": tx.run_id, **owned},
-                                     (scene.up_axis, scene.meters_per_unit))
-            write_layer_file(stage_path, staged["result_layer"], text)
-            tx.commit(last=paths["result_layer"])
-        except Interrupted as exc:
-            exc.published = tx.committed
-            tx.abort()
-            raise
-        except BaseException:
-            tx.abort()
-            raise
-        def stage_steps() -> RootEdit | None:
-            reload_if_open(paths["result_layer"])
-            if sublayer and stage_path is not None:
-                with signals_held():
-                    return sublayer_into_root(stage_path, paths["result_layer"])
-            return None
-        (on_stage or _here)(stage_steps)
+    tx = None
+    try:
+        with locked(folders, name, wait):
+            for note in recover(folders, name, [p.name for p in paths.values()]):
+                warn(note, OutputWarning)
+            claim = claim_outputs(stage_path, paths, scene.input_files())
+            for note in claim.notes:
+                warn(note, OutputWarning)
+            tx = Transaction(name, layer_dir, removals=list(claim.dropped))
+            try:
+                staged = {k: tx.staged(v) for k, v in paths.items()}
+                write_photometric_files(scene, ph, staged, name, pictures, run_id=tx.run_id,
+                                        cct_K=col.total["cct_K"] if col is not None else None,
+                                        checkpoint=checkpoint)
+                if col is not None:
+                    write_colour_files(col, staged, name, pictures, run_id=tx.run_id,
+                                       title=scene.info.name, checkpoint=checkpoint)
+                if deliverables:
+                    checkpoint()
+                    write_deliverables(scene, ph, record, staged, paths, run_id=tx.run_id)
+                acc = result.accumulator
+                channels = {"Y": est.filtered, "raw.Y": est.raw,
+                            "count": acc.counts().astype(np.float64),
+                            "relativeError": np.minimum(est.texel_error, MAX_TEXEL_ERROR),
+                            **colour_maps(acc, est)}
+                meta = {**exr_metadata(result, record), **(extra or {}), "runId": tx.run_id,
+                        "stagePath": str(stage_path or "")}
+                write_intensity_exr(staged["intensity_map"], channels, meta)
+                write_latlong_texture(staged["latlong_map"], est.filtered, scene.up_axis)
+                owned = ownership_record(stage_path, layer_dir,
+                                         {paths[k].name: f for k, f in staged.items()
+                                          if k != "result_layer"})
+                text = result_layer_text(stage_path, scene.luminaire_path,
+                                         record.layer_values(layer_dir),
+                                         photometric_light(scene, ph, paths["ies"], layer_dir),
+                                         layer_dir,
+                                         {**(extra or {}), "runId": tx.run_id, **owned},
+                                         (scene.up_axis, scene.meters_per_unit))
+                write_layer_file(stage_path, staged["result_layer"], text)
+                tx.commit(last=paths["result_layer"])
+            except Interrupted as exc:
+                exc.published = tx.committed
+                tx.abort()
+                raise
+            except BaseException:
+                tx.abort()
+                raise
+            def stage_steps() -> RootEdit | None:
+                reload_if_open(paths["result_layer"])
+                if sublayer and stage_path is not None:
+                    with signals_held():
+                        return sublayer_into_root(stage_path, paths["result_layer"])
+                return None
+            (on_stage or _here)(stage_steps)
+    except Interrupted as exc:  # after the commit (the stage's steps, the lock's release)
+        exc.published = exc.published or (tx is not None and tx.committed)
+        raise
     return record
 
 
