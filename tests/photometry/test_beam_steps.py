@@ -71,3 +71,18 @@ def test_the_bias_at_a_steps_foot_falls_with_the_noise():
     assert bias[0] < spread[0] and bias[1] < spread[1]
     assert bias[1] < 0.4 * bias[0]
     assert min(linear) > 0.3  # a quarter degree per side, whatever the noise
+
+
+def test_the_outermost_crossings_are_where_the_beam_angle_ends():
+    """The crossings a datasheet lists (``beam_crossings_*``) end where the beam angle does,
+    at the step on both sides."""
+    from lumitrace.photometry.quantities import _step_read, crossings, outermost_crossings
+
+    prof = _mean_over_cells()
+    sigma = np.full(len(ANG), 1e-4)
+    level = np.array([0.5])
+    left, right = outermost_crossings(ANG, prof[None], level, sigma)
+    assert abs(left[0] + STEP) < 1e-6 and abs(right[0] - STEP) < 1e-6
+    listed = _step_read(crossings(ANG, prof, 0.5), (left, right))
+    assert listed[-1] - listed[0] == spread_angles(ANG, prof[None], level, sigma)[0]
+    assert len(listed) == len(crossings(ANG, prof, 0.5))

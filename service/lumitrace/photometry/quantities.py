@@ -172,6 +172,15 @@ def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
     symmetric about nadir) at its ``levels`` (rows,), NaN where undefined; ``sigma``: the
     samples' standard errors, which let a step at a crossing be read as one
     (:func:`_outer_crossing`)."""
+    left, right = outermost_crossings(ang, profs, levels, sigma)
+    return right - left
+
+
+def outermost_crossings(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
+                        sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The outermost crossings (deg from nadir, negative toward the profile's start) of
+    every row of ``profs`` with its level, as :func:`spread_angles` reads them; NaN where
+    the profile does not fall below the level on both sides."""
     above = profs >= levels[:, None]
     n = profs.shape[1]
     first = np.argmax(above, axis=1)
@@ -180,9 +189,9 @@ def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
     first, last = np.where(ok, first, 1), np.where(ok, last, n - 2)
     back = None if sigma is None else sigma[::-1]
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = (_outer_crossing(ang, profs, levels, last, sigma)
-               + _outer_crossing(ang, profs[:, ::-1], levels, n - 1 - first, back))
-    return np.where(ok, out, np.nan)
+        right = _outer_crossing(ang, profs, levels, last, sigma)
+        left = -_outer_crossing(ang, profs[:, ::-1], levels, n - 1 - first, back)
+    return np.where(ok, left, np.nan), np.where(ok, right, np.nan)
 
 
 #: Samples each side's line is fitted to where a step is looked for at a crossing.
@@ -250,6 +259,14 @@ def _outer_crossing(ang, profs, levels, i, sigma):
     return np.where(ok, ang[i] + h * u, linear)
 
 
+def _step_read(every: tuple[float, ...], outer: tuple[np.ndarray, np.ndarray]
+               ) -> tuple[float, ...]:
+    """Every crossing, the outermost two as the beam angle reads them (at a step)."""
+    if len(every) < 2:
+        return every
+    return (float(outer[0][0]), *every[1:-1], float(outer[1][0]))
+
+
 def crossings(ang: np.ndarray, prof: np.ndarray, level: float) -> tuple[float, ...]:
     """Every angle (deg, signed from nadir) at which a profile crosses ``level`` (linear
     between samples), in order."""
@@ -295,9 +312,11 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     for c in planes:
         ang, prof = _plane_profile(grid, c)
         for f in fractions:
-            angle = spread_angle(ang, prof, f * tops[c][0], sigmas[c])
+            level = f * tops[c][0]
+            angle = spread_angle(ang, prof, level, sigmas[c])
             out[c, f] = (angle, None, ()) if angle is None else \
-                (angle, None, crossings(ang, prof, f * tops[c][0]))
+                (angle, None, _step_read(crossings(ang, prof, level), outermost_crossings(
+                    ang, prof[None], np.array([level]), sigmas[c])))
             draws[c, f] = []
     # each profile's half-planes as weights of the grid's planes (linear across them):
     # only the planes they use are redrawn
