@@ -3,7 +3,7 @@ the C-gamma grid with its standard errors and symmetry, the figures and the lumi
 opening, ready for the IES and EULUMDAT writers, the pictures and the sidecar JSON."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import math
 
@@ -16,7 +16,7 @@ from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
 from .accuracy import FilesAccuracy, grid_accuracy
 from .measured import emitter_rings, symmetric_grid
-from .quantities import PhotometricFigures, figures
+from .quantities import PhotometricFigures, figures, scaled_figures
 
 #: Symmetry is used unless the counts show a departure from it larger than this (relative
 #: RMS, at a 3 sigma lower bound; see :func:`~lumitrace.photometry.measured.asymmetry`).
@@ -185,7 +185,45 @@ def beam_half_width(rings: list[tuple[float, float, np.ndarray]]) -> float | Non
 def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
     """Measure the photometry of a session's counts: a grid of C every :data:`C_STEP` deg
     and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
-    deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`)."""
+    deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`). The same
+    counts with every light's flux times one factor (a flux-only edit) give the last
+    photometry scaled: intensities, fluxes and their errors by the factor, every ratio,
+    angle and relative error as it was."""
+    last = _LAST[0] if _LAST else None
+    if last is not None and last[0] == _light_key(acc):
+        k = _common_factor(last[1], [t.flux for t in acc.emitters])
+        if k is not None:
+            return _scaled(last[2], k, scene.total_flux)
+    ph = _measured(scene, acc)
+    _LAST[:] = [(_light_key(acc), [t.flux for t in acc.emitters], ph)]
+    return ph
+
+
+#: The last photometry measured: (counts and lights' colours, lights' fluxes, photometry).
+_LAST: list[tuple] = []
+
+
+def _light_key(acc: Accumulator) -> tuple:
+    return acc.version, tuple(s[1] for s in acc.light_state())
+
+
+def _common_factor(before: list[float], now: list[float]) -> float | None:
+    """The one factor every light's flux was multiplied by (None: none, or no light)."""
+    if len(before) != len(now) or not sum(before) > 0:
+        return None
+    k = sum(now) / sum(before)
+    same = all(abs(b * k - n) <= 1e-12 * max(abs(n), abs(b * k)) for b, n in zip(before, now))
+    return k if same and k > 0 else None
+
+
+def _scaled(ph: Photometry, k: float, lamp_flux: float) -> Photometry:
+    grid = replace(ph.grid, candela=ph.grid.candela * k,
+                   sigma=None if ph.grid.sigma is None else ph.grid.sigma * k)
+    figures = PhotometricFigures(**scaled_figures(ph.figures.as_dict(), k))
+    return replace(ph, grid=grid, figures=figures, lamp_flux=lamp_flux)
+
+
+def _measured(scene: Scene, acc: Accumulator) -> Photometry:
     rings = emitter_rings(acc)
     half_width = beam_half_width(rings)
     grid, halves, departures = _files_grid(acc, default_gammas(half_width))
