@@ -118,7 +118,8 @@ def _typed_value(value: Any, type_name: Sdf.ValueTypeName, ctx: _Context, where:
         raise _Bad("values must be finite numbers", where)
     converted = type_name.type.pythonClass
     if type_name.isArray and isinstance(value, list):
-        return _float_array(value, type_name) or value
+        fast = _float_array(value, type_name)
+        return value if fast is None else fast
     if converted is not None and isinstance(value, list):
         try:
             return converted(*value) if len(value) in (2, 3, 4) and not isinstance(

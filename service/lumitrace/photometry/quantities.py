@@ -154,24 +154,13 @@ def _plane_profile(grid: CGammaGrid, c_deg: float, values=None):
     return np.concatenate([-grid.gamma[::-1], grid.gamma[1:]]), np.concatenate([b[::-1], a[1:]])
 
 
-def spread_angle(ang: np.ndarray, prof: np.ndarray, level: float,
-                 sigma: np.ndarray | None = None) -> float | None:
-    """Full angle (deg) between the outermost crossings of ``level``
-    (:func:`spread_angles`): a noisy sample dipping below the level inside the beam (a tiny
-    cell next to nadir) does not cut it short. None where the profile does not fall below it
-    on both sides."""
-    if not level > 0:
-        return None
-    a = spread_angles(ang, prof[None], np.array([level]), sigma)[0]
-    return None if np.isnan(a) else float(a)
-
-
 def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
                   sigma: np.ndarray | None = None) -> np.ndarray:
-    """:func:`spread_angle` of every row of ``profs`` (rows, samples on a uniform raster
-    symmetric about nadir) at its ``levels`` (rows,), NaN where undefined; ``sigma``: the
-    samples' standard errors, which let a step at a crossing be read as one
-    (:func:`_outer_crossing`)."""
+    """Full angles (deg) between the outermost crossings of every row of ``profs`` (rows,
+    samples on a uniform raster symmetric about nadir) with its ``levels`` (rows,), NaN
+    where undefined: a noisy sample dipping below the level inside the beam (a tiny cell
+    next to nadir) does not cut it short; ``sigma``: the samples' standard errors, which
+    let a step at a crossing be read as one (:func:`_outer_crossing`)."""
     left, right = outermost_crossings(ang, profs, levels, sigma)
     return right - left
 
@@ -313,10 +302,10 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
         ang, prof = _plane_profile(grid, c)
         for f in fractions:
             level = f * tops[c][0]
-            angle = spread_angle(ang, prof, level, sigmas[c])
-            out[c, f] = (angle, None, ()) if angle is None else \
-                (angle, None, _step_read(crossings(ang, prof, level), outermost_crossings(
-                    ang, prof[None], np.array([level]), sigmas[c])))
+            outer = outermost_crossings(ang, prof[None], np.array([level]), sigmas[c])
+            width = float(outer[1][0] - outer[0][0])
+            out[c, f] = (None, None, ()) if not level > 0 or math.isnan(width) else \
+                (width, None, _step_read(crossings(ang, prof, level), outer))
             draws[c, f] = []
     # each profile's half-planes as weights of the grid's planes (linear across them):
     # only the planes they use are redrawn

@@ -576,8 +576,9 @@ class Engine:
             self._publish(result, rev, pictures=pictures)
             return
         copy = replace(result, accumulator=result.accumulator.snapshot())
-        with self._cv:
-            self._pictures_for = rev.number if pictures else self._pictures_for
+        if pictures:
+            with self._cv:
+                self._pictures_for = rev.number
         self._writer.put(lambda: self._publish(copy, rev, pictures, abandon=pictures))
 
     def _write_failed(self, exc: Exception) -> None:
