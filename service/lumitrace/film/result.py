@@ -3,12 +3,12 @@ the one shape the tracing session hands to the writers (neither knows the other)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..scene import Scene
 from .accumulate import Accumulator
-from .convergence import MapEstimate
+from .convergence import MapEstimate, estimate
 
 
 @dataclass
@@ -23,7 +23,8 @@ class TraceResult:
     iterations: int
     seconds: float
     prepare_seconds: float
-    estimate: MapEstimate
+    #: None in a frozen copy handed to another thread to estimate (:meth:`estimated`)
+    estimate: MapEstimate | None
     #: batches sent again after a Dask worker was lost (with it, their tallies or the scene)
     batches_redone: int = 0
     #: the photometric files' accuracy (a ``lumitrace.photometry.accuracy.FilesAccuracy``)
@@ -32,6 +33,13 @@ class TraceResult:
     files_accuracy: Any = None
     #: whether the target is judged on the files (else on the map)
     judge_files: bool = False
+
+    def estimated(self) -> TraceResult:
+        """This result with its map estimated from its counts where that was left to
+        whoever writes it (:attr:`estimate` None)."""
+        if self.estimate is not None:
+            return self
+        return replace(self, estimate=estimate(self.accumulator, self.settings.threshold))
 
     @property
     def photons(self) -> int:

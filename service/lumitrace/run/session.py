@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 from ..errors import LumitraceError, warn
@@ -182,17 +182,22 @@ class Refinement:
                 self._keep_records(tally)
         self.iteration += 1
 
-    def settle(self, estimated: bool = True) -> MapEstimate | None:
+    def settle(self, estimated: bool = True,
+               checkpoint: Callable[[], None] = lambda: None) -> MapEstimate | None:
         """The second half of :meth:`add_round`: the map's estimate (unless not
         ``estimated``), the files judged where the target is theirs, the next round's
-        size. It reads the counts only."""
+        size. It reads the counts only. ``checkpoint`` runs between its steps and may raise
+        to abandon it: :attr:`estimate` then stays of the counts before (as
+        :meth:`estimate_current` says), and whoever reads it next estimates afresh."""
         t0 = time.perf_counter()
-        est = estimate(self.accumulator, self.settings.threshold) if estimated else None
+        self.files = None
+        est = estimate(self.accumulator, self.settings.threshold, checkpoint) \
+            if estimated else None
         if est is not None and est.threshold != self.settings.threshold:
             est = estimate(self.accumulator, self.settings.threshold)  # changed meanwhile
         self._set_estimate(est)
-        self.files = None
         if self.settings.target_error is not None:
+            checkpoint()
             self.current_files()
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
@@ -307,9 +312,21 @@ class Refinement:
             self._set_estimate(estimate(acc, self.settings.threshold))
         self.files = None  # judged again when asked: the fluxes changed
 
-    def result(self, seconds: float, prepare_seconds: float = 0.0) -> TraceResult:
-        if self.estimate_current() is None or self._scaled_estimate:
+    def result(self, seconds: float, prepare_seconds: float = 0.0,
+               frozen: bool = False) -> TraceResult:
+        """The result of the counts as they are; ``frozen``: of a copy of them, for another
+        thread to write while they grow, its map estimated there where the estimate is not
+        current or a rescale's (:meth:`TraceResult.estimated`)."""
+        exact = self.estimate_current() is not None and not self._scaled_estimate
+        if frozen:
+            return replace(self._result(seconds, prepare_seconds),
+                           accumulator=self.accumulator.snapshot(),
+                           estimate=self.estimate if exact else None)
+        if not exact:
             self._set_estimate(estimate(self.accumulator, self.settings.threshold))
+        return self._result(seconds, prepare_seconds)
+
+    def _result(self, seconds: float, prepare_seconds: float) -> TraceResult:
         est = self.estimate
         # the files' accuracy of the last round, where no photon came since; else the
         # writer measures it from the grid it writes (a scene of thousands of lights pays

@@ -146,6 +146,13 @@ class Engine:
     def _interrupted(self) -> bool:
         return self._stopping or self._pending is not None
 
+    def _superseded(self) -> None:
+        """Raise :class:`_Superseded` where a revision that is not a rescale waits: the
+        current round's estimate would be replaced before anyone reads it."""
+        pending = self._pending
+        if pending is not None and not self._rescale_only(pending):
+            raise _Superseded
+
     def _wake(self, _future) -> None:
         """A batch ended: the engine's thread, waiting for its round, looks again."""
         with self._cv:
@@ -447,7 +454,21 @@ class Engine:
         self._refreshed()
         self._write(pictures=False)
 
+    def _rescales_first(self) -> None:
+        """Wait while a rescale's files are written in the background (beside a round's
+        tracing or estimate they take twice as long), taking the rescales that come
+        meanwhile; an edit to trace, or the engine's stop, ends the wait."""
+        while True:
+            self._writer.wait_cheap(lambda: self._stopping or self._pending is not None)
+            rescale = self._pop_rescale()
+            if rescale is None:
+                return
+            self._take(rescale)
+
     def _round(self, pool: ThreadPoolExecutor) -> None:
+        self._rescales_first()
+        if self._interrupted():
+            return
         r, ps = self.refinement, self._prepared
         jobs = r.next_jobs()
         if not jobs:
@@ -480,8 +501,14 @@ class Engine:
         with self._cv:
             r.add_counts(tallies)
         # the estimate outside the lock (this thread alone changes the counts): a preview
-        # or status request need not wait for it
-        est = r.settle()
+        # or status request need not wait for it. An edit that came meanwhile (other than
+        # a rescale, which scales the estimate) abandons it: its own trace is what the
+        # client waits for, and this round's counts stay without their estimate
+        self._rescales_first()  # a flux edit taken while the round ran: its files first
+        try:
+            est = r.settle(checkpoint=self._superseded)
+        except _Superseded:
+            return
         acc = r.accumulator
         elapsed = time.perf_counter() - self.started
         self.events.publish("iteration", revision=self.revision.number,
@@ -505,6 +532,12 @@ class Engine:
             while not (self._interrupted() or all(f.done() for f in futures)
                        or any(f.done() and f.exception() for f in futures)):
                 self._cv.wait()
+        return self._pop_rescale()
+
+    def _pop_rescale(self) -> Revision | None:
+        """The pending revision, no longer pending, where it is a rescale
+        (:meth:`_rescale_only`); else None."""
+        with self._cv:
             rev = self._pending
             if rev is None or self._stopping or not self._rescale_only(rev):
                 return None
@@ -569,17 +602,21 @@ class Engine:
         r, rev = self.refinement, self.revision
         if r is None or not r.accumulator.photons:
             return
-        result = r.result(time.perf_counter() - self.started)
+        seconds = time.perf_counter() - self.started
         self._last_write = time.perf_counter()
         if not background:
+            result = r.result(seconds)
             self._writer.flush()
             self._publish(result, rev, pictures=pictures)
             return
-        copy = replace(result, accumulator=result.accumulator.snapshot())
+        # a copy of the counts, its map estimated by the writer where it must be (after a
+        # rescale, say): the engine is free for the next edit at once
+        copy = r.result(seconds, frozen=True)
         if pictures:
             with self._cv:
                 self._pictures_for = rev.number
-        self._writer.put(lambda: self._publish(copy, rev, pictures, abandon=pictures))
+        self._writer.put(lambda: self._publish(copy.estimated(), rev, pictures,
+                                               abandon=pictures), cheap=not pictures)
 
     def _write_failed(self, exc: Exception) -> None:
         """A write on the writer thread that failed other than by a LumitraceError."""
@@ -641,7 +678,8 @@ class Engine:
 
 
 class _Superseded(Exception):
-    """A newer revision came while a done revision's pictures were being drawn."""
+    """A newer revision came while a done revision's pictures were being drawn, or while
+    a round's map was being estimated."""
 
 
 def _drain(futures) -> None:

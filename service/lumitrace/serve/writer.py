@@ -14,16 +14,26 @@ class Writer:
         self._cv = threading.Condition()
         self._job: Callable[[], None] | None = None
         self._busy = False
+        #: whether the job handed over last (queued or running) writes the files alone
+        self._cheap = False
         self._closed = False
         self._failed = failed
         self._thread = threading.Thread(target=self._main, name="lumitrace-writer",
                                         daemon=True)
         self._thread.start()
 
-    def put(self, job: Callable[[], None]) -> None:
+    def put(self, job: Callable[[], None], cheap: bool = False) -> None:
+        """Hand ``job`` over (``cheap``: it writes the files, no pictures)."""
         with self._cv:
-            self._job = job
+            self._job, self._cheap = job, cheap
             self._cv.notify_all()
+
+    def wait_cheap(self, stop: Callable[[], bool], poll: float = 0.005) -> None:
+        """Wait while a cheap write is queued or running, until ``stop()`` (polled every
+        ``poll`` s) says not to."""
+        with self._cv:
+            while self._cheap and (self._job is not None or self._busy) and not stop():
+                self._cv.wait(poll)
 
     def flush(self) -> None:
         """Wait until what was handed over is written."""
