@@ -157,3 +157,33 @@ def test_an_edit_during_a_rounds_estimate_abandons_it(tmp_path, monkeypatch):
         assert [e for e in events if e.kind == "iteration" and e.data["revision"] == 1]
         fresh = run(rev.scene, SETTINGS, frame=eng.frame).accumulator
         np.testing.assert_array_equal(eng.refinement.accumulator.counts(), fresh.counts())
+
+
+def test_the_refinement_waits_out_a_run_of_flux_edits(tmp_path):
+    """Flux edits sent mid-refinement, one every 50 ms: no round of the rescaled revisions
+    is estimated until :data:`RESCALE_QUIET` s after the last of them (their previews and
+    files are made without the tracing beside them), and the refinement then goes on."""
+    from lumitrace.serve.engine import RESCALE_QUIET
+
+    with running_engine(tmp_path) as (live, eng):
+        deadline = time.monotonic() + 60
+        eng.update_settings({"photons": 5_000_000})  # still tracing while the edits come
+        while not eng.status()["iterations"]:
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+        for k in range(4):
+            rev = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux",
+                                                  1200.0 + 10.0 * k))
+            eng.submit(rev)
+            time.sleep(0.05)
+        while not (eng.status()["traced_revision"] == rev.number and
+                   [e for e in eng.events.since(0)
+                    if e.kind == "iteration" and e.data["revision"] == rev.number]):
+            assert time.monotonic() < deadline, eng.status()
+            time.sleep(0.01)
+        events = eng.events.since(0)
+        taken = [e.time for e in events if e.kind == "revision" and e.data["revision"] >= 1]
+        rounds = [e.time for e in events
+                  if e.kind == "iteration" and e.data["revision"] >= 1]
+        assert len(taken) >= 2 and rounds and eng.status()["state"] == "tracing"
+        assert min(rounds) >= max(taken) + RESCALE_QUIET - 0.01

@@ -25,6 +25,7 @@ redraws agrees, ``tests/photometry/test_ugr.py``). UGR does not depend on H; H =
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -170,9 +171,10 @@ def _rows(a: np.ndarray) -> list:
 
 class _Model:
     """The table as a function of the full grid's values (flattened): the taps of every
-    room's luminaires and the linear maps to the background luminances."""
+    room's luminaires and the linear maps to the background luminances, fixed by the grid's
+    layout; the luminaires' weights, by the luminous opening (:meth:`of`)."""
 
-    def __init__(self, grid: CGammaGrid, opening):
+    def __init__(self, grid: CGammaGrid):
         full = grid.full()
         self.shape = full.candela.shape
         gam = full.gamma
@@ -182,15 +184,16 @@ class _Model:
         down_cos = np.clip(cos_e, 0.0, None)
         omega_down = (down_cos[:-1] - down_cos[1:]) * dc  # each zone's part below 90
         omega_up = (cos_e[:-1] - cos_e[1:]) * dc - omega_down
-        idx, w, weight, lbs = [], [], [], []
+        idx, w, seen, lbs = [], [], [], []
         for x, y in ROOMS:
             g = room(float(x), float(y))
             for c in (g.c_crosswise, g.c_endwise):
                 i, wi = taps(grid, c, g.gamma)
                 idx.append(i)
                 w.append(wi)
-                weight.append(1.0 / (projected_area(opening, c, g.gamma) * g.distance ** 2
-                                     * g.p ** 2))
+                seen.append((np.broadcast_to(c, g.gamma.shape), g.gamma,
+                             np.broadcast_to(g.distance ** 2, g.gamma.shape),
+                             np.broadcast_to(g.p ** 2, g.gamma.shape)))
             floor = omega_down * _floor_share(gam, x, y)
             # flux (lm) to floor, walls, ceiling per unit intensity of each gamma (all C)
             to = np.stack([floor, omega_down - floor, omega_up])
@@ -198,10 +201,25 @@ class _Model:
             lbs.append(np.stack([g.n / a_w * transfer_factors(x, y, refl) @ to / np.pi
                                  for refl in REFLECTANCES]))  # (reflectances, gammas)
         self.idx, self.w = np.concatenate(idx), np.concatenate(w)
-        self.weight = np.concatenate(weight)
+        # each luminaire's direction (C, gamma) as the observer sees it, its distance and
+        # position index squared: what its weight takes from the room
+        self._c, self._gamma, self._d2, self._p2 = (np.concatenate(a) for a in zip(*seen))
         # (not a matrix product: BLAS's threads would spin beside the tracing threads)
-        self.starts = np.cumsum([0] + [len(a) for a in weight[:-1]])
+        self.starts = np.cumsum([0] + [len(a) for a, *_ in seen[:-1]])
         self.lb = np.stack(lbs)
+        self.weight = np.empty(0)
+        self._last: tuple | None = None  # (opening, its weights)
+
+    def of(self, opening) -> _Model:
+        """A copy of this model with the weights (1 / (projected area d^2 p^2)) of
+        ``opening`` (this one stays as it is: threads may share it)."""
+        last = self._last
+        if last is None or last[0] != opening:
+            last = self._last = (opening, 1.0 / (projected_area(opening, self._c, self._gamma)
+                                                 * self._d2 * self._p2))
+        view = copy.copy(self)
+        view.weight = last[1]
+        return view
 
     def evaluate(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(crosswise, endwise) UGR, each (draws, rooms, reflectances), of grid values
@@ -269,20 +287,21 @@ def _propagated(grid: CGammaGrid, d_glare: np.ndarray, d_back: np.ndarray) -> np
     return np.sqrt(body + poles)
 
 
-#: The last models made, by grid layout and opening: a service writes the same luminaire's
-#: table again and again.
+#: The last models made, by grid layout: a service writes the same luminaire's table again
+#: and again.
 _MODELS: dict[tuple, _Model] = {}
 
 
 def _model(grid: CGammaGrid, opening) -> _Model:
-    """The table's model of a grid's layout (C planes, gammas, symmetry) and opening."""
-    key = (tuple(grid.c.tolist()), tuple(grid.gamma.tolist()), grid.symmetry, opening)
+    """The table's model of a grid's layout (C planes, gammas, symmetry), with the weights
+    of ``opening`` (measured from the photons, it differs a little from write to write)."""
+    key = (tuple(grid.c.tolist()), tuple(grid.gamma.tolist()), grid.symmetry)
     model = _MODELS.get(key)
     if model is None:
-        model = _MODELS[key] = _Model(grid, opening)
+        model = _MODELS[key] = _Model(grid)
         for old in list(_MODELS)[:-8]:
             _MODELS.pop(old, None)
-    return model
+    return model.of(opening)
 
 
 def _unfold_index(grid: CGammaGrid) -> np.ndarray:

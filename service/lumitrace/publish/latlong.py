@@ -10,13 +10,14 @@ is the luminaire's intensity toward it.
 """
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import OutputError
-from ..film.cubemap import sample_map
+from ..film.cubemap import bilinear_taps, sample_map
 from .exr_tiled import ENVMAP_LATLONG, write_tiled_exr
 
 #: Tile size (pixels) of the texture.
@@ -43,14 +44,25 @@ def latlong_image(intensity_map: np.ndarray, up_axis: str, width: int | None = N
                   ) -> np.ndarray:
     """The cube map (cd) resampled bilinearly at the pixel centres of a 2N x N lat-long
     image: (N, 2N) float32, N twice the cube face size unless ``width`` says otherwise."""
-    w = width or 4 * intensity_map.shape[1]
+    res = intensity_map.shape[1]
+    w = width or 4 * res
+    taps = _latlong_taps(res, w, up_axis)
+    return sample_map(intensity_map, None, taps).reshape(w // 2, w).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=8)
+def _latlong_taps(res: int, w: int, up_axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """The cube-map taps of a 2N x N lat-long image's pixel centres (N = ``w`` / 2), made
+    once per layout: a service writes the texture after every few rounds."""
     h = w // 2
     lon = np.pi - 2.0 * np.pi * (np.arange(w) + 0.5) / w
     lat = 0.5 * np.pi - np.pi * (np.arange(h) + 0.5) / h
     lat, lon = np.meshgrid(lat, lon, indexing="ij")
     dome = np.stack([np.cos(lat) * np.sin(lon), np.sin(lat), np.cos(lat) * np.cos(lon)], -1)
-    world = dome_to_stage(dome, up_axis).reshape(-1, 3)
-    return sample_map(intensity_map, world).reshape(h, w).astype(np.float32)
+    taps = bilinear_taps(dome_to_stage(dome, up_axis).reshape(-1, 3), res)
+    for a in taps:
+        a.flags.writeable = False
+    return taps
 
 
 def write_latlong_texture(path: str | os.PathLike, intensity_map: np.ndarray,

@@ -297,19 +297,21 @@ class Refinement:
         coloured surface, lights' colours) only: the counts stay and scale with the new
         fluxes (photons are analog), the lights' colours are taken, nothing is retraced."""
         acc = self.accumulator
-        before = acc.light_state()
+        before, current = acc.light_state(), self.estimate_current() is not None
         for i, e in enumerate(scene.emitters):
             acc.rescale(i, e.flux)
         acc.colour = scene.colour
         acc.set_colours(scene)
         self.scene = scene
         k = flux_scale(before, acc.light_state())
-        if k is not None and self.estimate_current() is not None:
+        if k is not None and current:
             # every light dimmed alike (one light, say): the maps scale, at once; the
             # files' estimate is made afresh from the counts (:meth:`result`)
             self._set_estimate(self.estimate.scaled(k), scaled=True)
-        else:
+        elif current:
             self._set_estimate(estimate(acc, self.settings.threshold))
+        # else the counts' estimate was given up (:meth:`settle`): it stays to be made by
+        # whoever reads it next
         self.files = None  # judged again when asked: the fluxes changed
 
     def result(self, seconds: float, prepare_seconds: float = 0.0,

@@ -10,7 +10,7 @@ import math
 import numbers
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..errors import LumitraceError
 from ..trace.job import MAX_DEPTH
@@ -133,3 +133,26 @@ class TraceSettings:
     def convergence_target(self) -> float:
         """The error at or below which a result is converged."""
         return self.target_error or DEFAULT_TARGET_ERROR
+
+
+#: The settings a service's client may change while it runs.
+KNOBS = ("threshold", "target_error", "photons", "paused")
+
+
+def with_knobs(settings: TraceSettings, changes: dict) -> tuple[TraceSettings, bool | None]:
+    """``settings`` with a client's ``changes`` of :data:`KNOBS` (checked as the command
+    line's are: one :class:`SettingsError` names a bad one), and ``paused`` (None: not
+    said). A photon budget given ends the target error, and a target the budget."""
+    unknown = sorted(set(changes) - set(KNOBS))
+    if unknown:
+        raise SettingsError(f"unknown setting(s) {', '.join(unknown)}; known: "
+                            f"{', '.join(sorted(KNOBS))}")
+    paused = changes.get("paused", None)
+    if paused is not None and not isinstance(paused, bool):
+        raise SettingsError(f"must be true or false, got {paused!r}", prop="paused")
+    knobs = {k: v for k, v in changes.items() if k != "paused"}
+    if "photons" in knobs and knobs["photons"] is not None:
+        knobs.setdefault("target_error", None)
+    elif "target_error" in knobs and knobs["target_error"] is not None:
+        knobs.setdefault("photons", None)
+    return (replace(settings, **knobs) if knobs else settings), paused  # replace checks
