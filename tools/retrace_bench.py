@@ -137,6 +137,8 @@ def bench_stage(name: str, photons: int, threads: int) -> dict:
             prepare_s, rebuilt = 0.0, 0
             if kind == "flux":
                 r.rescale(new)
+                if r.estimate_current() is None:  # none to scale: the map the preview shows
+                    r.reestimate()
                 n, exact = 0, None
             else:
                 sel = select(r.records, scene, new, frame)
