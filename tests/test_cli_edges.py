@@ -307,3 +307,30 @@ def test_a_signal_a_finalizer_swallows_is_not_printed_as_a_traceback():
     assert p.returncode == 0 and p.stdout == "ran on\n", p.stderr
     assert "Interrupted" not in p.stderr
     assert "ValueError: kept" in p.stderr and p.stderr.count("Exception ignored") == 1
+
+
+def test_a_signal_a_library_wraps_is_still_the_signal():
+    """A signal's :class:`Interrupted` that a library wraps in its own exception (a class
+    body's ``__set_name__`` during an import turns it into a RuntimeError) ends the run as
+    the signal does: its exit status and one line, no traceback; another RuntimeError is
+    raised as it is."""
+    code = (
+        "import sys\n"
+        "from lumitrace import cli\n"
+        "from lumitrace.errors import Interrupted\n"
+        "class Hook:\n"
+        "    def __set_name__(self, owner, name): raise Interrupted(15)\n"
+        "def dispatch(args):\n"
+        "    if sys.argv[1] == 'other': raise RuntimeError('not a signal')\n"
+        "    class Axes:\n"
+        "        x = Hook()\n"
+        "cli._dispatch = dispatch\n"
+        "sys.exit(cli.main(['check', 'any.usda']))\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
+    p = subprocess.run([sys.executable, "-c", code, "signal"], capture_output=True, text=True,
+                       timeout=60, env=env)
+    assert p.returncode == 128 + signal.SIGTERM, p.stderr
+    assert "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    p = subprocess.run([sys.executable, "-c", code, "other"], capture_output=True, text=True,
+                       timeout=60, env=env)
+    assert p.returncode == 1 and "RuntimeError: not a signal" in p.stderr

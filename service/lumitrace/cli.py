@@ -598,6 +598,18 @@ def _failure(exc: BaseException) -> tuple[int, str]:
     return 2, f"lumitrace: error: {where}{getattr(exc, 'strerror', None) or exc}"
 
 
+def _interruption(exc: BaseException) -> Interrupted | None:
+    """The :class:`Interrupted` that caused ``exc``, where a library wrapped it (a signal
+    that lands in an import can come out as its RuntimeError); else None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, Interrupted):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def main(argv: list[str] | None = None, early_signals: list[int] | None = None) -> int:
     """The command line; ``early_signals`` are signals the entry point caught before
     lumitrace was imported (the run then stops before it starts). A command given
@@ -614,8 +626,12 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
         args = build_parser().parse_args(argv)
         warnings.showwarning = _show_warning
         return _dispatch(args)
-    except (LumitraceError, Interrupted, KeyboardInterrupt, OSError) as exc:
-        code, line = _failure(exc)
+    except (Exception, Interrupted, KeyboardInterrupt) as exc:  # the rest raised again
+        failure = exc if isinstance(exc, (LumitraceError, Interrupted, KeyboardInterrupt,
+                                          OSError)) else _interruption(exc)
+        if failure is None:
+            raise
+        code, line = _failure(failure)
         print(line, file=sys.stderr)
         if getattr(args, "json", False):
             with contextlib.suppress(OSError, ValueError):

@@ -174,7 +174,8 @@ def test_the_refinement_waits_out_a_run_of_flux_edits(tmp_path):
             time.sleep(0.005)
         for k in range(4):
             rev = live.call(live.apply, set_delta("/Luminaire/LED", "lumitrace:luminousFlux",
-                                                  1200.0 + 10.0 * k))
+                                                  1300.0 + 10.0 * k))
+            assert rev.effect.kind == "flux"
             eng.submit(rev)
             time.sleep(0.05)
         while not (eng.status()["traced_revision"] == rev.number and
