@@ -24,8 +24,9 @@ def main() -> int:
     # inherit it). A value the user set wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from lumitrace.cli import main as cli_main
+    from lumitrace.quick_exit import finish
 
-    return cli_main(early_signals=_early)
+    return finish(cli_main(early_signals=_early))
 
 
 if __name__ == "__main__":  # pragma: no cover

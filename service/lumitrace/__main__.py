@@ -4,5 +4,6 @@ import sys
 
 from . import EARLY_SIGNALS
 from .cli import main
+from .quick_exit import finish
 
-sys.exit(main(early_signals=EARLY_SIGNALS))
+sys.exit(finish(main(early_signals=EARLY_SIGNALS)))

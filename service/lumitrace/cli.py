@@ -646,4 +646,6 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    from lumitrace.quick_exit import finish
+
+    sys.exit(finish(main()))

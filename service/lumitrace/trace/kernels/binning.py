@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 from .jit import _ALWAYS, _INLINE, _JIT
+from .maths import _apply9, _rows
 
 # --- binning of escapes ---------------------------------------------------------------------
 
@@ -95,21 +96,6 @@ def _atan2_fast(y, x):
 #: How near (in cells) an approximate angle may come to a cell edge before the exact one
 #: decides: far above the fast angles' error (2.2e-8 rad, 5e-6 of a 0.25 deg cell).
 _EDGE_MARGIN = 1e-4
-
-
-@numba.njit(**_INLINE)
-def _rows(axes):
-    """The photometric axes (3, 3) as a 9-tuple, row by row: held in registers, where
-    array reads in a loop that writes other arrays keep LLVM from vectorising it."""
-    return (axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 1], axes[1, 2],
-            axes[2, 0], axes[2, 1], axes[2, 2])
-
-
-@numba.njit(**_INLINE)
-def _apply9(m, x, y, z):
-    """(x, y, z) in the axes ``m`` (a 9-tuple from :func:`_rows`)."""
-    return (m[0] * x + m[1] * y + m[2] * z, m[3] * x + m[4] * y + m[5] * z,
-            m[6] * x + m[7] * y + m[8] * z)
 
 
 @numba.njit(**_ALWAYS)

@@ -8,9 +8,9 @@ import math
 import numba
 import numpy as np
 
-from ..codes import DISK, MESH, RAYS, RECT, SPHERE
+from ..codes import CYLINDER, DISK, MESH, RAYS, RECT, SPHERE
 from .jit import _ALWAYS, _INLINE, _JIT
-from .maths import _cosine_local, _fmix64, _to_world, _turn, _uniform_pair
+from .maths import _apply9, _cosine_local, _fmix64, _rows, _to_world, _turn, _uniform_pair
 
 @numba.njit(**_ALWAYS)
 def _started(p, n, i, center, scale, epsilon):
@@ -25,8 +25,9 @@ def _started(p, n, i, center, scale, epsilon):
 def start(p, d, n, center, scale, epsilon, o, d_out, o32, d32):
     """Emitted photons into the first wave: origins moved into the normalised frame and
     off the emitting surface along its normal ``n`` (3, N), float32 rays beside them."""
+    c3 = (center[0], center[1], center[2])  # in registers, as the lights' constants
     for i in range(p.shape[1]):
-        x = _started(p, n, i, center, scale, epsilon)
+        x = _started(p, n, i, c3, scale, epsilon)
         for k in range(3):
             o[i, k] = o32[i, k] = x[k]
             d_out[i, k] = d32[i, k] = d[k, i]
@@ -74,12 +75,6 @@ def _unit(x, y, z):
     return x / n, y / n, z / n
 
 
-@numba.njit(**_INLINE)
-def _apply(m, x, y, z):
-    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z, m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
-            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
-
-
 @numba.njit(**_JIT)
 def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
                  cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, ray_cdf,
@@ -92,36 +87,74 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
     which is the light's whole distribution (a disk or rect then emits on both sides).
     A mesh light picks a triangle by area (``mesh_cdf``), a point uniform on it and, if
     ``two_sided``, a side, from its first two numbers; a ray-file light picks one of its
-    rays (start points ``ray_pos``, directions ``ray_dir``, local) by flux (``ray_cdf``)."""
-    ax, ay, az = _unit(*_apply(normal_map, 0.0, 0.0, -1.0))
+    rays (start points ``ray_pos``, directions ``ray_dir``, local) by flux (``ray_cdf``).
+
+    Each family of lights has a loop of its own, with the family compiled in: LLVM then
+    keeps only that family's path, where one loop over every light's branches ran 3-4x
+    slower."""
+    tables = (shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf,
+              cos_edges, c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, ray_cdf,
+              ray_pos, ray_dir, lin, offset, normal_map, key, index, p, d, n, base)
+    tabulated = shaped or measured
+    if shape == DISK or shape == RECT:
+        if tabulated:
+            _emit_loop(DISK, True, tables)
+        else:
+            _emit_loop(DISK, False, tables)
+    elif shape == SPHERE:
+        if tabulated:
+            _emit_loop(SPHERE, True, tables)
+        else:
+            _emit_loop(SPHERE, False, tables)
+    elif shape == MESH:
+        _emit_loop(MESH, False, tables)
+    elif shape == RAYS:
+        _emit_loop(RAYS, False, tables)
+    else:  # any other code: a cylinder, as ever
+        _emit_loop(CYLINDER, False, tables)
+
+
+@numba.njit(**_ALWAYS)
+def _emit_loop(family, tabulated, tables):
+    """:func:`emit_photons`' loop for one family of lights, constants where it is called:
+    ``family`` DISK (a disk or a rect), SPHERE, MESH, RAYS or CYLINDER; ``tabulated``
+    whether the light's profile is a table (shaped or measured)."""
+    (shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, gamma_cdf, cos_edges,
+     c_step, mesh_cdf, mesh_tris, mesh_normals, two_sided, ray_cdf, ray_pos, ray_dir, lin,
+     offset, normal_map, key, index, p, d, n, base) = tables
+    # the light's constants in registers: read from their arrays, they would be read again
+    # after each photon's writes (the arrays may alias), at several times the photon's cost
+    lin9, nmap9, sz = _rows(lin), _rows(normal_map), (size[0], size[1], size[2], size[3])
+    off3 = (offset[0], offset[1], offset[2])
+    ax, ay, az = _unit(*_apply9(nmap9, 0.0, 0.0, -1.0))
     for i in range(index.shape[0]):
         h = _fmix64(numba.uint64(index[i]) ^ key)
         base[i] = h
         u1, u2 = _uniform_pair(h, 0)
         u3, u4 = _uniform_pair(h, 1)
-        if shape == DISK or shape == RECT:
+        if family == DISK:
             if shape == DISK:
-                r = size[0] * math.sqrt(u1)
+                r = sz[0] * math.sqrt(u1)
                 c, s = _turn(u2)
                 x, y, z = r * c, r * s, 0.0
             else:
-                x, y, z = (u1 - 0.5) * size[1], (u2 - 0.5) * size[2], 0.0
-            if measured:
-                dx, dy, dz = _unit(*_apply(lin, *_measured_local(u3, u4, c_cdf, gamma_cdf,
+                x, y, z = (u1 - 0.5) * sz[1], (u2 - 0.5) * sz[2], 0.0
+            if tabulated and measured:
+                dx, dy, dz = _unit(*_apply9(lin9, *_measured_local(u3, u4, c_cdf, gamma_cdf,
                                                                  cos_edges, c_step)))
                 side = 1.0 if dx * ax + dy * ay + dz * az >= 0.0 else -1.0
                 nx, ny, nz = side * ax, side * ay, side * az
             else:
-                if shaped:
+                if tabulated:
                     lx, ly, lz = _profile_local(u3, u4, theta_tab, cdf)
                 else:
                     lx, ly, lz = _cosine_local(u3, u4)
                 dx, dy, dz = _to_world(lx, ly, lz, ax, ay, az)
                 nx, ny, nz = ax, ay, az
-        elif shape == SPHERE:
-            if measured:
+        elif family == SPHERE:
+            if tabulated and measured:
                 wx, wy, wz = _measured_local(u1, u2, c_cdf, gamma_cdf, cos_edges, c_step)
-            elif shaped:
+            elif tabulated:
                 wx, wy, wz = _profile_local(u1, u2, theta_tab, cdf)
                 wy, wz = -wy, -wz  # about the light's -Z
             else:
@@ -129,16 +162,16 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
                 st = math.sqrt(max(0.0, 1.0 - ct * ct))
                 c, s = _turn(u2)
                 wx, wy, wz = st * c, st * s, ct
-            dx, dy, dz = _unit(*_apply(lin, wx, wy, wz))
+            dx, dy, dz = _unit(*_apply9(lin9, wx, wy, wz))
             if point:
                 x, y, z = 0.0, 0.0, 0.0
                 nx, ny, nz = dx, dy, dz
             else:
                 lx, ly, lz = _cosine_local(u3, u4)
                 x, y, z = _to_world(lx, ly, lz, wx, wy, wz)
-                x, y, z = size[0] * x, size[0] * y, size[0] * z
-                nx, ny, nz = _unit(*_apply(normal_map, x, y, z))
-        elif shape == MESH:
+                x, y, z = sz[0] * x, sz[0] * y, sz[0] * z
+                nx, ny, nz = _unit(*_apply9(nmap9, x, y, z))
+        elif family == MESH:
             m = mesh_cdf.shape[0] - 1
             t = min(max(np.searchsorted(mesh_cdf, u1, side="right") - 1, 0), m - 1)
             w = mesh_cdf[t + 1] - mesh_cdf[t]
@@ -151,25 +184,25 @@ def emit_photons(shape, size, point, shaped, theta_tab, cdf, measured, c_cdf, ga
             x = b0 * mesh_tris[t, 0, 0] + b1 * mesh_tris[t, 1, 0] + b2 * mesh_tris[t, 2, 0]
             y = b0 * mesh_tris[t, 0, 1] + b1 * mesh_tris[t, 1, 1] + b2 * mesh_tris[t, 2, 1]
             z = b0 * mesh_tris[t, 0, 2] + b1 * mesh_tris[t, 1, 2] + b2 * mesh_tris[t, 2, 2]
-            nx, ny, nz = _apply(normal_map, side * mesh_normals[t, 0], side * mesh_normals[t, 1],
+            nx, ny, nz = _apply9(nmap9, side * mesh_normals[t, 0], side * mesh_normals[t, 1],
                                 side * mesh_normals[t, 2])
             nx, ny, nz = _unit(nx, ny, nz)
             lx, ly, lz = _cosine_local(u3, u4)
             dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
-        elif shape == RAYS:
+        elif family == RAYS:
             m = ray_cdf.shape[0] - 1
             t = min(max(np.searchsorted(ray_cdf, u1, side="right") - 1, 0), m - 1)
             x, y, z = ray_pos[t, 0], ray_pos[t, 1], ray_pos[t, 2]
-            dx, dy, dz = _unit(*_apply(lin, ray_dir[t, 0], ray_dir[t, 1], ray_dir[t, 2]))
+            dx, dy, dz = _unit(*_apply9(lin9, ray_dir[t, 0], ray_dir[t, 1], ray_dir[t, 2]))
             nx, ny, nz = dx, dy, dz  # offset along the ray
         else:  # CYLINDER: its side, not its caps
             c, s = _turn(u2)
-            x, y, z = (u1 - 0.5) * size[3], size[0] * c, size[0] * s
-            nx, ny, nz = _unit(*_apply(normal_map, 0.0, c, s))
+            x, y, z = (u1 - 0.5) * sz[3], sz[0] * c, sz[0] * s
+            nx, ny, nz = _unit(*_apply9(nmap9, 0.0, c, s))
             lx, ly, lz = _cosine_local(u3, u4)
             dx, dy, dz = _to_world(lx, ly, lz, nx, ny, nz)
-        wx, wy, wz = _apply(lin, x, y, z)
-        p[0, i], p[1, i], p[2, i] = wx + offset[0], wy + offset[1], wz + offset[2]
+        wx, wy, wz = _apply9(lin9, x, y, z)
+        p[0, i], p[1, i], p[2, i] = wx + off3[0], wy + off3[1], wz + off3[2]
         d[0, i], d[1, i], d[2, i] = dx, dy, dz
         n[0, i], n[1, i], n[2, i] = nx, ny, nz
 

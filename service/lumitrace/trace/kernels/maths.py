@@ -37,6 +37,23 @@ def _uniform_pair(base, counter):
 # --- scalar vector helpers ----------------------------------------------------------------
 
 @numba.njit(**_INLINE)
+def _rows(axes):
+    """A 3 x 3 matrix (the photometric axes, a light's transform) as a 9-tuple, row by
+    row: held in registers, where array reads in a loop that writes other arrays would be
+    read again after every write (the arrays may alias) and keep LLVM from vectorising."""
+    return (axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 1], axes[1, 2],
+            axes[2, 0], axes[2, 1], axes[2, 2])
+
+
+@numba.njit(**_INLINE)
+def _apply9(m, x, y, z):
+    """The matrix ``m`` (a 9-tuple from :func:`_rows`) applied to (x, y, z): the same
+    products and sums, in the same order, as on the array."""
+    return (m[0] * x + m[1] * y + m[2] * z, m[3] * x + m[4] * y + m[5] * z,
+            m[6] * x + m[7] * y + m[8] * z)
+
+
+@numba.njit(**_INLINE)
 def _dot(ax, ay, az, bx, by, bz):
     return ax * bx + ay * by + az * bz
 
