@@ -343,16 +343,21 @@ def test_signals_held_holds_a_signal_another_thread_takes():
         os.kill(os.getpid(), signal.SIGINT)
         sent.set()
 
+    # Python's own SIGINT handler, whatever an earlier test in this process left there
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
     helper = threading.Thread(target=send)
     helper.start()
     finished = []
-    with pytest.raises(KeyboardInterrupt):
-        with signals_held():
-            go.set()
-            sent.wait()
-            for _ in range(200):  # bytecode boundaries, where Python runs its handlers
-                time.sleep(0.001)
-            finished.append(True)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with signals_held():
+                go.set()
+                sent.wait()
+                for _ in range(200):  # bytecode boundaries, where Python runs its handlers
+                    time.sleep(0.001)
+                finished.append(True)
+    finally:
+        signal.signal(signal.SIGINT, before)
     helper.join()
     assert finished == [True]
 
