@@ -64,9 +64,9 @@ steradians); texel indices are int64 flat indices ``row * res + col`` into the
 """
 from __future__ import annotations
 
-import functools
 
 import numpy as np
+from ..table_cache import kept_table
 
 #: Number of faces and their names, in ImfEnvmap's ``CubeMapFace`` order (top to bottom).
 NUM_FACES = 6
@@ -377,7 +377,7 @@ def canonical_texels(res: int) -> np.ndarray:
     return texel_index(texel_directions(res).reshape(-1, 3), res).reshape(image_shape(res))
 
 
-@functools.lru_cache(maxsize=16)
+@kept_table
 def _seams(res: int) -> tuple[np.ndarray, np.ndarray]:
     """The canonical texel of every texel and which texels share their position: fixed
     by the face size, made once."""

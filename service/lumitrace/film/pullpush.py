@@ -32,13 +32,13 @@ Cost is linear in the number of texels.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from .cubemap import (bilinear_taps, sample_map, texel_directions, texel_index,
                       texel_solid_angles, weld_seams)
+from ..table_cache import kept_table
 
 FOUR_PI = 4.0 * np.pi
 
@@ -54,7 +54,7 @@ class _Level:
     taps: tuple  # bilinear taps of ``directions`` in this level's map (cube-map lookups)
 
 
-@functools.lru_cache(maxsize=8)
+@kept_table
 def _pyramid(res: int) -> tuple[_Level, ...]:
     """Face sizes res, ~res/2, ..., 2 and the fine-to-coarse texel maps between them."""
     levels = []

@@ -11,12 +11,12 @@ a rating that a zone moved by two standard errors would change is shown as a ran
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
 from ..film.accumulate import Accumulator
 from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA
+from ..table_cache import kept_table
 
 ZONES = ("FL", "FM", "FH", "FVH", "BL", "BM", "BH", "BVH", "UL", "UH")
 #: Gamma edges (deg) of the forward and back zones, and of the uplight zones.
@@ -32,7 +32,7 @@ GLARE = {"FVH": (10, 100, 225, 500, 750), "BVH": (10, 100, 225, 500, 750),
 RANGE_SIGMAS = 2.0
 
 
-@lru_cache(maxsize=1)
+@kept_table
 def zone_of_cell() -> np.ndarray:
     """The zone (index into :data:`ZONES`) of every goniometer cell (C-major)."""
     centres = (np.arange(N_C) + 0.5) * C_STEP

@@ -24,6 +24,7 @@ import numpy as np
 from ..film.accumulate import Accumulator
 from ..film.goniometer import (C_STEP, GAMMA_EDGES, GAMMA_STEP, N_C, N_CELLS, N_GAMMA,
                                cell_solid_angles)
+from ..table_cache import kept_table
 
 #: Radius (deg) of the fit: this share of the beam's half width (to where it halves), within
 #: the bounds below; the widest for a distribution that never halves.
@@ -60,7 +61,7 @@ class Peak:
     gamma: float
 
 
-@functools.lru_cache(maxsize=1)
+@kept_table
 def _cell_directions() -> np.ndarray:
     """Unit vectors of the goniometer cells' centres in the photometric frame (x = C0,
     y = C90, z = up; gamma from nadir), (N_C * N_GAMMA, 3)."""
@@ -72,7 +73,7 @@ def _cell_directions() -> np.ndarray:
     return d.reshape(-1, 3)
 
 
-@functools.lru_cache(maxsize=1)
+@kept_table
 def _cell_omegas() -> np.ndarray:
     """Solid angles (sr) of the goniometer cells, flat (read-only, made once)."""
     omega = cell_solid_angles().reshape(-1).copy()

@@ -10,7 +10,6 @@ is the luminaire's intensity toward it.
 """
 from __future__ import annotations
 
-import functools
 import os
 from pathlib import Path
 
@@ -19,6 +18,7 @@ import numpy as np
 from ..errors import OutputError
 from ..film.cubemap import bilinear_taps, sample_map
 from .exr_tiled import ENVMAP_LATLONG, write_tiled_exr
+from ..table_cache import kept_table
 
 #: Tile size (pixels) of the texture.
 TILE = 64
@@ -50,7 +50,7 @@ def latlong_image(intensity_map: np.ndarray, up_axis: str, width: int | None = N
     return sample_map(intensity_map, None, taps).reshape(w // 2, w).astype(np.float32)
 
 
-@functools.lru_cache(maxsize=8)
+@kept_table
 def _latlong_taps(res: int, w: int, up_axis: str) -> tuple[np.ndarray, np.ndarray]:
     """The cube-map taps of a 2N x N lat-long image's pixel centres (N = ``w`` / 2), made
     once per layout: a service writes the texture after every few rounds."""

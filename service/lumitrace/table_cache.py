@@ -1,0 +1,131 @@
+"""Tables fixed by a layout (a cube map's face size, the goniometer's grid), kept on disk so
+that a run reads them instead of making them again: a pure function's results, pickled
+once per argument under the user's cache folder and keyed on lumitrace's sources and numpy.
+
+A short run spends as long making these tables (the pull-push pyramid, the cube map's
+seams, the lat-long texture's taps, the goniometer's cell directions: about 50 ms at face
+size 64) as tracing its photons. Reading them back takes about a millisecond. Any edit of
+a lumitrace source or another numpy makes a new key, so a stale table is never read.
+The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
+``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
+cannot be written, or a file that cannot be read, costs only the making.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import os
+import pickle
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def cache_folder() -> Path | None:
+    """Where tables are kept (None: not on disk)."""
+    env = os.environ.get("LUMITRACE_CACHE_DIR")
+    if env:
+        return None if env.lower() in ("off", "0", "none") else Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "lumitrace"
+
+
+@functools.lru_cache(maxsize=1)
+def sources_stamp() -> str:
+    """A digest of every lumitrace source file (path, size, modification time), numpy's
+    version and Python's: what a kept table is valid for."""
+    h = hashlib.blake2b(digest_size=10)
+    h.update(f"{np.__version__} {sys.version_info[:2]}".encode())
+    folders = [str(_PACKAGE)]
+    while folders:
+        folder = folders.pop()
+        entries = sorted(os.scandir(folder), key=lambda e: e.name)
+        for e in entries:
+            if e.name.endswith(".py") and e.is_file():
+                st = e.stat()
+                h.update(f"{e.path} {st.st_size} {st.st_mtime_ns}\0".encode())
+            elif e.is_dir() and e.name != "__pycache__" and not e.name.startswith("."):
+                folders.append(e.path)
+    return h.hexdigest()
+
+
+def _frozen(value: Any) -> Any:
+    """``value`` with every array in it (in tuples, lists, frozen dataclasses) read-only:
+    a table is shared by every caller."""
+    if isinstance(value, np.ndarray):
+        value.flags.writeable = False
+    elif isinstance(value, (tuple, list)):
+        for v in value:
+            _frozen(v)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            _frozen(getattr(value, f.name))
+    return value
+
+
+def _path(fn: Callable, args: tuple) -> Path | None:
+    """The file of ``fn``'s table for ``args``: NAME-ARGS-STAMP.pickle."""
+    folder = cache_folder()
+    if folder is None:
+        return None
+    key = hashlib.blake2b(repr(args).encode(), digest_size=8).hexdigest()
+    return folder / f"{fn.__module__}.{fn.__qualname__}-{key}-{sources_stamp()}.pickle"
+
+
+def _read(path: Path) -> tuple[bool, Any]:
+    try:
+        with open(path, "rb") as f:
+            return True, pickle.load(f)
+    except Exception:  # absent, unreadable or from another layout of the classes: remake
+        return False, None
+
+
+def _write(path: Path, value: Any) -> None:
+    """Keep ``value`` at ``path`` (written whole under another name, then renamed: two
+    processes making the same table leave one whole file); never raises."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        with open(tmp, "wb") as f:
+            pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    except Exception:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        return
+    # the same table kept for sources or a numpy that are no longer these: never read again
+    name, _, stamp = path.name.rpartition("-")
+    for old in path.parent.glob(f"{name.rpartition('-')[0]}-*.pickle"):
+        if not old.name.endswith(f"-{stamp}"):
+            try:
+                old.unlink()
+            except OSError:
+                pass
+
+
+def kept_table(fn: Callable) -> Callable:
+    """Decorate a pure function of hashable arguments whose result is a table (arrays in
+    tuples, lists or frozen dataclasses): made once per process (the result is shared and
+    read-only) and kept on disk between processes."""
+    @functools.lru_cache(maxsize=16)
+    def cached(*args):
+        path = _path(fn, args)
+        if path is not None:
+            found, value = _read(path)
+            if found:
+                return _frozen(value)
+        value = _frozen(fn(*args))
+        if path is not None:
+            _write(path, value)
+        return value
+
+    functools.update_wrapper(cached, fn)
+    cached.uncached = fn
+    return cached

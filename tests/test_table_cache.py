@@ -1,0 +1,132 @@
+"""Layout tables kept on disk (lumitrace.table_cache): read back equal to what is made,
+keyed on the sources, safe against broken and unwritable folders, and a run that reads
+them writes the same files as one that makes them."""
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lumitrace import table_cache
+from lumitrace.film import cubemap, pullpush
+from lumitrace.photometry import bug, measured, peak
+from lumitrace.publish import latlong
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    """A fresh cache folder, and every kept table forgotten in this process."""
+    monkeypatch.setenv("LUMITRACE_CACHE_DIR", str(tmp_path / "cache"))
+    tables = [pullpush._pyramid, cubemap._seams, latlong._latlong_taps, peak._cell_directions,
+              peak._cell_omegas, measured._blocks, measured._cap_bins_cached, bug.zone_of_cell]
+    for t in tables:
+        t.cache_clear()
+    yield tmp_path / "cache"
+    for t in tables:
+        t.cache_clear()
+
+
+def _equal(a, b) -> bool:
+    """Deep equality of tables: arrays bit for bit (dtype and shape), containers alike."""
+    if isinstance(a, np.ndarray):
+        return isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
+    if isinstance(a, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(map(_equal, a, b))
+    if hasattr(a, "__dataclass_fields__"):
+        return type(a) is type(b) and all(_equal(getattr(a, f), getattr(b, f))
+                                          for f in a.__dataclass_fields__)
+    return a == b
+
+
+CASES = [(pullpush._pyramid, (64,)), (cubemap._seams, (32,)),
+         (latlong._latlong_taps, (16, 64, "Z")), (peak._cell_directions, ()),
+         (peak._cell_omegas, ()), (measured._blocks, (15.0, tuple(np.arange(0, 181, 5.0)))),
+         (measured._cap_bins_cached, (tuple(np.arange(0, 181, 2.5)),)),
+         (bug.zone_of_cell, ())]
+
+
+@pytest.mark.parametrize("fn,args", CASES, ids=lambda c: getattr(c, "__qualname__", ""))
+def test_a_kept_table_reads_back_equal_to_the_one_made(folder, fn, args):
+    made = fn.uncached(*args)
+    first = fn(*args)  # made and kept
+    files = list(folder.glob(f"{fn.__module__}.{fn.__qualname__}-*.pickle"))
+    assert len(files) == 1
+    fn.cache_clear()
+    read = fn(*args)  # read back from the file
+    assert read is not first
+    assert _equal(made, first) and _equal(made, read)
+    arrays = [read] if isinstance(read, np.ndarray) else \
+        [a for a in (read if isinstance(read, tuple) else ()) if isinstance(a, np.ndarray)]
+    assert all(not a.flags.writeable for a in arrays)  # shared: read-only
+
+
+def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder):
+    pullpush._pyramid(8)
+    (old,) = folder.glob("*._pyramid-*.pickle")
+    source = Path(pullpush.__file__)
+    st = source.stat()
+    try:
+        os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+        table_cache.sources_stamp.cache_clear()
+        pullpush._pyramid.cache_clear()
+        pullpush._pyramid(8)
+    finally:
+        os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns))
+        table_cache.sources_stamp.cache_clear()
+    (new,) = folder.glob("*._pyramid-*.pickle")
+    assert new.name != old.name and not old.exists()
+
+
+def test_a_broken_file_is_made_again_and_replaced_whole(folder):
+    want = cubemap._seams.uncached(16)
+    cubemap._seams(16)
+    (path,) = folder.glob("*._seams-*.pickle")
+    path.write_bytes(b"\x80\x05 not a pickle")
+    cubemap._seams.cache_clear()
+    assert _equal(cubemap._seams(16), want)
+    with open(path, "rb") as f:
+        assert _equal(pickle.load(f), want)
+
+
+def test_an_unwritable_folder_or_off_costs_only_the_making(tmp_path, monkeypatch, folder):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("LUMITRACE_CACHE_DIR", str(blocker / "cache"))
+    assert _equal(cubemap._seams(8), cubemap._seams.uncached(8))
+    monkeypatch.setenv("LUMITRACE_CACHE_DIR", "off")
+    cubemap._seams.cache_clear()
+    assert table_cache.cache_folder() is None
+    assert _equal(cubemap._seams(8), cubemap._seams.uncached(8))
+    assert not folder.exists()
+
+
+def test_a_run_that_reads_the_tables_writes_what_a_run_that_makes_them_writes(tmp_path):
+    """The same command twice, with an empty cache folder and then with the tables the first
+    run kept: the photometric files are byte for byte the same (but for the run's id), the EXR's channels bit for
+    bit."""
+    from lumitrace.publish.exr import read_intensity_exr
+
+    stage = ROOT / "stages" / "reference" / "lambertian_disc.usda"
+    env = dict(os.environ, LUMITRACE_CACHE_DIR=str(tmp_path / "cache"))
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"out{k}"
+        subprocess.run([sys.executable, "-m", "lumitrace", "trace", str(stage), "--photons",
+                        "200000", "--no-pictures", "--quiet", "--no-sublayer", "--out",
+                        str(out)], check=True, env=env)
+        outs.append(out)
+        if k == 0:
+            assert len(list((tmp_path / "cache").glob("*.pickle"))) >= 5
+    for suffix in (".ies", ".ldt"):  # all but the line naming the run (its own id)
+        a, b = ([line for line in (o / f"lambertian_disc{suffix}").read_bytes().splitlines()
+                 if b" run " not in line and not line.startswith(b"[_LUMITRACE_RUN]")]
+                for o in outs)
+        assert len(a) > 10 and a == b
+    maps = [read_intensity_exr(o / "lambertian_disc.intensity.exr")[0] for o in outs]
+    for ch in maps[0]:
+        assert np.array_equal(maps[0][ch], maps[1][ch]), ch
