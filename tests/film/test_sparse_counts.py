@@ -58,3 +58,17 @@ def test_a_compact_batch_adds_like_the_dense_one(batches):
                       small.cut, small.segments))
     assert np.array_equal(a.counts(), b.counts())
     assert compact(tallies[2].counts) is tallies[2].counts  # dense where dense is smaller
+
+
+def test_a_batch_that_could_fill_a_quarter_of_the_bins_stays_dense_unlooked(batches):
+    """Told the batch's photons, compact keeps a large batch's counts as they are (no scan),
+    and still packs a small batch's; the packed counts are the same counts."""
+    _, tallies = batches
+    big, small = tallies[2], tallies[1]  # 20,000 and 40 photons in 2 x 1536 texels
+    assert compact(big.counts, big.photons) is big.counts
+    narrow = np.zeros_like(big.counts)
+    narrow[0, 3] = big.photons  # every photon in one texel: kept dense, as its size allows
+    assert compact(narrow, big.photons) is narrow
+    assert isinstance(compact(narrow), SparseCounts)  # looked at, it packs
+    packed = compact(small.counts, small.photons)
+    assert isinstance(packed, SparseCounts) and np.array_equal(packed.dense(), small.counts)

@@ -63,8 +63,8 @@ def _traced(ps: PreparedScene, job: BatchJob) -> BatchTally:
     """The job's tally, its counts compacted: a batch of a few photons in a big map keeps
     only the texels it hit while it waits to be added (many emitters: many small jobs)."""
     tally = trace_batch(ps, job)
-    tally.counts = compact(tally.counts)
-    tally.cells = compact(tally.cells)
+    tally.counts = compact(tally.counts, tally.photons)
+    tally.cells = compact(tally.cells, tally.photons)
     return tally
 
 
