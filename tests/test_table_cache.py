@@ -130,3 +130,21 @@ def test_a_run_that_reads_the_tables_writes_what_a_run_that_makes_them_writes(tm
     maps = [read_intensity_exr(o / "lambertian_disc.intensity.exr")[0] for o in outs]
     for ch in maps[0]:
         assert np.array_equal(maps[0][ch], maps[1][ch]), ch
+
+
+def test_processes_making_the_same_table_at_once_leave_one_whole_file(folder):
+    """Four processes started together make the same table into one empty folder: one file
+    is left, whole, and equal to the table."""
+    code = ("import sys; from lumitrace.film import pullpush; print('ready', flush=True); "
+            "sys.stdin.read(); pullpush._pyramid(48)")
+    env = dict(os.environ, LUMITRACE_CACHE_DIR=str(folder))
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, env=env) for _ in range(4)]
+    assert all(p.stdout.readline().strip() == "ready" for p in procs)
+    for p in procs:  # released together, once every one has loaded lumitrace
+        p.stdin.close()
+    assert all(p.wait(timeout=120) == 0 for p in procs)
+    files = list(folder.iterdir())
+    assert [f.suffix for f in files] == [".pickle"]
+    with open(files[0], "rb") as f:
+        assert _equal(pickle.load(f), pullpush._pyramid.uncached(48))

@@ -18,6 +18,7 @@ import hashlib
 import os
 import pickle
 import sys
+import threading
 from pathlib import Path
 from typing import Any, Callable
 
@@ -86,9 +87,9 @@ def _read(path: Path) -> tuple[bool, Any]:
 
 
 def _write(path: Path, value: Any) -> None:
-    """Keep ``value`` at ``path`` (written whole under another name, then renamed: two
-    processes making the same table leave one whole file); never raises."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    """Keep ``value`` at ``path`` (written whole under a name of this process and thread,
+    then renamed: two makers of the same table leave one whole file); never raises."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         with open(tmp, "wb") as f:
