@@ -65,21 +65,37 @@ def test_a_kept_table_reads_back_equal_to_the_one_made(folder, fn, args):
     assert all(not a.flags.writeable for a in arrays)  # shared: read-only
 
 
-def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder):
-    pullpush._pyramid(8)
-    (old,) = folder.glob("*._pyramid-*.pickle")
-    source = Path(pullpush.__file__)
-    st = source.stat()
+def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder, tmp_path,
+                                                                  monkeypatch):
+    """The key follows every source file (here a copy of two of them, so the package itself
+    is left alone): touching one makes a new key, and the table made under it removes the
+    one kept for the sources before."""
+    package = tmp_path / "package"
+    (package / "film").mkdir(parents=True)
+    for name in ("film/pullpush.py", "film/cubemap.py"):
+        (package / name).write_bytes((Path(pullpush.__file__).parents[1] / name).read_bytes())
+    (package / "film" / "__pycache__").mkdir()
+    (package / "film" / "__pycache__" / "ignored.py").write_text("")
+    monkeypatch.setattr(table_cache, "_PACKAGE", package)
+    table_cache.sources_stamp.cache_clear()
     try:
+        first = table_cache.sources_stamp()
+        pullpush._pyramid(8)
+        (old,) = folder.glob("*._pyramid-*.pickle")
+        (package / "film" / "__pycache__" / "ignored.py").write_text("# not a source")
+        table_cache.sources_stamp.cache_clear()
+        assert table_cache.sources_stamp() == first  # bytecode folders are not sources
+        source = package / "film" / "cubemap.py"
+        st = source.stat()
         os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
         table_cache.sources_stamp.cache_clear()
+        assert table_cache.sources_stamp() != first
         pullpush._pyramid.cache_clear()
         pullpush._pyramid(8)
+        (new,) = folder.glob("*._pyramid-*.pickle")
+        assert new.name != old.name and not old.exists()
     finally:
-        os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns))
         table_cache.sources_stamp.cache_clear()
-    (new,) = folder.glob("*._pyramid-*.pickle")
-    assert new.name != old.name and not old.exists()
 
 
 def test_a_broken_file_is_made_again_and_replaced_whole(folder):
