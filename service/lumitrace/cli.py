@@ -251,6 +251,10 @@ def cmd_trace(args) -> int:
                              target_of=args.target_of)
     check_interrupted(defer=True)
     preflight(args.stage, args.out)
+    if not args.no_pictures:  # VTK loads on another core while the photons are traced
+        from .photometry.solid_render import start_renderer
+
+        start_renderer()
     if args.edits is not None:
         from .delta.edits import open_with_edits
         from .stage.reader import scene_from_stage

@@ -41,9 +41,9 @@ def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
     return Path(path)
 
 
-def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
-                      title: str = "") -> Path:
-    """Write a picture (PNG) of the photometric solid around the luminaire geometry."""
+def solid_points(grid: CGammaGrid, scene: Scene) -> tuple:
+    """The photometric solid of ``grid`` around ``scene``'s geometry, as its picture draws
+    it: points (C, gamma, 3), their candela (C, gamma) and the luminaire's triangles."""
     full = grid.full()
     cs = np.append(full.c, 360.0)
     cd = np.vstack([full.candela, full.candela[:1]])
@@ -57,45 +57,38 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
         center, size = np.zeros(3), 0.1
     peak = float(cd.max()) or 1.0
     pts = center + d * (cd / peak * 1.5 * size)[..., None]
+    return pts, cd, tri
+
+
+def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
+                      title: str = "", job: int | None = None) -> Path:
+    """Write a picture (PNG) of the photometric solid around the luminaire geometry: the
+    renderer's drawing of it when ``job`` (from :func:`submit_solid`) succeeds, else drawn
+    here."""
+    from .solid_render import draw_solid, renderer
+
+    r = renderer() if job is not None else None
+    if r is not None and r.wait(job):
+        return Path(path)
+    pts, cd, tri = solid_points(grid, scene)
     try:
-        return _solid_pyvista(path, pts, cd, tri, scene.up_axis, title)
+        return draw_solid(path, pts, cd, tri, scene.up_axis, title)
     except Exception:  # no working offscreen OpenGL: draw it with matplotlib instead
         return _solid_matplotlib(path, pts, cd, tri, title)
 
 
-def _solid_pyvista(path, pts, cd, tri, up_axis, title) -> Path:
-    import pyvista as pv
-    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject  # (all of vtk: 0.5 s more)
+def submit_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
+                 title: str = "") -> int | None:
+    """Hand the solid's picture to this process's renderer (started by
+    :func:`~lumitrace.photometry.solid_render.start_renderer`), which draws it while this
+    process goes on: its job, for :func:`photometric_solid`, or None without a renderer."""
+    from .solid_render import renderer
 
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)  # no X server: not news
-    vtkObject.GlobalWarningDisplayOff()
-    pv.OFF_SCREEN = True
-    grid = pv.StructuredGrid(pts[..., 0], pts[..., 1], pts[..., 2])
-    grid.point_data["cd"] = np.ascontiguousarray(cd).ravel(order="F")
-    plotter = pv.Plotter(off_screen=True, window_size=(900, 800))
-    plotter.set_background("white")
-    # false colour by intensity, with its candela scale
-    plotter.add_mesh(grid, scalars="cd", cmap="inferno", clim=(0.0, float(cd.max()) or 1.0),
-                     opacity=0.6, smooth_shading=True, show_edges=True, edge_color="#777777",
-                     line_width=0.2,
-                     scalar_bar_args={"title": "intensity (cd)", "color": "black",
-                                      "vertical": True, "position_x": 0.86,
-                                      "position_y": 0.2, "height": 0.6, "width": 0.06,
-                                      "fmt": "%.0f", "title_font_size": 16,
-                                      "label_font_size": 14})
-    if tri.size:
-        faces = np.hstack([np.full((len(tri), 1), 3), np.arange(3 * len(tri)).reshape(-1, 3)])
-        mesh = pv.PolyData(tri.reshape(-1, 3), faces.ravel())
-        plotter.add_mesh(mesh, color="#7f8c8d", smooth_shading=False)
-    if title:
-        plotter.add_text(title, font_size=10, color="black")
-    plotter.view_vector((1.0, -1.4, 0.8) if up_axis == "Z" else (1.0, 0.8, 1.4),
-                        viewup=(0, 0, 1) if up_axis == "Z" else (0, 1, 0))
-    plotter.add_axes(color="black")
-    with atomic_path(path) as tmp:
-        plotter.screenshot(str(tmp))
-    plotter.close()
-    return Path(path)
+    r = renderer()
+    if r is None:
+        return None
+    pts, cd, tri = solid_points(grid, scene)
+    return r.submit(path, pts, cd, tri, scene.up_axis, title)
 
 
 def _solid_matplotlib(path, pts, cd, tri, title) -> Path:

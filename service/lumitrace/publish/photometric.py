@@ -9,7 +9,7 @@ from typing import Callable
 from ..atomic import write_text
 from ..filenames import (COLOUR_DIAGRAM_SUFFIX, COLOUR_SUFFIX, IES_SUFFIX, LDT_SUFFIX,
                          PHOTOMETRY_SUFFIX, POLAR_SUFFIX, SOLID_SUFFIX)
-from ..photometry.diagrams import photometric_solid, polar_diagram
+from ..photometry.diagrams import photometric_solid, polar_diagram, submit_solid
 from ..photometry.colour import ColourOverAngle
 from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
@@ -114,12 +114,21 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \
                 f"LOR {fig.light_output_ratio:.2f}"
         checkpoint()
-        polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
-        checkpoint()
+        # the renderer process (where the command started one) draws the solid meanwhile
+        job = submit_solid(paths["photometric_solid"], grid, scene, title)
+        try:
+            polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
+            checkpoint()
+        except BaseException:
+            if job is not None:  # abandoned: nothing more is written into this set
+                from ..photometry.solid_render import abandon_renderer
+
+                abandon_renderer()
+            raise
         # VTK does not survive a Python exception raised inside it by a signal handler:
         # a signal waits until the picture is drawn
         with signals_held():
-            photometric_solid(paths["photometric_solid"], grid, scene, title)
+            photometric_solid(paths["photometric_solid"], grid, scene, title, job)
 
 
 def write_colour_files(col: ColourOverAngle, paths: dict[str, Path], name: str,

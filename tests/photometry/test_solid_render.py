@@ -1,0 +1,170 @@
+"""The photometric solid drawn by a renderer process started ahead of the run: the same PNG
+as drawn in the command's own process, a renderer that fails or dies costs only the drawing
+here, an abandoned picture is never written, and the command leaves no renderer behind."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pyvista")
+
+from lumitrace.photometry import solid_render  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def renderer(monkeypatch):
+    """This process's renderer, started for the test and ended after it."""
+    monkeypatch.setenv("LUMITRACE_RENDERER", "process")
+    solid_render.stop_renderer()
+    r = solid_render.start_renderer()
+    if r is None:
+        pytest.skip("no renderer on this machine (one core)")
+    yield r
+    solid_render.stop_renderer()
+
+
+def _solid():
+    """A small solid: a cosine lobe on a 10 x 8 grid around two triangles."""
+    c = np.radians(np.linspace(0, 360, 10))[:, None]
+    g = np.radians(np.linspace(0, 180, 8))[None, :]
+    cd = 100.0 * np.clip(np.cos(g), 0, None) * np.ones_like(c)
+    pts = np.stack([np.sin(g) * np.cos(c), np.sin(g) * np.sin(c), -np.cos(g) + 0 * c], -1)
+    pts = pts * (cd / cd.max())[..., None]
+    tri = np.array([[[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]],
+                    [[0, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]], np.float64)
+    return pts, cd, tri
+
+
+def test_the_renderer_draws_the_png_this_process_draws(renderer, tmp_path):
+    pts, cd, tri = _solid()
+    job = renderer.submit(tmp_path / "there.png", pts, cd, tri, "Z", "a title")
+    assert job is not None and renderer.wait(job)
+    solid_render.draw_solid(tmp_path / "here.png", pts, cd, tri, "Z", "a title")
+    there, here = (tmp_path / n for n in ("there.png", "here.png"))
+    assert there.stat().st_size > 10_000
+    assert there.read_bytes() == here.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["here.png", "there.png"]  # no temp
+
+
+def test_a_failed_picture_is_answered_and_the_renderer_goes_on(renderer, tmp_path):
+    pts, cd, tri = _solid()
+    bad = renderer.submit(tmp_path / "no such folder" / "x.png", pts, cd, tri, "Z", "")
+    good = renderer.submit(tmp_path / "x.png", pts, cd, tri, "Y", "")
+    assert not renderer.wait(bad)
+    assert renderer.wait(good) and (tmp_path / "x.png").exists()
+
+
+def test_a_dead_renderer_costs_only_the_drawing_here(renderer, tmp_path):
+    """The solid of a real stage's grid: its renderer killed after the picture was handed
+    over, the picture is drawn in this process all the same."""
+    from lumitrace.photometry.diagrams import photometric_solid, submit_solid
+    from lumitrace.photometry.distribution import photometry_of
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+    from lumitrace.stage.reader import read_stage
+
+    scene = read_stage(ROOT / "stages" / "reference" / "mirror_cup.usda")
+    result = run(scene, TraceSettings(photons=50_000, seed=1))
+    grid = photometry_of(scene, result.accumulator).grid
+    job = submit_solid(tmp_path / "solid.png", grid, scene, "cup")
+    assert job is not None
+    renderer.proc.kill()
+    renderer.proc.wait()
+    photometric_solid(tmp_path / "solid.png", grid, scene, "cup", job)
+    assert (tmp_path / "solid.png").stat().st_size > 10_000
+    assert solid_render.renderer() is None
+    assert submit_solid(tmp_path / "again.png", grid, scene, "cup") is None
+
+
+def test_an_abandoned_picture_is_never_written(renderer, tmp_path):
+    pts, cd, tri = _solid()
+    job = renderer.submit(tmp_path / "late.png", pts, cd, tri, "Z", "")
+    assert job is not None
+    solid_render.abandon_renderer()  # at once: the set it was for is rolled back
+    assert renderer.proc.poll() is not None
+    time.sleep(0.5)
+    assert not list(tmp_path.iterdir())
+
+
+def _renderers() -> set[int]:
+    """Pids of the running renderer processes (by their command line)."""
+    out = set()
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/cmdline", "rb") as f:
+                    if b"_lumitrace_solid_render" in f.read():
+                        out.add(int(d))
+            except OSError:
+                pass
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="no renderer on one core")
+def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
+    """The ``lumitrace`` entry point starts the renderer before lumitrace loads (seen while
+    the run traces), the solid it draws is written, and once the command has ended no
+    renderer of it is left; a SIGTERM mid-run leaves none either."""
+    stage = tmp_path / "cup.usda"
+    stage.write_bytes((ROOT / "stages" / "reference" / "mirror_cup.usda").read_bytes())
+    before = _renderers()
+    cmd = [sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
+           "trace", str(stage), "--photons", "3000000", "--no-progress", "--no-sublayer",
+           "--out", str(tmp_path / "out")]
+    env = dict(os.environ, LUMITRACE_RENDERER="process")  # (stderr is not a terminal)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env)
+    seen = set()
+    for _ in range(100):
+        seen = _renderers() - before
+        if seen or p.poll() is not None:
+            break
+        time.sleep(0.02)
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert seen, "no renderer started"
+    assert (tmp_path / "out" / "cup.solid.png").stat().st_size > 10_000
+    time.sleep(0.2)
+    assert not (_renderers() - before)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env)
+    for _ in range(100):
+        if _renderers() - before:
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGTERM)
+    p.communicate(timeout=120)
+    for _ in range(50):  # the renderer ends with its command
+        if not (_renderers() - before):
+            break
+        time.sleep(0.05)
+    assert not (_renderers() - before)
+
+
+def test_by_default_a_terminal_gets_a_renderer_and_a_script_does_not(monkeypatch):
+    """``auto`` follows standard error: a terminal's user waits for the pictures, a farm's
+    job pays for the second interpreter's CPU; ``process`` and ``inline`` say it outright."""
+    class Stream:
+        def __init__(self, tty):
+            self.tty = tty
+
+        def isatty(self):
+            return self.tty
+
+    monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 2)
+    for mode, tty, want in (("auto", True, True), ("auto", False, False),
+                            ("process", False, True), ("inline", True, False)):
+        monkeypatch.setenv("LUMITRACE_RENDERER", mode)
+        monkeypatch.setattr(solid_render.sys, "stderr", Stream(tty))
+        assert solid_render.wanted() is want, (mode, tty)
+    monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 1)
+    monkeypatch.setenv("LUMITRACE_RENDERER", "process")
+    assert not solid_render.wanted()
