@@ -61,9 +61,10 @@ def test_a_failed_picture_is_answered_and_the_renderer_goes_on(renderer, tmp_pat
     assert renderer.wait(good) and (tmp_path / "x.png").exists()
 
 
-def test_a_dead_renderer_costs_only_the_drawing_here(renderer, tmp_path):
-    """The solid of a real stage's grid: its renderer killed after the picture was handed
-    over, the picture is drawn in this process all the same."""
+def test_a_crashed_renderer_costs_only_the_drawing_here(renderer, tmp_path, monkeypatch):
+    """The solid of a real stage's grid: its renderer crashing (SIGSEGV) after the picture
+    was handed over, the picture is drawn in this process all the same, and not with VTK,
+    which would take the command down with it."""
     from lumitrace.photometry.diagrams import photometric_solid, submit_solid
     from lumitrace.photometry.distribution import photometry_of
     from lumitrace.run.session import run
@@ -75,9 +76,15 @@ def test_a_dead_renderer_costs_only_the_drawing_here(renderer, tmp_path):
     grid = photometry_of(scene, result.accumulator).grid
     job = submit_solid(tmp_path / "solid.png", grid, scene, "cup")
     assert job is not None
-    renderer.proc.kill()
+    os.kill(renderer.proc.pid, signal.SIGSEGV)
     renderer.proc.wait()
+
+    def no_vtk_here(*_):
+        raise AssertionError("VTK drawn in the command's process after the renderer crashed")
+
+    monkeypatch.setattr(solid_render, "draw_solid", no_vtk_here)
     photometric_solid(tmp_path / "solid.png", grid, scene, "cup", job)
+    assert renderer.crashed
     assert (tmp_path / "solid.png").stat().st_size > 10_000
     assert solid_render.renderer() is None
     assert submit_solid(tmp_path / "again.png", grid, scene, "cup") is None

@@ -139,6 +139,9 @@ class Renderer:
             [sys.executable, "-c", _BOOT, os.path.abspath(__file__)], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, close_fds=True)
         self._ids = iter(range(1, 1 << 62))
+        #: whether it died of a signal while it drew (VTK crashed, most likely: drawing
+        #: with VTK in the command's own process would take the command down with it)
+        self.crashed = False
         self._lock = threading.Lock()
         self._buffer = b""
 
@@ -163,6 +166,8 @@ class Renderer:
     def wait(self, job: int, timeout: float = RENDER_TIMEOUT) -> bool:
         """Whether job ``job`` was drawn and written (answers to older jobs are passed
         over); False when it failed, the renderer ended or ``timeout`` seconds passed."""
+        if self.proc.stdout.closed:  # ended by close(): nothing more will come
+            return False
         deadline = time.monotonic() + timeout
         fd = self.proc.stdout.fileno()
         while True:
@@ -179,7 +184,8 @@ class Renderer:
                 self.close()  # a renderer that hangs is not waited for again
                 return False
             chunk = os.read(fd, 65536)
-            if not chunk:
+            if not chunk:  # it ended without an answer: killed by a signal is a crash
+                self.crashed = (self.proc.wait() or 0) < 0
                 return False
             self._buffer += chunk
 
@@ -241,9 +247,11 @@ def start_renderer() -> Renderer | None:
     return _renderer
 
 
-def renderer() -> Renderer | None:
-    """The renderer started in this process, if it still runs."""
-    return _renderer if _renderer is not None and _renderer.alive() else None
+def renderer(running: bool = True) -> Renderer | None:
+    """The renderer started in this process, if it still runs (or, ``running`` False,
+    also one that has ended: whether it crashed is read from it)."""
+    return _renderer if _renderer is not None and (_renderer.alive() or not running) \
+        else None
 
 
 def abandon_renderer() -> None:
