@@ -61,14 +61,14 @@ def solid_points(grid: CGammaGrid, scene: Scene) -> tuple:
 
 
 def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
-                      title: str = "", job: int | None = None) -> Path:
+                      title: str = "", job: tuple | None = None) -> Path:
     """Write a picture (PNG) of the photometric solid around the luminaire geometry: the
     renderer's drawing of it when ``job`` (from :func:`submit_solid`) succeeds, else drawn
     here (with matplotlib where VTK crashed the renderer: it would crash this process)."""
-    from .solid_render import draw_solid, renderer
+    from .solid_render import draw_solid
 
-    r = renderer(running=False) if job is not None else None
-    if r is not None and r.wait(job):
+    r = job[0] if job is not None else None
+    if r is not None and r.wait(job[1]):
         return Path(path)
     pts, cd, tri = solid_points(grid, scene)
     if r is not None and r.crashed:
@@ -80,17 +80,19 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
 
 
 def submit_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
-                 title: str = "") -> int | None:
+                 title: str = "") -> tuple | None:
     """Hand the solid's picture to this process's renderer (started by
     :func:`~lumitrace.photometry.solid_render.start_renderer`), which draws it while this
-    process goes on: its job, for :func:`photometric_solid`, or None without a renderer."""
+    process goes on: (the renderer, its job), for :func:`photometric_solid`, or None
+    without a renderer."""
     from .solid_render import renderer
 
     r = renderer()
     if r is None:
         return None
     pts, cd, tri = solid_points(grid, scene)
-    return r.submit(path, pts, cd, tri, scene.up_axis, title)
+    job = r.submit(path, pts, cd, tri, scene.up_axis, title)
+    return None if job is None else (r, job)
 
 
 def _solid_matplotlib(path, pts, cd, tri, title) -> Path:

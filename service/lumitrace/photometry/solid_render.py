@@ -247,11 +247,9 @@ def start_renderer() -> Renderer | None:
     return _renderer
 
 
-def renderer(running: bool = True) -> Renderer | None:
-    """The renderer started in this process, if it still runs (or, ``running`` False,
-    also one that has ended: whether it crashed is read from it)."""
-    return _renderer if _renderer is not None and (_renderer.alive() or not running) \
-        else None
+def renderer() -> Renderer | None:
+    """The renderer started in this process, if it still runs."""
+    return _renderer if _renderer is not None and _renderer.alive() else None
 
 
 def abandon_renderer() -> None:
