@@ -12,7 +12,7 @@ import pytest
 
 from lumitrace import table_cache
 from lumitrace.film import cubemap, pullpush
-from lumitrace.photometry import bug, measured, peak
+from lumitrace.photometry import bug, peak
 from lumitrace.publish import latlong
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,7 +23,7 @@ def folder(tmp_path, monkeypatch):
     """A fresh cache folder, and every kept table forgotten in this process."""
     monkeypatch.setenv("LUMITRACE_CACHE_DIR", str(tmp_path / "cache"))
     tables = [pullpush._pyramid, cubemap._seams, latlong._latlong_taps, peak._cell_directions,
-              peak._cell_omegas, measured._blocks, measured._cap_bins_cached, bug.zone_of_cell]
+              peak._cell_omegas, bug.zone_of_cell]
     for t in tables:
         t.cache_clear()
     yield tmp_path / "cache"
@@ -45,9 +45,7 @@ def _equal(a, b) -> bool:
 
 CASES = [(pullpush._pyramid, (64,)), (cubemap._seams, (32,)),
          (latlong._latlong_taps, (16, 64, "Z")), (peak._cell_directions, ()),
-         (peak._cell_omegas, ()), (measured._blocks, (15.0, tuple(np.arange(0, 181, 5.0)))),
-         (measured._cap_bins_cached, (tuple(np.arange(0, 181, 2.5)),)),
-         (bug.zone_of_cell, ())]
+         (peak._cell_omegas, ()), (bug.zone_of_cell, ())]
 
 
 @pytest.mark.parametrize("fn,args", CASES, ids=lambda c: getattr(c, "__qualname__", ""))

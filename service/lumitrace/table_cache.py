@@ -114,7 +114,9 @@ def _write(path: Path, value: Any) -> None:
 def kept_table(fn: Callable) -> Callable:
     """Decorate a pure function of hashable arguments whose result is a table (arrays in
     tuples, lists or frozen dataclasses): made once per process (the result is shared and
-    read-only) and kept on disk between processes."""
+    read-only) and kept on disk between processes. Only for arguments a layout fixes (a
+    face size): a table that follows the data (a narrow beam's own grid) would leave a
+    file per beam."""
     @functools.lru_cache(maxsize=16)
     def cached(*args):
         path = _path(fn, args)

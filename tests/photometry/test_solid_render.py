@@ -124,7 +124,7 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
     stage.write_bytes((ROOT / "stages" / "reference" / "mirror_cup.usda").read_bytes())
     before = _renderers()
     cmd = [sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
-           "trace", str(stage), "--photons", "3000000", "--no-progress", "--no-sublayer",
+           "trace", str(stage), "--photons", "300000", "--no-progress", "--no-sublayer",
            "--out", str(tmp_path / "out")]
     env = dict(os.environ, LUMITRACE_RENDERER="process")  # (stderr is not a terminal)
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

@@ -19,6 +19,7 @@ smooth; at a kink, such as the horizon of a one-sided disc, the cell's mean).
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -27,7 +28,6 @@ from ..errors import LumitraceError
 from ..film.accumulate import Accumulator
 from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, N_CELLS, N_GAMMA, cell_solid_angles
 from .grid import CGammaGrid
-from ..table_cache import kept_table
 
 #: Symmetries tried, strongest first.
 CANDIDATES = ("rotational", "quadrant", "C0-C180", "C90-C270")
@@ -86,7 +86,7 @@ def planes_kept(symmetry: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"unknown symmetry {symmetry!r}")
 
 
-@kept_table
+@functools.lru_cache(maxsize=16)
 def _blocks(c_step: float, gammas: tuple[float, ...]) -> tuple[int, int, np.ndarray, np.ndarray]:
     """How goniometer cells add into grid cells: (planes, C bins per plane, the first gamma
     bin of every grid zone, the grid cells' solid angles (planes, zones))."""
@@ -208,7 +208,7 @@ def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
     return out
 
 
-@kept_table
+@functools.lru_cache(maxsize=16)
 def _cap_bins_cached(gammas: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     first = 0.5 * gammas[1], 0.5 * (180.0 - gammas[-2])  # to the midpoints: the grid's zones
     bins, omega, angles = [], [], []
