@@ -162,3 +162,39 @@ def test_processes_making_the_same_table_at_once_leave_one_whole_file(folder):
     assert [f.suffix for f in files] == [".pickle"]
     with open(files[0], "rb") as f:
         assert _equal(pickle.load(f), pullpush._pyramid.uncached(48))
+
+
+class _Planted:
+    """A pickle that runs code as it loads: it leaves a marker file."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (Path.write_text, (Path(self.marker), "ran"))
+
+
+@pytest.mark.skipif(os.getuid() != 0, reason="giving a file to another user needs root")
+def test_a_planted_table_is_never_loaded(folder, tmp_path):
+    """A crafted pickle in the place of a kept table is not loaded (its code does not run)
+    when the file is another user's, or when the folder is writable by others; the table
+    is made again, right. This user's own file in a private folder is read as before."""
+    want = cubemap._seams.uncached(8)
+    cubemap._seams(8)
+    (path,) = folder.glob("*._seams-*.pickle")
+    marker = tmp_path / "ran"
+    for case in ("another user's file", "a folder others may write"):
+        path.write_bytes(pickle.dumps(_Planted(marker)))
+        if case == "another user's file":
+            os.chown(path, 65534, 65534)
+        else:
+            os.chown(path, 0, 0)
+            folder.chmod(0o777)
+        cubemap._seams.cache_clear()
+        assert _equal(cubemap._seams(8), want), case
+        assert not marker.exists(), case
+    folder.chmod(0o700)
+    path.write_bytes(pickle.dumps(_Planted(marker)))  # this user's, private: it is read
+    cubemap._seams.cache_clear()
+    cubemap._seams(8)
+    assert marker.exists()

@@ -8,7 +8,8 @@ size 64) as tracing its photons. Reading them back takes about a millisecond. An
 a lumitrace source or another numpy makes a new key, so a stale table is never read.
 The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
 ``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
-cannot be written, or a file that cannot be read, costs only the making.
+cannot be written, or a file that cannot be read, costs only the making; a file that is
+not this user's, or a folder others may write, is never read (a pickle runs code).
 """
 from __future__ import annotations
 
@@ -78,9 +79,21 @@ def _path(fn: Callable, args: tuple) -> Path | None:
     return folder / f"{fn.__module__}.{fn.__qualname__}-{key}-{sources_stamp()}.pickle"
 
 
+def _ours(st: os.stat_result) -> bool:
+    """Whether a file or folder is this user's and no one else may write it."""
+    return st.st_uid == os.getuid() and not st.st_mode & 0o022
+
+
 def _read(path: Path) -> tuple[bool, Any]:
+    """(True, the table) kept at ``path``; (False, None) where there is none to trust: a
+    pickle runs code as it loads, so only a file this user wrote, in a folder no one else
+    may write, is read (another's, or one in a shared folder, is made again instead)."""
     try:
+        if not _ours(os.stat(path.parent)):
+            return False, None
         with open(path, "rb") as f:
+            if not _ours(os.fstat(f.fileno())):
+                return False, None
             return True, pickle.load(f)
     except Exception:  # absent, unreadable or from another layout of the classes: remake
         return False, None
