@@ -30,16 +30,23 @@ from pathlib import Path
 RENDER_TIMEOUT = 60.0
 
 
+def _quiet_pyvista():
+    """pyvista, offscreen, with VTK's messages off (no X server is not news)."""
+    import pyvista as pv
+    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject  # (all of vtk: 0.5 s more)
+
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)
+    vtkObject.GlobalWarningDisplayOff()
+    pv.OFF_SCREEN = True
+    return pv
+
+
 def draw_solid(path, pts, cd, tri, up_axis: str, title: str) -> Path:
     """Draw the solid (points ``pts`` (C, gamma, 3) coloured by ``cd`` (C, gamma), the
     luminaire's triangles ``tri`` (T, 3, 3)) with pyvista and write it to ``path`` (PNG)."""
     import numpy as np
-    import pyvista as pv
-    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject  # (all of vtk: 0.5 s more)
 
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)  # no X server: not news
-    vtkObject.GlobalWarningDisplayOff()
-    pv.OFF_SCREEN = True
+    pv = _quiet_pyvista()
     grid = pv.StructuredGrid(pts[..., 0], pts[..., 1], pts[..., 2])
     grid.point_data["cd"] = np.ascontiguousarray(cd).ravel(order="F")
     plotter = pv.Plotter(off_screen=True, window_size=(900, 800))
@@ -104,11 +111,7 @@ def serve() -> None:
             pass
     out = sys.stdout
     try:
-        import pyvista  # noqa: F401  (the point: loaded while the command traces)
-        from vtkmodules.vtkCommonCore import vtkLogger, vtkObject
-
-        vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)
-        vtkObject.GlobalWarningDisplayOff()
+        _quiet_pyvista()  # the point: VTK loaded while the command traces
         import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (the window's libraries)
     except Exception as exc:  # noqa: BLE001  (the command draws it itself)
         out.write(f"unavailable {type(exc).__name__}\n")
