@@ -18,16 +18,24 @@ from lumitrace.photometry import solid_render  # noqa: E402
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.fixture(scope="module")
+def _module_renderer():
+    """Renderers for this module's tests: one is shared until a test ends it (each start
+    loads VTK again, a second and a half of CPU that the suite's other worker feels)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("LUMITRACE_RENDERER", "process")
+        solid_render.stop_renderer()
+        yield
+        solid_render.stop_renderer()
+
+
 @pytest.fixture
-def renderer(monkeypatch):
-    """This process's renderer, started for the test and ended after it."""
-    monkeypatch.setenv("LUMITRACE_RENDERER", "process")
-    solid_render.stop_renderer()
+def renderer(_module_renderer):
+    """This process's renderer, running (started again where a test before ended it)."""
     r = solid_render.start_renderer()
     if r is None:
         pytest.skip("no renderer on this machine (one core)")
-    yield r
-    solid_render.stop_renderer()
+    return r
 
 
 def _solid():
@@ -124,7 +132,7 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
     stage.write_bytes((ROOT / "stages" / "reference" / "mirror_cup.usda").read_bytes())
     before = _renderers()
     cmd = [sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
-           "trace", str(stage), "--photons", "300000", "--no-progress", "--no-sublayer",
+           "trace", str(stage), "--photons", "100000", "--no-progress", "--no-sublayer",
            "--out", str(tmp_path / "out")]
     env = dict(os.environ, LUMITRACE_RENDERER="process")  # (stderr is not a terminal)
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
