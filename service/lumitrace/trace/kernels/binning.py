@@ -118,10 +118,9 @@ def _edges4(extra_edges):
 
 
 @numba.njit(**_ALWAYS)
-def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma):
-    """The C-gamma cell of world direction (x, y, z) from its fast angles ``gamma``, ``c``
-    where they are far from every cell edge, else from :func:`_gonio_cell_exact`, so the
-    cell is always the exact one (libm's acos and atan2 cost half of an escape)."""
+def _gonio_cell_fast(gamma, c, extra_edges, c_scale, g_scale, n_c, n_gamma):
+    """The C-gamma cell of fast angles ``gamma``, ``c``, and whether they lie so near a
+    cell edge that the exact angles must decide (selects only: several at once)."""
     gs, cs = gamma * g_scale, c * c_scale  # both >= 0: int() is floor()
     g = int(gs)
     fg, fc = gs - g, cs - int(cs)
@@ -130,10 +129,19 @@ def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_g
     for e in extra_edges:
         near |= abs(gamma - e) * g_scale < _EDGE_MARGIN
         g += gamma >= e
+    return min(int(cs), n_c - 1) * n_gamma + min(g, n_gamma - 1), near
+
+
+@numba.njit(**_ALWAYS)
+def _gonio_cell_at(gamma, c, x, y, z, m, extra_edges, c_scale, g_scale, n_c, n_gamma):
+    """The C-gamma cell of world direction (x, y, z) from its fast angles ``gamma``, ``c``
+    where they are far from every cell edge, else from :func:`_gonio_cell_exact`, so the
+    cell is always the exact one (libm's acos and atan2 cost half of an escape)."""
+    cell, near = _gonio_cell_fast(gamma, c, extra_edges, c_scale, g_scale, n_c, n_gamma)
     if near:
         px, py, pz = _apply9(m, x, y, z)
         return _gonio_cell_exact(px, py, pz, extra_edges, c_scale, g_scale, n_c, n_gamma)
-    return min(int(cs), n_c - 1) * n_gamma + min(g, n_gamma - 1)
+    return cell
 
 
 @numba.njit(**_ALWAYS)
@@ -224,16 +232,20 @@ def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, ex
     for k in range(m):  # selects only: several escapes at once
         x, y, z = staged[3, k], staged[4, k], staged[5, k]
         pix[0, k], pix[1, k], pix[2, k] = _texel_pixel(x, y, z, res)
-        ang[0, k], ang[1, k] = _gonio_angles(x, y, z, mm)
+        gamma, c = _gonio_angles(x, y, z, mm)
+        cell, near = _gonio_cell_fast(gamma, c, edges, c_scale, g_scale, n_c, n_gamma)
+        ang[0, k], ang[1, k] = cell, near
         pix[3, k], ang[2, k] = _gonio_exit(staged[0, k], staged[1, k], staged[2, k], x, y, z,
                                            mm, lo3, hi3, side, n_cells)
     for k in range(m):
         x, y, z = staged[3, k], staged[4, k], staged[5, k]
         row, half, ex = sbin[0, k], sbin[1, k], pix[3, k]
         tex = _texel_index(pix[0, k], pix[1, k], pix[2, k], res, layout)
-        counts[half, tex] += 1
-        cell = _gonio_cell_at(ang[0, k], ang[1, k], x, y, z, mm, edges, c_scale, g_scale,
-                              n_c, n_gamma)
+        pix[0, k] = tex
+        cell = np.int64(ang[0, k])
+        if ang[1, k]:  # near a cell edge: the exact angles decide
+            px, py, pz = _apply9(mm, x, y, z)
+            cell = _gonio_cell_exact(px, py, pz, edges, c_scale, g_scale, n_c, n_gamma)
         j = first + 2 * k
         escaped[j] = cell + n_bins * half
         escaped[j + 1] = ex + n_bins * half
@@ -250,6 +262,8 @@ def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, ex
             exit_pos[row, 1] = staged[1, k] + t * y
             exit_pos[row, 2] = staged[2, k] + t * z
             exit_dir[row, 0], exit_dir[row, 1], exit_dir[row, 2] = x, y, z
+    for k in range(m):  # the texels' counts alone: their increments overlap
+        counts[sbin[1, k], pix[0, k]] += 1
     return first + 2 * m
 
 
