@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import Interrupted, LumitraceError, LumitraceWarning
+from .pyplot import short_setter_docs
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
@@ -629,6 +630,7 @@ def main(argv: list[str] | None = None, early_signals: list[int] | None = None) 
         check_interrupted(defer=True)
         args = build_parser().parse_args(argv)
         warnings.showwarning = _show_warning
+        short_setter_docs()  # this process draws pictures and never shows a docstring
         return _dispatch(args)
     except (Exception, Interrupted, KeyboardInterrupt) as exc:  # the rest raised again
         failure = exc if isinstance(exc, (LumitraceError, Interrupted, KeyboardInterrupt,

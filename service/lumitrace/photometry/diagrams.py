@@ -25,10 +25,9 @@ def polar_diagram(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float,
     """Write the polar light distribution curve (PNG) of ``grid`` (cd), with its error
     band and, given the record's ``figures``, the beam and field angles and the peak
     (see :func:`lumitrace.photometry.curves.draw_polar`)."""
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from .curves import draw_polar
 
@@ -96,10 +95,9 @@ def submit_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
 
 
 def _solid_matplotlib(path, pts, cd, tri, title) -> Path:
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig = plt.figure(figsize=(6, 6), dpi=120)
     ax = fig.add_subplot(projection="3d")
@@ -126,10 +124,9 @@ def colour_diagram(path: str | os.PathLike, col, title: str = "") -> Path:
     """Write the colour over angle (PNG): u', v' and CCT over gamma (all round, with their
     standard errors), and every cell's u'v' on the CIE 1976 diagram with the spectral
     locus, the Planckian locus and the beam's Delta u'v' circle."""
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from ..scene.spectra import observer
 

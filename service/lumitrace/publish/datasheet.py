@@ -43,10 +43,9 @@ def curve_pngs(data: DatasheetInput, dpi: int = 110, polar: bool = True
                ) -> dict[str, bytes]:
     """The polar curve (unless ``polar`` is False) and, for a narrow beam, the Cartesian
     diagram as PNG bytes."""
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from ..photometry.curves import draw_cartesian, draw_polar, is_narrow
 

@@ -81,10 +81,10 @@ def _height(s: Section) -> float:
 
 def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
     """The datasheet PDF (bytes): one or two A4 pages."""
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
+    import matplotlib
     from matplotlib.backends.backend_pdf import PdfPages
 
     from ..photometry.curves import draw_cartesian, draw_polar, is_narrow

@@ -207,10 +207,9 @@ def _pick_snapshots(iterations: list[int]) -> list[int]:
 
 
 def _plots(out: Path, rows, thresholds, ref, snapshots, picked, main_t) -> dict[str, Path]:
-    import matplotlib
+    from ..pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from ..publish.exr import cube_to_latlong
 
