@@ -82,15 +82,13 @@ def _turn(u):
         _SIN[4] + x2 * (_SIN[5] + x2 * _SIN[6]))))))
     c = 1.0 + x2 * (_COS[0] + x2 * (_COS[1] + x2 * (_COS[2] + x2 * (_COS[3] + x2 * (
         _COS[4] + x2 * (_COS[5] + x2 * (_COS[6] + x2 * _COS[7])))))))
-    if flip:
-        s, c = c, s
-    if k == 0:
-        return c, s
-    if k == 1:
-        return -s, c
-    if k == 2:
-        return -c, -s
-    return s, -c
+    # the quadrant by selects and exact sign flips, no branches, so a loop that draws
+    # directions runs on several photons at once: k = 0: (c, s), 1: (-s, c), 2: (-c, -s),
+    # 3: (s, -c), the octant's swap first
+    odd = (k & 1) == 1
+    a = (s if odd else c) if not flip else (c if odd else s)
+    b = (c if odd else s) if not flip else (s if odd else c)
+    return (-a if (k == 1) | (k == 2) else a), (-b if k >= 2 else b)
 
 
 @numba.njit(**_INLINE)
