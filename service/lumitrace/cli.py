@@ -380,6 +380,9 @@ def cmd_serve(args) -> int:
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
+    from .photometry.solid_render import start_renderer
+
+    start_renderer()  # the solids drawn off this process's interpreter, which edits need
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
                  deliverables=args.deliverables)

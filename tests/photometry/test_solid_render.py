@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -91,21 +92,28 @@ def test_a_crashed_renderer_costs_only_the_drawing_here(renderer, tmp_path, monk
         raise AssertionError("VTK drawn in the command's process after the renderer crashed")
 
     monkeypatch.setattr(solid_render, "draw_solid", no_vtk_here)
+    monkeypatch.setattr(solid_render, "_vtk_crashed", threading.Event())  # this test's own
     photometric_solid(tmp_path / "solid.png", grid, scene, "cup", job)
     assert renderer.crashed
     assert (tmp_path / "solid.png").stat().st_size > 10_000
     assert solid_render.renderer() is None
     assert submit_solid(tmp_path / "again.png", grid, scene, "cup") is None
+    # a process that draws many solids (a service) keeps away from VTK from then on
+    photometric_solid(tmp_path / "again.png", grid, scene, "cup", None)
+    assert (tmp_path / "again.png").stat().st_size > 10_000
 
 
 def test_an_abandoned_picture_is_never_written(renderer, tmp_path):
+    """A picture not waited for (its set rolled back) never reaches its place; the renderer
+    draws the next one, and keeps no file of either."""
     pts, cd, tri = _solid()
-    job = renderer.submit(tmp_path / "late.png", pts, cd, tri, "Z", "")
-    assert job is not None
-    solid_render.abandon_renderer()  # at once: the set it was for is rolled back
-    assert renderer.proc.poll() is not None
-    time.sleep(0.5)
-    assert not list(tmp_path.iterdir())
+    late = renderer.submit(tmp_path / "late.png", pts, cd, tri, "Z", "")
+    job = renderer.submit(tmp_path / "next.png", pts, cd, tri, "Z", "")
+    assert late is not None and job is not None
+    assert renderer.wait(job)
+    time.sleep(0.3)
+    assert [p.name for p in tmp_path.iterdir()] == ["next.png"]
+    assert renderer.alive() and not list(renderer.folder.iterdir())
 
 
 def _renderers() -> set[int]:

@@ -51,3 +51,61 @@ def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path
             assert time.monotonic() < deadline, (eng.status(), drawn)
             time.sleep(0.02)
         assert len(solids) == 1  # revision 0's write given up after its polar curve
+
+
+def test_a_renderers_solid_given_up_by_an_edit_never_lands_and_the_renderer_goes_on(
+        tmp_path, monkeypatch):
+    """With a renderer process (a service at a terminal): revision 0's solid, handed to the
+    renderer before its polar curve, is given up when the edit comes; the renderer is not
+    stopped for it, draws revision 1's solid, and that is the one in the set (none drawn
+    in this process, and no picture left in the renderer's folder)."""
+    import pytest
+
+    pytest.importorskip("pyvista")
+    from lumitrace.photometry import solid_render
+
+    monkeypatch.setenv("LUMITRACE_RENDERER", "process")
+    renderer = solid_render.start_renderer()
+    if renderer is None:
+        pytest.skip("no renderer on one core")
+    try:
+        monkeypatch.setattr(engine_module, "PICTURES_QUIET", 0.0)
+        drawing, submitted = threading.Event(), []
+        real_polar, real_submit = photometric.polar_diagram, photometric.submit_solid
+
+        def slow_polar(path, *args, **kwargs):
+            if len(submitted) == 1:  # revision 0's: the edit comes meanwhile
+                drawing.set()
+                time.sleep(DRAWING_S)
+            return real_polar(path, *args, **kwargs)
+
+        def submit(path, *args, **kwargs):
+            job = real_submit(path, *args, **kwargs)
+            submitted.append((path, job))
+            return job
+
+        def no_vtk_here(*_):
+            raise AssertionError("a solid drawn in the service's process")
+
+        monkeypatch.setattr(photometric, "polar_diagram", slow_polar)
+        monkeypatch.setattr(photometric, "submit_solid", submit)
+        monkeypatch.setattr(solid_render, "draw_solid", no_vtk_here)
+        with running_engine(tmp_path) as (live, eng):
+            assert drawing.wait(120), eng.status()
+            edit = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance",
+                                                   0.5))
+            eng.submit(edit)
+            deadline = time.monotonic() + 120
+            while not (eng.status()["written_revision"] == 1
+                       and eng.status()["written_pictures"]):
+                assert time.monotonic() < deadline, eng.status()
+                time.sleep(0.02)
+        assert len(submitted) == 2 and all(job is not None for _, job in submitted)
+        assert {job[0] for _, job in submitted} == {renderer}  # one renderer throughout
+        assert renderer.alive()
+        staged = submitted[1][0]  # in the set's staging folder, then published beside it
+        solid = staged.parent.parent / staged.name
+        assert solid.exists() and solid.stat().st_size > 10_000
+        assert not list(renderer.folder.iterdir())
+    finally:
+        solid_render.stop_renderer()

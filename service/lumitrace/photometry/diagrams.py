@@ -64,13 +64,13 @@ def photometric_solid(path: str | os.PathLike, grid: CGammaGrid, scene: Scene,
     """Write a picture (PNG) of the photometric solid around the luminaire geometry: the
     renderer's drawing of it when ``job`` (from :func:`submit_solid`) succeeds, else drawn
     here (with matplotlib where VTK crashed the renderer: it would crash this process)."""
-    from .solid_render import draw_solid
+    from .solid_render import draw_solid, vtk_crashed
 
     r = job[0] if job is not None else None
     if r is not None and r.wait(job[1]):
         return Path(path)
     pts, cd, tri = solid_points(grid, scene)
-    if r is not None and r.crashed:
+    if vtk_crashed():
         return _solid_matplotlib(path, pts, cd, tri, title)
     try:
         return draw_solid(path, pts, cd, tri, scene.up_axis, title)

@@ -5,9 +5,11 @@ and the polar curve on another core.
 Loading pyvista and VTK and setting up an offscreen window cost a run that writes pictures
 about 0.65 s before the solid's 0.35 s of drawing, all while the interpreter is held. A
 command that will draw starts a renderer (:func:`start_renderer`) before it reads the
-stage; the renderer loads VTK while the photons are traced, then draws each solid it is
-sent and writes its PNG (whole, under another name, then renamed). Wherever it cannot
-(it did not start, died, or failed a picture), the solid is drawn here, as before.
+stage (a service, as it starts); the renderer loads VTK while the photons are traced,
+then draws each solid it is sent into a folder of its own, and the PNG is put in its place
+when it is waited for: a picture no longer wanted (an edit came, a set was rolled back)
+never lands, and the renderer goes on. Wherever it cannot (it did not start, died, or
+failed a picture), the solid is drawn here, as before.
 
 This module needs only the standard library, numpy and pyvista: the renderer loads it by
 its file, without lumitrace and USD.
@@ -15,9 +17,11 @@ its file, without lumitrace and USD.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import os
 import pickle
 import select
+import shutil
 import struct
 import subprocess
 import sys
@@ -69,6 +73,15 @@ def draw_solid(path, pts, cd, tri, up_axis: str, title: str) -> Path:
     plotter.view_vector((1.0, -1.4, 0.8) if up_axis == "Z" else (1.0, 0.8, 1.4),
                         viewup=(0, 0, 1) if up_axis == "Z" else (0, 1, 0))
     plotter.add_axes(color="black")
+    try:
+        return _write_whole(path, plotter.screenshot)
+    finally:
+        plotter.close()
+
+
+def _write_whole(path, write) -> Path:
+    """Have ``write(name)`` write a file under a temporary name beside ``path``, then
+    rename it to ``path``: a reader sees the old file or the whole new one."""
     target = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=".tmp.png", dir=target.parent)
     os.close(fd)
@@ -76,14 +89,12 @@ def draw_solid(path, pts, cd, tri, up_axis: str, title: str) -> Path:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # an ordinary file, as every output
-        plotter.screenshot(tmp)
+        write(tmp)
         os.replace(tmp, target)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-    finally:
-        plotter.close()
     return target
 
 
@@ -135,13 +146,19 @@ def serve() -> None:
 
 
 class Renderer:
-    """A renderer process: started at once, used by :meth:`submit` and :meth:`wait`."""
+    """A renderer process: started at once, used by :meth:`submit` and :meth:`wait`.
+
+    It draws each picture into a folder of its own; :meth:`wait` puts the picture in its
+    place. A picture no longer wanted (its set rolled back, a newer revision come) is just
+    not waited for: it never reaches its place, and the renderer goes on to the next."""
 
     def __init__(self):
+        self.folder = Path(tempfile.mkdtemp(prefix="lumitrace-renderer-"))
         self.proc = subprocess.Popen(
             [sys.executable, "-c", _BOOT, os.path.abspath(__file__)], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, close_fds=True)
         self._ids = iter(range(1, 1 << 62))
+        self._targets: dict[int, Path] = {}  # job -> where its picture goes once waited for
         #: whether it died of a signal while it drew (VTK crashed, most likely: drawing
         #: with VTK in the command's own process would take the command down with it)
         self.crashed = False
@@ -157,14 +174,34 @@ class Renderer:
             if not self.alive():
                 return None
             job = next(self._ids)
-            data = pickle.dumps((job, str(path), pts, cd, tri, up_axis, title),
+            data = pickle.dumps((job, str(self._drawn(job)), pts, cd, tri, up_axis, title),
                                 protocol=pickle.HIGHEST_PROTOCOL)
             try:
                 self.proc.stdin.write(struct.pack("<Q", len(data)) + data)
                 self.proc.stdin.flush()
             except OSError:
                 return None
+            self._targets[job] = Path(path)
             return job
+
+    def _drawn(self, job: int) -> Path:
+        """Where the renderer writes job ``job``'s picture."""
+        return self.folder / f"{job}.png"
+
+    def _answered(self, job: int, ok: bool, wanted: bool) -> bool:
+        """Job ``job`` answered: its picture put in its place if ``wanted`` and drawn
+        (whether it was), removed from the renderer's folder either way."""
+        drawn, target = self._drawn(job), self._targets.pop(job, None)
+        try:
+            if ok and wanted and target is not None:
+                _write_whole(target, lambda tmp: shutil.copyfile(drawn, tmp))
+                return True
+            return False
+        except OSError:
+            return False
+        finally:
+            with contextlib.suppress(OSError):
+                drawn.unlink()
 
     def wait(self, job: int, timeout: float = RENDER_TIMEOUT) -> bool:
         """Whether job ``job`` was drawn and written (answers to older jobs are passed
@@ -178,8 +215,11 @@ class Renderer:
                 line, self._buffer = self._buffer.split(b"\n", 1)
                 words = line.decode(errors="replace").split()
                 if words[:1] in (["ok"], ["error"]) and len(words) > 1 and \
-                        words[1] == str(job):
-                    return words[0] == "ok"
+                        words[1].isdigit():
+                    done = int(words[1])
+                    placed = self._answered(done, words[0] == "ok", done == job)
+                    if done == job:
+                        return placed
                 if words[:1] == ["unavailable"]:
                     return False
             left = deadline - time.monotonic()
@@ -189,6 +229,8 @@ class Renderer:
             chunk = os.read(fd, 65536)
             if not chunk:  # it ended without an answer: killed by a signal is a crash
                 self.crashed = (self.proc.wait() or 0) < 0
+                if self.crashed:
+                    _vtk_crashed.set()
                 return False
             self._buffer += chunk
 
@@ -208,9 +250,18 @@ class Renderer:
             self.proc.stdout.close()
         except OSError:
             pass
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 _renderer: Renderer | None = None
+#: set once a renderer of this process died of a signal: VTK crashes here, so every later
+#: solid of this process (a service draws many) is drawn with matplotlib
+_vtk_crashed = threading.Event()
+
+
+def vtk_crashed() -> bool:
+    """Whether a renderer of this process died of a signal while it drew."""
+    return _vtk_crashed.is_set()
 
 
 def wanted() -> bool:
@@ -255,18 +306,11 @@ def renderer() -> Renderer | None:
     return _renderer if _renderer is not None and _renderer.alive() else None
 
 
-def abandon_renderer() -> None:
-    """Kill this process's renderer at once (a picture it draws is no longer wanted: the
-    set it was to join is being rolled back); the next :func:`start_renderer` starts
-    another."""
+def stop_renderer() -> None:
+    """End this process's renderer, if one was started, at once: at the process's end
+    every picture it was given and still wanted has been waited for."""
     global _renderer
     if _renderer is not None:
         _renderer.proc.kill()
         _renderer.close()
         _renderer = None
-
-
-def stop_renderer() -> None:
-    """End this process's renderer, if one was started: at the process's end every
-    picture it was given has been waited for, so it is not waited for itself."""
-    abandon_renderer()

@@ -114,17 +114,11 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \
                 f"LOR {fig.light_output_ratio:.2f}"
         checkpoint()
-        # the renderer process (where the command started one) draws the solid meanwhile
+        # the renderer process (where the process started one) draws the solid meanwhile,
+        # into a folder of its own: abandoned here, it never reaches this set
         job = submit_solid(paths["photometric_solid"], grid, scene, title)
-        try:
-            polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
-            checkpoint()
-        except BaseException:
-            if job is not None:  # abandoned: nothing more is written into this set
-                from ..photometry.solid_render import abandon_renderer
-
-                abandon_renderer()
-            raise
+        polar_diagram(paths["polar_diagram"], grid, lamp, title, fig.as_dict())
+        checkpoint()
         # VTK does not survive a Python exception raised inside it by a signal handler:
         # a signal waits until the picture is drawn
         with signals_held():
