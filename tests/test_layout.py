@@ -19,6 +19,7 @@ PACKAGE = ROOT / "service" / "lumitrace"
 RANKS = {
     "errors": 0, "atomic": 0, "filenames": 0,
     "table_cache": 0,  # layout tables kept on disk: numpy and the standard library only
+    "pyplot": 0,  # matplotlib's pyplot as every picture loads it: matplotlib only
     "tm25": 0.5,  # the ray-file format: the stage reader reads a light's rays, outputs write them
     "scene": 1, "schema": 1.2,  # the schema names the scene's scattering models as tokens
     "__init__": 1.5,  # registers the schema on import; anything may read __version__
