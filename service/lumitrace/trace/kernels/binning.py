@@ -234,7 +234,7 @@ def _bin_escapes(m, staged, sbin, ang, pix, first, res, layout, counts, axes, ex
         pix[0, k], pix[1, k], pix[2, k] = _texel_pixel(x, y, z, res)
         gamma, c = _gonio_angles(x, y, z, mm)
         cell, near = _gonio_cell_fast(gamma, c, edges, c_scale, g_scale, n_c, n_gamma)
-        ang[0, k], ang[1, k] = cell, near
+        ang[0, k], ang[1, k] = cell, near  # (a cell index is exact in a float64)
         pix[3, k], ang[2, k] = _gonio_exit(staged[0, k], staged[1, k], staged[2, k], x, y, z,
                                            mm, lo3, hi3, side, n_cells)
     for k in range(m):

@@ -85,9 +85,8 @@ def _turn(u):
     # the quadrant by selects and exact sign flips, no branches, so a loop that draws
     # directions runs on several photons at once: k = 0: (c, s), 1: (-s, c), 2: (-c, -s),
     # 3: (s, -c), the octant's swap first
-    odd = (k & 1) == 1
-    a = (s if odd else c) if not flip else (c if odd else s)
-    b = (c if odd else s) if not flip else (s if odd else c)
+    swap = ((k & 1) == 1) != flip
+    a, b = (s, c) if swap else (c, s)
     return (-a if (k == 1) | (k == 2) else a), (-b if k >= 2 else b)
 
 
