@@ -165,11 +165,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
     """
     n_out, cut, absorbed, segments = 0, 0, 0, 0
     n_parts = part_hits.shape[0]
-    ray = np.empty(40, np.uint32)  # deep: an RTCRayHit, 16-byte aligned within
-    k0 = ((16 - ray.ctypes.data % 16) % 16) // 4
-    rf = ray[k0:].view(np.float32)
-    ru = ray[k0:]
-    addr = numba.uint64(ray.ctypes.data + 4 * k0)
+    rf, ru, addr = _rayhit(np.empty(_RAYHIT_WORDS, np.uint32))  # deep: Embree's ray
     staged = np.empty((6, _CHUNK))  # escapes staged for binning, and its scratch
     sbin = np.empty((2, _CHUNK), np.int64)
     binning = (staged, sbin, np.empty((3, _CHUNK)), np.empty((4, _CHUNK), np.int64))
@@ -315,6 +311,21 @@ def _call_void3(typingctx, fn, a, b, c):
     return sig, codegen
 
 
+#: uint32 words of the buffer an RTCRayHit (80 bytes) is placed in: room for it to start on
+#: the first cache line after the buffer's first byte and to have its two lines alone.
+_RAYHIT_WORDS = 48
+
+
+@numba.njit(**_ALWAYS)
+def _rayhit(buf):
+    """An RTCRayHit in ``buf`` (:data:`_RAYHIT_WORDS` uint32): its words as float32 and as
+    uint32, and its address. Embree writes each ray's hit there, so it shares no cache
+    line with anything else: small allocations of two threads can sit side by side, and a
+    shared line would move between the cores at every ray."""
+    k = (64 - buf.ctypes.data % 64) // 4
+    return buf[k:].view(np.float32), buf[k:], numba.uint64(buf.ctypes.data + 4 * k)
+
+
 @numba.njit(**_ALWAYS)
 def _closest(fn, scene, addr, f, u, ox, oy, oz, dx, dy, dz, offsets, order):
     """Embree's closest hit of one ray (made float32) through the RTCRayHit at ``addr``
@@ -338,11 +349,7 @@ def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     geometry, or one instance of a scene of it, per part; triangle j of part g is
     ``order[offsets[g] + j]``): triangle
     ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``: ``rtcIntersect1``."""
-    buf = np.empty(40, np.uint32)  # an RTCRayHit, 16-byte aligned within
-    k = ((16 - buf.ctypes.data % 16) % 16) // 4
-    f = buf[k:].view(np.float32)
-    u = buf[k:]
-    addr = numba.uint64(buf.ctypes.data + 4 * k)
+    f, u, addr = _rayhit(np.empty(_RAYHIT_WORDS, np.uint32))
     for i in range(o32.shape[0]):
         prim[i], tfar[i] = _closest(fn, scene, addr, f, u, o32[i, 0], o32[i, 1], o32[i, 2],
                                     d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)
