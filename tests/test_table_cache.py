@@ -12,7 +12,7 @@ import pytest
 
 from lumitrace import table_cache
 from lumitrace.film import cubemap, pullpush
-from lumitrace.photometry import bug, peak
+from lumitrace.photometry import bug, peak, ugr
 from lumitrace.publish import latlong
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,7 +23,7 @@ def folder(tmp_path, monkeypatch):
     """A fresh cache folder, and every kept table forgotten in this process."""
     monkeypatch.setenv("LUMITRACE_CACHE_DIR", str(tmp_path / "cache"))
     tables = [pullpush._pyramid, cubemap._seams, latlong._latlong_taps, peak._cell_directions,
-              peak._cell_omegas, bug.zone_of_cell]
+              peak._cell_omegas, bug.zone_of_cell, ugr._kept_layout_tables]
     for t in tables:
         t.cache_clear()
     yield tmp_path / "cache"
@@ -45,7 +45,9 @@ def _equal(a, b) -> bool:
 
 CASES = [(pullpush._pyramid, (64,)), (cubemap._seams, (32,)),
          (latlong._latlong_taps, (16, 64, "Z")), (peak._cell_directions, ()),
-         (peak._cell_omegas, ()), (bug.zone_of_cell, ())]
+         (peak._cell_omegas, ()), (bug.zone_of_cell, ()),
+         (ugr._kept_layout_tables, (tuple(np.arange(0.0, 360.0, 15.0)),
+                                    tuple(ugr.DEFAULT_GAMMAS), "none"))]
 
 
 @pytest.mark.parametrize("fn,args", CASES, ids=lambda c: getattr(c, "__qualname__", ""))

@@ -32,7 +32,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from .grid import CGammaGrid
+from ..table_cache import kept_table
+from .grid import CGammaGrid, default_gammas
 from .guth import table_index
 from .luminance import projected_area, taps
 
@@ -174,39 +175,10 @@ class _Model:
     room's luminaires and the linear maps to the background luminances, fixed by the grid's
     layout; the luminaires' weights, by the luminous opening (:meth:`of`)."""
 
-    def __init__(self, grid: CGammaGrid):
-        full = grid.full()
-        self.shape = full.candela.shape
-        gam = full.gamma
-        edges = np.concatenate([[0.0], 0.5 * (gam[1:] + gam[:-1]), [180.0]])
-        cos_e = np.cos(np.radians(edges))
-        dc = np.radians(360.0 / self.shape[0])
-        down_cos = np.clip(cos_e, 0.0, None)
-        omega_down = (down_cos[:-1] - down_cos[1:]) * dc  # each zone's part below 90
-        omega_up = (cos_e[:-1] - cos_e[1:]) * dc - omega_down
-        idx, w, seen, lbs = [], [], [], []
-        for x, y in ROOMS:
-            g = room(float(x), float(y))
-            for c in (g.c_crosswise, g.c_endwise):
-                i, wi = taps(grid, c, g.gamma)
-                idx.append(i)
-                w.append(wi)
-                seen.append((np.broadcast_to(c, g.gamma.shape), g.gamma,
-                             np.broadcast_to(g.distance ** 2, g.gamma.shape),
-                             np.broadcast_to(g.p ** 2, g.gamma.shape)))
-            floor = omega_down * _floor_share(gam, x, y)
-            # flux (lm) to floor, walls, ceiling per unit intensity of each gamma (all C)
-            to = np.stack([floor, omega_down - floor, omega_up])
-            a_w = 2.0 * HEIGHT * HEIGHT * (x + y)
-            lbs.append(np.stack([g.n / a_w * transfer_factors(x, y, refl) @ to / np.pi
-                                 for refl in REFLECTANCES]))  # (reflectances, gammas)
-        self.idx, self.w = np.concatenate(idx), np.concatenate(w)
-        # each luminaire's direction (C, gamma) as the observer sees it, its distance and
-        # position index squared: what its weight takes from the room
-        self._c, self._gamma, self._d2, self._p2 = (np.concatenate(a) for a in zip(*seen))
-        # (not a matrix product: BLAS's threads would spin beside the tracing threads)
-        self.starts = np.cumsum([0] + [len(a) for a, *_ in seen[:-1]])
-        self.lb = np.stack(lbs)
+    def __init__(self, tables: tuple):
+        """``tables``: :func:`_layout_tables` of the grid's layout."""
+        (self.shape, self.idx, self.w, self._c, self._gamma, self._d2, self._p2, self.starts,
+         self.lb) = tables
         self.weight = np.empty(0)
         self._last: tuple | None = None  # (opening, its weights)
 
@@ -287,9 +259,58 @@ def _propagated(grid: CGammaGrid, d_glare: np.ndarray, d_back: np.ndarray) -> np
     return np.sqrt(body + poles)
 
 
+def _layout_tables(c: tuple[float, ...], gamma: tuple[float, ...], symmetry: str) -> tuple:
+    """What a UGR table takes from a grid's layout (C planes and gammas, deg; symmetry):
+    the full grid's shape, the taps (indices, weights) of every room's luminaires, their
+    directions (C, gamma, deg), distances and position indices squared, each sum's first
+    row, and the background luminances per unit intensity of each gamma (rooms,
+    reflectances, gammas)."""
+    grid = CGammaGrid(np.array(c), np.array(gamma), np.zeros((len(c), len(gamma))), symmetry)
+    full = grid.full()
+    shape = full.candela.shape
+    gam = full.gamma
+    edges = np.concatenate([[0.0], 0.5 * (gam[1:] + gam[:-1]), [180.0]])
+    cos_e = np.cos(np.radians(edges))
+    dc = np.radians(360.0 / shape[0])
+    down_cos = np.clip(cos_e, 0.0, None)
+    omega_down = (down_cos[:-1] - down_cos[1:]) * dc  # each zone's part below 90
+    omega_up = (cos_e[:-1] - cos_e[1:]) * dc - omega_down
+    idx, w, seen, lbs = [], [], [], []
+    for x, y in ROOMS:
+        g = room(float(x), float(y))
+        for c in (g.c_crosswise, g.c_endwise):
+            i, wi = taps(grid, c, g.gamma)
+            idx.append(i)
+            w.append(wi)
+            seen.append((np.broadcast_to(c, g.gamma.shape), g.gamma,
+                         np.broadcast_to(g.distance ** 2, g.gamma.shape),
+                         np.broadcast_to(g.p ** 2, g.gamma.shape)))
+        floor = omega_down * _floor_share(gam, x, y)
+        # flux (lm) to floor, walls, ceiling per unit intensity of each gamma (all C)
+        to = np.stack([floor, omega_down - floor, omega_up])
+        a_w = 2.0 * HEIGHT * HEIGHT * (x + y)
+        lbs.append(np.stack([g.n / a_w * transfer_factors(x, y, refl) @ to / np.pi
+                             for refl in REFLECTANCES]))  # (reflectances, gammas)
+    idx, w = np.concatenate(idx), np.concatenate(w)
+    # each luminaire's direction (C, gamma) as the observer sees it, its distance and
+    # position index squared: what its weight takes from the room
+    c_, gamma_, d2, p2 = (np.concatenate(a) for a in zip(*seen))
+    # (not a matrix product: BLAS's threads would spin beside the tracing threads)
+    starts = np.cumsum([0] + [len(a) for a, *_ in seen[:-1]])
+    lb = np.stack(lbs)
+    return shape, idx, w, c_, gamma_, d2, p2, starts, lb
+
+
+#: The same tables kept on disk, for the layouts every run uses (the default gammas); a
+#: narrow beam's own gammas follow its measured width, so they are made in the process.
+_kept_layout_tables = kept_table(_layout_tables)
+
+
 #: The last models made, by grid layout: a service writes the same luminaire's table again
 #: and again.
 _MODELS: dict[tuple, _Model] = {}
+#: The gammas of a grid that no narrow beam refines.
+DEFAULT_GAMMAS = default_gammas()
 
 
 def _model(grid: CGammaGrid, opening) -> _Model:
@@ -298,7 +319,10 @@ def _model(grid: CGammaGrid, opening) -> _Model:
     key = (tuple(grid.c.tolist()), tuple(grid.gamma.tolist()), grid.symmetry)
     model = _MODELS.get(key)
     if model is None:
-        model = _MODELS[key] = _Model(grid)
+        standard = len(grid.gamma) == len(DEFAULT_GAMMAS) and \
+            np.array_equal(grid.gamma, DEFAULT_GAMMAS)
+        model = _MODELS[key] = _Model((_kept_layout_tables if standard else _layout_tables)(
+            *key))
         for old in list(_MODELS)[:-8]:
             _MODELS.pop(old, None)
     return model.of(opening)
