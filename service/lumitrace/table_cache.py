@@ -3,9 +3,10 @@ that a run reads them instead of making them again: a pure function's results, p
 once per argument under the user's cache folder and keyed on lumitrace's sources and numpy.
 
 A short run spends as long making these tables (the pull-push pyramid, the cube map's
-seams, the lat-long texture's taps, the goniometer's cell directions: about 50 ms at face
-size 64) as tracing its photons. Reading them back takes about a millisecond. Any edit of
-a lumitrace source or another numpy makes a new key, so a stale table is never read.
+seams, the lat-long texture's taps, the goniometer's cell directions, the UGR table's
+rooms: about 70 ms at face size 64) as tracing its photons. Reading them back takes a few
+milliseconds. Any edit of a lumitrace source or another numpy makes a new key, so a stale
+table is never read.
 The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
 ``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
 cannot be written, or a file that cannot be read, costs only the making; a file that is
