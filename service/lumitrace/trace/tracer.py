@@ -93,7 +93,6 @@ _CUBE_LAYOUT = np.stack([cubemap._C0, cubemap._CX, cubemap._CY, cubemap._R0, cub
                          cubemap._RY])
 
 
-
 def _own_lines(n: int) -> np.ndarray:
     """``n`` int64 zeros on cache lines no other array shares. A count the kernel adds to
     at every hit: two threads' small arrays side by side on one line made each add wait
