@@ -176,9 +176,9 @@ def beam_half_width(rings: list[tuple[float, float, np.ndarray]]) -> float | Non
     lower bound, and a ring counts as below half of it only where its upper bound is
     (3 standard errors each, one photon added to each ring's count). A flat top (a
     cup's direct light, level to its cut-off) has its highest ring anywhere on it, by
-    chance: measured from that ring, its half width flipped from run to run between the
-    cut-off's angle and a few degrees, and the files' gammas with it between the default
-    and the fine raster (a white cup's files at 491K photons: 4.0% then, 1.1% now)."""
+    chance: measured from that ring, its half width would flip from run to run between
+    the cut-off's angle and a few degrees, and the files' gammas with it between the
+    default and the fine raster."""
     flux = sum((w * ring for w, _, ring in rings), np.zeros(N_GAMMA))
     if not np.any(flux):
         return None
