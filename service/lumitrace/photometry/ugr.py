@@ -319,10 +319,9 @@ def _model(grid: CGammaGrid, opening) -> _Model:
     key = (tuple(grid.c.tolist()), tuple(grid.gamma.tolist()), grid.symmetry)
     model = _MODELS.get(key)
     if model is None:
-        standard = len(grid.gamma) == len(DEFAULT_GAMMAS) and \
-            np.array_equal(grid.gamma, DEFAULT_GAMMAS)
-        model = _MODELS[key] = _Model((_kept_layout_tables if standard else _layout_tables)(
-            *key))
+        make = _kept_layout_tables if np.array_equal(grid.gamma, DEFAULT_GAMMAS) \
+            else _layout_tables
+        model = _MODELS[key] = _Model(make(*key))
         for old in list(_MODELS)[:-8]:
             _MODELS.pop(old, None)
     return model.of(opening)
