@@ -421,9 +421,10 @@ def weld_seams(image, solid_angles=None) -> np.ndarray:
 
 
 def bilinear_taps(directions, res: int) -> tuple[np.ndarray, np.ndarray]:
-    """The four texels (N, 4) and weights (N, 4) of :func:`sample_map`'s bilinear lookup
+    """The four texels (4, N) and weights (4, N) of :func:`sample_map`'s bilinear lookup
     of ``directions`` (N, 3) in a map of face size ``res``: a lookup of many maps at the
-    same directions computes them once."""
+    same directions computes them once. Tap by tap (rows), so that each gather reads one
+    contiguous row of indices: a third of the time of gathering columns."""
     res = _check_res(res)
     face, pif = face_and_pixel_position(directions, res)
     s = res - 1
@@ -440,8 +441,8 @@ def bilinear_taps(directions, res: int) -> tuple[np.ndarray, np.ndarray]:
 
     tx, ty = t[:, 0], t[:, 1]
     index = np.stack([texel(i0[:, 0], i0[:, 1]), texel(i1[:, 0], i0[:, 1]),
-                      texel(i0[:, 0], i1[:, 1]), texel(i1[:, 0], i1[:, 1])], axis=1)
-    weight = np.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty], axis=1)
+                      texel(i0[:, 0], i1[:, 1]), texel(i1[:, 0], i1[:, 1])])
+    weight = np.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty])
     return index, weight
 
 
@@ -475,9 +476,13 @@ def sample_map(image, directions, taps: tuple[np.ndarray, np.ndarray] | None = N
     if img.shape[1] != res:
         raise ValueError(f"cube map image must be {6 * res} x {res}, got {img.shape[:2]}")
     index, weight = taps if taps is not None else bilinear_taps(directions, res)
+    if img.ndim == 2:
+        flat = img.ravel()
+        return ((weight[0] * flat[index[0]] + weight[1] * flat[index[1]])
+                + weight[2] * flat[index[2]]) + weight[3] * flat[index[3]]
     flat = img.reshape(NUM_FACES * res * res, -1)
-    out = sum(weight[:, k:k + 1] * flat[index[:, k]] for k in range(4))
-    return out[:, 0] if img.ndim == 2 else out
+    return ((weight[0, :, None] * flat[index[0]] + weight[1, :, None] * flat[index[1]])
+            + weight[2, :, None] * flat[index[2]]) + weight[3, :, None] * flat[index[3]]
 
 
 def latlong_directions(height: int, width: int | None = None) -> np.ndarray:

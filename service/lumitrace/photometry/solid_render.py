@@ -107,7 +107,8 @@ m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); m.serve()
 
 def serve() -> None:
     """The renderer's loop: load VTK, say ``ready``, then draw each job read from standard
-    input (a length and a pickle of ``(id, path, pts, cd, tri, up_axis, title)``) and
+    input (a length and a pickle of ``(id, job file)``; the file, in the command's own
+    folder for this renderer, a pickle of ``(path, pts, cd, tri, up_axis, title)``) and
     answer ``ok ID`` or ``error ID MESSAGE``, until standard input ends."""
     import signal
 
@@ -124,6 +125,9 @@ def serve() -> None:
     try:
         _quiet_pyvista()  # the point: VTK loaded while the command traces
         import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (the window's libraries)
+        # and pyvista's plotting, which a first Plotter would load (0.6-0.7 s: it brings
+        # matplotlib for its colour maps), before the first solid, not after it came
+        import pyvista.plotting  # noqa: F401
     except Exception as exc:  # noqa: BLE001  (the command draws it itself)
         out.write(f"unavailable {type(exc).__name__}\n")
         out.flush()
@@ -137,7 +141,10 @@ def serve() -> None:
             return
         job = pickle.loads(stdin.read(struct.unpack("<Q", head)[0]))
         try:
-            draw_solid(*job[1:])
+            with open(job[1], "rb") as fh:
+                args = pickle.load(fh)
+            os.unlink(job[1])
+            draw_solid(*args)
             out.write(f"ok {job[0]}\n")
         except Exception as exc:  # noqa: BLE001
             out.write(f"error {job[0]} {type(exc).__name__}: "
@@ -169,14 +176,20 @@ class Renderer:
         return self.proc.poll() is None
 
     def submit(self, path, pts, cd, tri, up_axis: str, title: str) -> int | None:
-        """Send a solid to draw; its job id, or None when the renderer cannot take it."""
+        """Send a solid to draw; its job id, or None when the renderer cannot take it.
+        The solid's arrays (a megabyte or more) go into a file beside the pictures, and
+        only its name through the pipe: a renderer still loading VTK does not read, and a
+        pipe's 64 KB would hold the command until it did (a quarter of a second)."""
         with self._lock:
             if not self.alive():
                 return None
             job = next(self._ids)
-            data = pickle.dumps((job, str(self._drawn(job)), pts, cd, tri, up_axis, title),
-                                protocol=pickle.HIGHEST_PROTOCOL)
+            spec = self.folder / f"{job}.job"
             try:
+                with open(spec, "wb") as fh:
+                    pickle.dump((str(self._drawn(job)), pts, cd, tri, up_axis, title), fh,
+                                protocol=pickle.HIGHEST_PROTOCOL)
+                data = pickle.dumps((job, str(spec)), protocol=pickle.HIGHEST_PROTOCOL)
                 self.proc.stdin.write(struct.pack("<Q", len(data)) + data)
                 self.proc.stdin.flush()
             except OSError:
