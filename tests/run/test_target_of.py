@@ -64,6 +64,52 @@ def test_a_target_on_the_files_stops_when_their_true_error_is_about_it():
     assert result.estimate.error_bound > target
 
 
+def test_the_photons_a_target_is_projected_to_need():
+    from lumitrace.run.session import photons_to_target
+
+    # the error falls as one over the root of the photons: half the error, four times them
+    assert photons_to_target(100_000, 0.02, 0.01, margin=1.0) == 300_000
+    assert photons_to_target(100_000, 0.02, 0.01, margin=1.2) == 380_000
+    assert photons_to_target(100_000, 0.009, 0.01, margin=1.0) == 0  # met already
+    assert photons_to_target(100_000, math.inf, 0.01) == math.inf  # no light: unknown
+    assert photons_to_target(0, 0.02, 0.01) == math.inf
+
+
+def test_a_files_target_sizes_its_last_round_to_reach_it():
+    """The last round is the projected photons, not a doubling: the run stops one round
+    after the projection with its files just under the target (the margin's 1.2 times the
+    photons: about 0.91 of it), where doubling stopped at 2.06M photons and 0.76% on the
+    isotropic source asked for 1%."""
+    from lumitrace.run.session import MIN_PHOTONS_FOR_TARGET, TARGET_MARGIN, Refinement
+
+    scene = read_stage(REFERENCE / "isotropic.usda")
+    target = 0.01
+    settings = TraceSettings(target_error=target, resolution=16, seed=5, threads=2)
+    session = Refinement(scene, settings)
+    from lumitrace.run.workers import batch_runner
+    from lumitrace.trace.prepared import prepare
+
+    ps = prepare(scene)
+    rounds = []
+    with batch_runner(scene, ps, "threads", 2) as runner:
+        while not session.finished():
+            jobs = session.next_jobs()
+            session.add_round(runner(jobs), estimated=False)
+            rounds.append((session.accumulator.photons, session.files.error,
+                           session.to_target))
+    photons, error, _ = rounds[-1]
+    assert session.reached_target() and error <= target
+    # the round before the last projected it: the last round traced what it asked
+    before, error_before, projected = rounds[-2]
+    assert before >= MIN_PHOTONS_FOR_TARGET and error_before > target
+    assert photons - before == projected
+    assert photons == math.ceil(before * TARGET_MARGIN * (error_before / target) ** 2)
+    # its error as projected: within the noise of the error's own estimate
+    assert 0.85 * target < error < 0.97 * target, rounds
+    # and fewer photons than doubling the rounds would have traced
+    assert photons < 2 * before
+
+
 def test_the_map_is_judged_only_when_asked():
     scene = read_stage(REFERENCE / "lambertian_disc.usda")
     result = run(scene, TraceSettings(target_error=0.05, resolution=8, seed=2, threads=2,

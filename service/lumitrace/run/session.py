@@ -44,6 +44,11 @@ NO_ESCAPE_PHOTONS = 1 << 20
 #: Photons a session traces before its estimated error may stop it: the split-half
 #: estimate of the first small rounds can be far too low (few photons per texel).
 MIN_PHOTONS_FOR_TARGET = 1 << 17
+#: A files' target's last round is sized to reach it (the error falling as one over the
+#: root of the photons) with this many times the photons projected, not doubled blindly:
+#: the estimate is noisy, most in the worst lit value, and a round short of the target
+#: costs another round's judging.
+TARGET_MARGIN = 1.2
 #: Share of the emitted flux cut by the depth limit above which the result says so.
 CUT_WARNING_FRACTION = 0.01
 
@@ -99,6 +104,18 @@ def _round_jobs(done: list[int], targets: list[float], shares: list[float],
             start += c
             want -= c
     return jobs
+
+
+def photons_to_target(photons: int, error: float, target: float,
+                      margin: float = TARGET_MARGIN) -> float:
+    """Photons still to trace for a relative ``error`` measured at ``photons`` to fall to
+    ``target``, errors falling as one over the root of the photons: ``margin`` times the
+    photons projected, less those traced (infinite where the error is unknown)."""
+    if not (math.isfinite(error) and error > 0 and target > 0 and photons > 0):
+        return math.inf
+    if error <= target:
+        return 0.0
+    return max(0.0, math.ceil(photons * margin * (error / target) ** 2) - photons)
 
 
 def _warn_unreached(acc: Accumulator) -> None:
@@ -157,7 +174,9 @@ class Refinement:
     def next_jobs(self, most: int | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
         most ``most`` photons when given (a round that must end by a deadline)."""
-        size = self.round_photons if most is None else max(1, min(self.round_photons, most))
+        size = self.round_photons if math.isinf(self.to_target) else \
+            max(MIN_SPLIT_PHOTONS, min(self.round_photons, int(self.to_target)))
+        size = size if most is None else max(1, min(size, most))
         return _round_jobs(self.done, self.targets, self.shares, size, self.settings)
 
     def add_round(self, tallies, estimated: bool = True) -> MapEstimate | None:
@@ -196,9 +215,14 @@ class Refinement:
         if est is not None and est.threshold != self.settings.threshold:
             est = estimate(self.accumulator, self.settings.threshold)  # changed meanwhile
         self._set_estimate(est)
+        self.to_target = math.inf
         if self.settings.target_error is not None:
             checkpoint()
-            self.current_files()
+            files = self.current_files()
+            if files is not None and self.accumulator.photons >= MIN_PHOTONS_FOR_TARGET:
+                # the first rounds' estimates can be far too low: no projection from them
+                self.to_target = photons_to_target(self.accumulator.photons, files.error,
+                                                   self.settings.target_error)
         t_estimate = time.perf_counter() - t0
         if self.round_photons < self.full_round or (
                 t_estimate > ESTIMATE_SHARE * self._t_trace and self._t_trace < ROUND_SECONDS):
@@ -237,6 +261,9 @@ class Refinement:
         self.targets = (allocate(fluxes, budget, MIN_EMITTER_PHOTONS)
                         if budget is not None else [math.inf] * len(fluxes))
         self.settings, self.budget = settings, budget
+        #: photons the files' target is projected to need beyond those traced (infinite:
+        #: none projected): the next round is no larger (see :data:`TARGET_MARGIN`)
+        self.to_target = math.inf
 
     def finished(self) -> bool:
         """Whether refining is over: the target reached, the budget spent, or no light
