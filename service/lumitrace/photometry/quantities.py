@@ -31,7 +31,7 @@ import numpy as np
 
 from ..film.accumulate import Accumulator
 from ..film.goniometer import CIE_COSINES, GAMMA_EDGES
-from .grid import CGammaGrid, redrawn
+from .grid import CGammaGrid, NormalDraws, redrawn
 from .accuracy import grid_accuracy
 from .measured import emitter_rings, measure_all
 from .peak import Peak, fitted_peak
@@ -285,7 +285,7 @@ DRAW_CHUNK = 50
 
 
 def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
-                  rng: np.random.Generator, peak: Peak | None = None,
+                  rng, peak: Peak | None = None,
                   planes: tuple[float, ...] = (0.0, 90.0), fractions: tuple[float, ...] = (
                       0.5, 0.1)) -> dict:
     """The beam (``fraction`` 0.5) and field (0.1) angles in the vertical planes through
@@ -293,7 +293,7 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     (deg from nadir, negative toward C + 180))}. A profile with a shoulder near the level
     crosses it more than twice; the angle is between the outermost two, as CIE and IES read
     it. The errors come from :data:`BOOTSTRAP_DRAWS` redraws of the grid within its errors
-    (:func:`redrawn`: both sides of a symmetric profile are the same values and move
+    (``rng``'s normal draws, see :func:`redrawn`: both sides of a symmetric profile are the same values and move
     together) and of the level's top within its error."""
     tops = {c: _level(grid, halves, c, peak) for c in planes}
     sigmas = {c: _plane_profile(grid, c, grid.sigma)[1] for c in planes}
@@ -383,7 +383,7 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         i, j = picks[0] if grid.candela.flat[a0] >= grid.candela.flat[a1] else picks[1]
         top = Peak(peak, peak_err, float(grid.c[i]), float(grid.gamma[j]))
     accuracy = grid_accuracy(grid, c_step)
-    rng = np.random.default_rng(0)
+    rng = NormalDraws(0)
     spreads = plane_spreads(*profiles, rng, top)
     values, errors = z["cie"]
     code = " ".join(str(int(round(v))) for v in values)
