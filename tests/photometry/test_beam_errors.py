@@ -69,3 +69,29 @@ def test_a_rotationally_symmetric_luminaire_has_one_beam_in_every_plane():
         (f.beam_angle_c90_c270, f.beam_angle_c90_c270_error)
     assert (f.field_angle_c0_c180, f.field_angle_c0_c180_error) == \
         (f.field_angle_c90_c270, f.field_angle_c90_c270_error)
+
+
+def test_the_bootstraps_normal_draws_are_standard_normal_and_reproducible():
+    """The figures' own normal draws (hashed counters, Box-Muller): mean 0, variance 1,
+    no skew or excess kurtosis, the normal's quantiles, successive draws uncorrelated; the
+    same seed the same draws, another seed others."""
+    import math
+
+    from lumitrace.photometry.grid import NormalDraws
+
+    n = 400_000
+    d = NormalDraws(0)
+    z = d.standard_normal((n // 2, 2))
+    assert z.shape == (n // 2, 2) and isinstance(d.standard_normal(), float)
+    z = z.ravel()
+    se = 1.0 / math.sqrt(n)
+    assert abs(z.mean()) < 4 * se
+    assert abs(z.var() - 1.0) < 4 * math.sqrt(2.0) * se
+    assert abs(np.mean(z ** 3)) < 4 * math.sqrt(15.0) * se  # skewness, var 15/n
+    assert abs(np.mean(z ** 4) - 3.0) < 4 * math.sqrt(96.0) * se  # excess kurtosis, var 96/n
+    for q in (-2.0, -1.0, 0.0, 0.5, 1.5, 2.5):
+        p = 0.5 * (1.0 + math.erf(q / math.sqrt(2.0)))
+        assert abs(np.mean(z <= q) - p) < 4 * math.sqrt(p * (1 - p) / n), q
+    assert abs(np.corrcoef(z[:-1], z[1:])[0, 1]) < 4 * se
+    np.testing.assert_array_equal(NormalDraws(0).standard_normal((n // 2, 2)).ravel(), z)
+    assert not np.array_equal(NormalDraws(1).standard_normal((n // 2, 2)).ravel(), z)

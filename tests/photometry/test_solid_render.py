@@ -191,3 +191,26 @@ def test_by_default_a_terminal_gets_a_renderer_and_a_script_does_not(monkeypatch
     monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 1)
     monkeypatch.setenv("LUMITRACE_RENDERER", "process")
     assert not solid_render.wanted()
+
+
+def test_a_solid_handed_over_does_not_wait_for_the_renderer_to_read(tmp_path, monkeypatch):
+    """A renderer still loading VTK reads nothing: a solid of a few megabytes handed to it
+    must not hold the command until it does (a pipe holds 64 KB). Here a renderer that
+    never reads at all: the submit returns, and its arrays wait in the renderer's folder."""
+    monkeypatch.setattr(solid_render, "_BOOT", "import time; time.sleep(60)")
+    r = solid_render.Renderer()
+    try:
+        g = np.linspace(0.0, 1.0, 400)
+        pts = np.stack(np.meshgrid(g, g, g[:3], indexing="ij"), -1)[..., 0, :]  # 400 x 400
+        cd = np.ones(pts.shape[:2])
+        done = []
+        t = threading.Thread(target=lambda: done.append(
+            r.submit(tmp_path / "x.png", pts, cd, np.zeros((0, 3, 3)), "Z", "")), daemon=True)
+        t.start()
+        t.join(timeout=20)
+        assert done and done[0] == 1, "the submit waited for the renderer to read"
+        assert (r.folder / "1.job").stat().st_size > pts.nbytes
+    finally:
+        r.proc.kill()
+        r.close()
+    assert not r.folder.exists()
