@@ -293,8 +293,8 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
     (deg from nadir, negative toward C + 180))}. A profile with a shoulder near the level
     crosses it more than twice; the angle is between the outermost two, as CIE and IES read
     it. The errors come from :data:`BOOTSTRAP_DRAWS` redraws of the grid within its errors
-    (``rng``'s normal draws, see :func:`redrawn`: both sides of a symmetric profile are the same values and move
-    together) and of the level's top within its error."""
+    (``rng``'s normal draws, see :func:`redrawn`: both sides of a symmetric profile are the
+    same values and move together) and of the level's top within its error."""
     tops = {c: _level(grid, halves, c, peak) for c in planes}
     sigmas = {c: _plane_profile(grid, c, grid.sigma)[1] for c in planes}
     out, draws = {}, {}

@@ -156,8 +156,9 @@ def serve() -> None:
 def _lean_matplotlib() -> None:
     """The renderer's matplotlib (pyvista's colour maps load pyplot): the Agg backend, no
     display looked for, and the Artists' ``set()`` docstrings left short, as
-    :mod:`lumitrace.pyplot` has them in a command's process (nobody reads them here). Its
-    load, and pyvista's, 0.9 of the time (10 runs in turn)."""
+    :mod:`lumitrace.pyplot` has them in a command's process (nobody reads them here):
+    pyvista's plotting, matplotlib with it, then loads in 0.9 of the time (10 runs in
+    turn)."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
         import matplotlib.artist as artist
