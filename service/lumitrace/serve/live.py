@@ -183,7 +183,12 @@ class LiveStage:
                     (e.rays,) if e.rays is not None else ())}
 
     def _remember_files(self) -> None:
-        self.known = {p: file_digest(p) for p in self.layer_files() | self.asset_files()}
+        """Know the content of every file the stage now uses. A file known already keeps
+        the digest of what was loaded from it: a save that lands while the scene is read
+        must stay news to the watcher (digested from the disk now, it would pass for the
+        content loaded, and be lost). A file newly used is digested as it is."""
+        files = self.layer_files() | self.asset_files()
+        self.known = {p: self.known[p] if p in self.known else file_digest(p) for p in files}
 
     def folders(self) -> set[Path]:
         """The folders to watch (those of :meth:`layer_files` and :meth:`asset_files`)."""
