@@ -123,7 +123,9 @@ def default_gammas(peak_half_width_deg: float | None = None) -> np.ndarray:
 
 class NormalDraws:
     """Standard normal draws for the figures' bootstrap, a pure function of a seed and the
-    draws made before: counters hashed (MurmurHash3's 64-bit finaliser) into uniform pairs,
+    draws made before: counters hashed (MurmurHash3's 64-bit finaliser, as
+    :func:`lumitrace.trace.rng.fmix64` has it for the photons; photometry does not import
+    the tracer, and the kernels compile that module's constants in) into uniform pairs,
     made normal by the Box-Muller transform. A ``numpy.random.Generator`` serves alike (its
     ``standard_normal``), but loading numpy.random costs every run 10 ms."""
 
