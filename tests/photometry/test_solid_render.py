@@ -62,6 +62,33 @@ def test_the_renderer_draws_the_png_this_process_draws(renderer, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["here.png", "there.png"]  # no temp
 
 
+def test_solids_drawn_one_after_another_in_the_kept_window_are_each_the_fresh_picture(
+        renderer, tmp_path):
+    """The renderer draws in one window (warmed up, then reused): nothing of a solid drawn
+    before (its scale, its camera, its title, its luminaire) is left in the next."""
+    pts, cd, tri = _solid()
+    solids = [(pts, cd, tri, "Z", "a title"),
+              (2.0 * pts, 40.0 * cd, tri[:1], "Y", ""),  # a wider scale, no title, Y up
+              (pts, cd, tri[:0], "Z", "again")]  # the first scale again, no luminaire
+    jobs = [renderer.submit(tmp_path / f"there{i}.png", *s) for i, s in enumerate(solids)]
+    assert all(job is not None for job in jobs)
+    assert all(renderer.wait(job) for job in jobs)
+    for i, s in enumerate(solids):
+        solid_render.draw_solid(tmp_path / f"here{i}.png", *s)
+        there = (tmp_path / f"there{i}.png").read_bytes()
+        here = (tmp_path / f"here{i}.png").read_bytes()
+        assert len(there) > 10_000 and there == here, f"solid {i} differs"
+    # and the in-process canvas, kept, draws them alike
+    canvas = solid_render.SolidCanvas()
+    try:
+        for i, s in enumerate(reversed(solids)):
+            canvas.draw(tmp_path / f"kept{i}.png", *s)
+            assert (tmp_path / f"kept{i}.png").read_bytes() == \
+                (tmp_path / f"here{len(solids) - 1 - i}.png").read_bytes()
+    finally:
+        canvas.close()
+
+
 def test_a_failed_picture_is_answered_and_the_renderer_goes_on(renderer, tmp_path):
     pts, cd, tri = _solid()
     bad = renderer.submit(tmp_path / "no such folder" / "x.png", pts, cd, tri, "Z", "")
