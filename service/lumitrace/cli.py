@@ -382,7 +382,9 @@ def cmd_serve(args) -> int:
     token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
     from .photometry.solid_render import start_renderer
 
-    start_renderer()  # the solids drawn off this process's interpreter, which edits need
+    # the solids drawn off this process's interpreter, which edits need, in a window
+    # warmed up while the service starts
+    start_renderer(warm_up=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
                  deliverables=args.deliverables)

@@ -143,16 +143,21 @@ def test_an_abandoned_picture_is_never_written(renderer, tmp_path):
     assert renderer.alive() and not list(renderer.folder.iterdir())
 
 
-def _renderers() -> set[int]:
-    """Pids of the running renderer processes (by their command line)."""
+def _renderers(parent: int | None = None) -> set[int]:
+    """Pids of the running renderer processes (by their command line), of ``parent``'s
+    only when given (other tests running beside this one start renderers of their own)."""
     out = set()
     for d in os.listdir("/proc"):
         if d.isdigit():
             try:
                 with open(f"/proc/{d}/cmdline", "rb") as f:
-                    if b"_lumitrace_solid_render" in f.read():
-                        out.add(int(d))
-            except OSError:
+                    if b"_lumitrace_solid_render" not in f.read():
+                        continue
+                with open(f"/proc/{d}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+                if parent is None or ppid == parent:
+                    out.add(int(d))
+            except (OSError, ValueError, IndexError):
                 pass
     return out
 
@@ -165,7 +170,6 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
     renderer of it is left; a SIGTERM mid-run leaves none either."""
     stage = tmp_path / "cup.usda"
     stage.write_bytes((ROOT / "stages" / "reference" / "mirror_cup.usda").read_bytes())
-    before = _renderers()
     cmd = [sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
            "trace", str(stage), "--photons", "100000", "--no-progress", "--no-sublayer",
            "--out", str(tmp_path / "out")]
@@ -174,7 +178,7 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
                          env=env)
     seen = set()
     for _ in range(100):
-        seen = _renderers() - before
+        seen = _renderers(p.pid)
         if seen or p.poll() is not None:
             break
         time.sleep(0.02)
@@ -183,20 +187,23 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
     assert seen, "no renderer started"
     assert (tmp_path / "out" / "cup.solid.png").stat().st_size > 10_000
     time.sleep(0.2)
-    assert not (_renderers() - before)
+    assert not (seen & _renderers())
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=env)
+    seen = set()
     for _ in range(100):
-        if _renderers() - before:
+        seen = _renderers(p.pid)
+        if seen:
             break
         time.sleep(0.02)
+    assert seen, "no renderer started"
     p.send_signal(signal.SIGTERM)
     p.communicate(timeout=120)
     for _ in range(50):  # the renderer ends with its command
-        if not (_renderers() - before):
+        if not (seen & _renderers()):
             break
         time.sleep(0.05)
-    assert not (_renderers() - before)
+    assert not (seen & _renderers())
 
 
 def test_by_default_a_terminal_gets_a_renderer_and_a_script_does_not(monkeypatch):

@@ -5,10 +5,10 @@ and the polar curve on another core.
 Loading pyvista and VTK costs a run that writes pictures about a second, and a solid drawn
 in a new window 0.4-0.5 s more, all while the interpreter is held. A command that will
 draw starts a renderer (:func:`start_renderer`) before it loads lumitrace (a service, as
-it starts); the renderer loads VTK while the photons are traced, opens one window and
-warms it up with a small solid while nothing is asked of it, then draws each solid it is
-sent in that window (0.2 s each) into a folder of its own, and the PNG is put in its place
-when it is waited for: a picture no longer wanted (an edit came, a set was rolled back)
+it starts); the renderer loads VTK while the photons are traced, opens one window (a
+service's warmed up with a small solid), then draws each solid it is sent in that window
+(a window that has drawn before draws the next in half the time) into a folder of its own,
+and the PNG is put in its place when it is waited for: a picture no longer wanted (an edit came, a set was rolled back)
 never lands, and the renderer goes on. Wherever it cannot (it did not start, died, or
 failed a picture), the solid is drawn here, in a window of its own.
 
@@ -147,12 +147,14 @@ def _write_whole(path, write) -> Path:
 
 _BOOT = """import importlib.util, sys
 spec = importlib.util.spec_from_file_location("_lumitrace_solid_render", sys.argv[1])
-m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); m.serve()"""
+m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m)
+m.serve(warm_up=sys.argv[2:] == ["warm-up"])"""
 
 
-def serve() -> None:
-    """The renderer's loop: load VTK, say ``ready``, open and warm up its window, then draw
-    each job read from standard input (a length and a pickle of ``(id, job file)``; the file, in the command's own
+def serve(warm_up: bool = False) -> None:
+    """The renderer's loop: load VTK, say ``ready``, open its window (and with ``warm_up``
+    draw a first small solid in it, see :meth:`Renderer.__init__`), then draw each job read
+    from standard input (a length and a pickle of ``(id, job file)``; the file, in the command's own
     folder for this renderer, a pickle of ``(path, pts, cd, tri, up_axis, title)``) and
     answer ``ok ID`` or ``error ID MESSAGE``, until standard input ends."""
     import signal
@@ -181,7 +183,7 @@ def serve() -> None:
     out.write("ready\n")
     out.flush()
     stdin = sys.stdin.buffer
-    canvas = _warm_canvas(stdin)
+    canvas = _kept_canvas(stdin, warm_up)
     while True:
         head = stdin.read(8)
         if len(head) < 8:
@@ -208,15 +210,16 @@ def serve() -> None:
         out.flush()
 
 
-def _warm_canvas(stdin) -> SolidCanvas | None:
-    """The renderer's window, warmed up unless a solid is already waiting (then the warm-up
-    would only delay it); None where it cannot be made (each solid then gets its own)."""
+def _kept_canvas(stdin, warm_up: bool) -> SolidCanvas | None:
+    """The renderer's window, warmed up if asked and no solid is waiting yet (then the
+    warm-up would only delay it); None where it cannot be made (each solid then gets its
+    own)."""
     try:
         canvas = SolidCanvas()
     except Exception:  # noqa: BLE001
         return None
     try:
-        if not select.select([stdin], [], [], 0)[0]:
+        if warm_up and not select.select([stdin], [], [], 0)[0]:
             canvas.warm_up()
     except Exception:  # noqa: BLE001
         with contextlib.suppress(Exception):
@@ -246,10 +249,16 @@ class Renderer:
     place. A picture no longer wanted (its set rolled back, a newer revision come) is just
     not waited for: it never reaches its place, and the renderer goes on to the next."""
 
-    def __init__(self):
+    def __init__(self, warm_up: bool = False):
+        """``warm_up``: draw a small solid as soon as VTK is loaded, so that the first real
+        one is drawn in a window that has drawn before (0.2 s, not 0.4-0.5 s). That costs
+        0.5 CPU s at once: a service, idle between edits, gains it back from its second
+        solid on; a command tracing on every core would only be slowed by it (a 10M-photon
+        run with pictures took 1.1 times as long with it, 6 runs in turn on 2 cores)."""
         self.folder = Path(tempfile.mkdtemp(prefix="lumitrace-renderer-"))
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", _BOOT, os.path.abspath(__file__)], stdin=subprocess.PIPE,
+            [sys.executable, "-c", _BOOT, os.path.abspath(__file__)]
+            + (["warm-up"] if warm_up else []), stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, close_fds=True)
         self._ids = iter(range(1, 1 << 62))
         self._targets: dict[int, Path] = {}  # job -> where its picture goes once waited for
@@ -381,10 +390,10 @@ def wanted() -> bool:
         return False
 
 
-def start_renderer() -> Renderer | None:
+def start_renderer(warm_up: bool = False) -> Renderer | None:
     """Start this process's renderer where it is :func:`wanted` (once; None where it is
     not, pyvista is not installed or the process cannot be started), to be used by the
-    pictures this process draws."""
+    pictures this process draws; ``warm_up``: see :class:`Renderer`."""
     global _renderer
     if _renderer is not None and _renderer.alive():
         return _renderer
@@ -393,7 +402,7 @@ def start_renderer() -> Renderer | None:
     if not wanted() or importlib.util.find_spec("pyvista") is None:
         return None
     try:
-        _renderer = Renderer()
+        _renderer = Renderer(warm_up)
     except OSError:
         _renderer = None
         return None
