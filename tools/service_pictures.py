@@ -1,0 +1,74 @@
+"""A designer's edit as it reaches the pictures: a real ``lumitrace serve`` (its solids drawn
+by its renderer) on a copy of the stage, converged to 2% first; then ``--edits`` material
+edits (the reflector's specular reflectance), each sent once the last one's revision is
+traced, written and drawn. Timed on the client, from the send to the status saying the
+revision's pictures are written (polar curve and photometric solid in place).
+
+    python tools/service_pictures.py [--stage stages/downlight.usda] [--edits 8] [--json]
+
+Run it against another checkout (``PYTHONPATH=OTHER/service``) in turn with this one to
+compare the two.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from service_process import Service  # noqa: E402
+
+REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
+
+
+def measure(stage: Path, edits: int) -> list[float]:
+    """Seconds from each edit's send to its pictures written."""
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / stage.name
+        shutil.copy(stage, copy)
+        service = Service(copy, "--out", Path(tmp) / "out", "--no-sublayer", "--quiet",
+                          "--target-error", "0.02")
+        try:
+            service.wait_status(lambda s: s.get("state") == "done"
+                                and s.get("written_pictures"), timeout=300)
+            times = []
+            for k in range(edits):
+                delta = {"op": "set", "path": REFLECTOR,
+                         "property": "lumitrace:specularReflectance", "value": 0.80 + 0.01 * k}
+                t0 = time.perf_counter()
+                revision = service.client.send([delta])["revision"]
+                service.wait_done(revision, pictures=True, timeout=300)
+                times.append(time.perf_counter() - t0)
+            return times
+        finally:
+            service.stop()
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--stage", type=Path, default=HERE.parent / "stages" / "downlight.usda")
+    p.add_argument("--edits", type=int, default=8)
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    os.environ["LUMITRACE_RENDERER"] = "process"  # as at a terminal: the service's renderer
+    times = measure(args.stage, args.edits)
+    out = {"stage": str(args.stage), "edits": args.edits,
+           "median_s": statistics.median(times), "max_s": max(times)}
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"{args.stage.name}, {args.edits} material edits: from the send to the pictures "
+              f"written, median {out['median_s']:.2f} s, slowest {out['max_s']:.2f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
