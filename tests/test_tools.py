@@ -44,8 +44,10 @@ RUNS: dict[str, tuple[str, ...]] = {
     "publish_stress.py": ("--runs", "1", "--bursts", "1", "--seconds", "1"),
     "retrace_bench.py": ("--photons", "20000", "--stages", "downlight", "--threads", "1"),
     "seed_study.py": ("--seeds", "2", "--photons", "20000", "--stages", "lambertian_disc"),
+    "service_pictures.py": ("--edits", "1"),
     "side_by_side.py": ("--photons", "20000", "--repeats", "1", "--max-photons", "20000",
                         "--resolution", "8", "--scenes", "isotropic", "--peer", "none"),
+    "solid_bench.py": ("--solids", "1"),
     "startup.py": ("--photons", "10000", "--repeats", "1"),
     "stress.py": ("--photons", "20000", "--fuzz-seconds", "0.5", "--only", "furnace"),
     "viewer_bench.py": ("--help",),  # drives headless Chromium for minutes
