@@ -53,7 +53,9 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         # the renderer loaded and warmed up, as a service's is when its first edit lands
         first = renderer.submit(Path(tmp) / "first.png", *solid(0), "Z", "first")
-        assert first is not None and renderer.wait(first)
+        if first is None or not renderer.wait(first):
+            print("the renderer failed its first solid", file=sys.stderr)
+            return 1
         time.sleep(1.0)
         for k in range(1, args.solids + 1):
             t = time.perf_counter()
