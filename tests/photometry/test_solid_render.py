@@ -89,6 +89,47 @@ def test_solids_drawn_one_after_another_in_the_kept_window_are_each_the_fresh_pi
         canvas.close()
 
 
+def test_a_thread_keeping_its_window_draws_its_solids_in_one_and_closes_it(tmp_path,
+                                                                          monkeypatch):
+    """Without a renderer (a service started by a script), a thread inside
+    :func:`kept_window` (the service's writer) draws its solids in one window, each the PNG
+    a window of its own draws, and closes it at the end; elsewhere each gets its own."""
+    made, closed = [], []
+
+    class Counted(solid_render.SolidCanvas):
+        def __init__(self):
+            super().__init__()
+            made.append(self)
+
+        def close(self):
+            closed.append(self)
+            super().close()
+
+    monkeypatch.setattr(solid_render, "SolidCanvas", Counted)
+    pts, cd, tri = _solid()
+    solids = [(pts, cd, tri, "Z", "one"), (2.0 * pts, 9.0 * cd, tri[:1], "Y", ""),
+              (pts, cd, tri, "Z", "one")]
+
+    inside = []
+
+    def writer():
+        with solid_render.kept_window():
+            for i, s in enumerate(solids):
+                solid_render.draw_solid(tmp_path / f"kept{i}.png", *s)
+            inside.append((len(made), len(closed)))
+
+    t = threading.Thread(target=writer)
+    t.start()
+    t.join()
+    assert inside == [(1, 0)]  # one window, open until the end
+    assert len(made) == 1 and closed == made
+    for i, s in enumerate(solids):  # here, outside: a window each
+        solid_render.draw_solid(tmp_path / f"own{i}.png", *s)
+        assert (tmp_path / f"own{i}.png").read_bytes() == \
+            (tmp_path / f"kept{i}.png").read_bytes(), f"solid {i} differs"
+    assert len(made) == 1 + len(solids) and closed == made
+
+
 def test_a_failed_picture_is_answered_and_the_renderer_goes_on(renderer, tmp_path):
     pts, cd, tri = _solid()
     bad = renderer.submit(tmp_path / "no such folder" / "x.png", pts, cd, tri, "Z", "")

@@ -48,13 +48,44 @@ def _quiet_pyvista():
 
 def draw_solid(path, pts, cd, tri, up_axis: str, title: str) -> Path:
     """Draw the solid (points ``pts`` (C, gamma, 3) coloured by ``cd`` (C, gamma), the
-    luminaire's triangles ``tri`` (T, 3, 3)) with pyvista and write it to ``path`` (PNG),
-    in a window of its own."""
-    canvas = SolidCanvas()
+    luminaire's triangles ``tri`` (T, 3, 3)) with pyvista and write it to ``path`` (PNG):
+    in the window this thread keeps (:func:`kept_window`), else in a window of its own."""
+    keeping = getattr(_thread_windows, "keeping", False)
+    canvas = getattr(_thread_windows, "canvas", None) if keeping else None
+    if canvas is None:
+        canvas = SolidCanvas()
     try:
-        return canvas.draw(path, pts, cd, tri, up_axis, title)
-    finally:
+        out = canvas.draw(path, pts, cd, tri, up_axis, title)
+    except BaseException:  # a window in doubt is not drawn in again
+        _thread_windows.canvas = None
+        with contextlib.suppress(Exception):
+            canvas.close()
+        raise
+    if keeping:
+        _thread_windows.canvas = canvas
+    else:
         canvas.close()
+    return out
+
+
+_thread_windows = threading.local()
+
+
+@contextlib.contextmanager
+def kept_window():
+    """While in it, the solids this thread draws (:func:`draw_solid`) share one window, made
+    at the first and closed at the end: a thread that draws one solid after another (a
+    service's writer) draws each after the first in about half the time. An OpenGL context
+    is current on one thread: the window stays with the thread that made it."""
+    _thread_windows.keeping = True
+    try:
+        yield
+    finally:
+        _thread_windows.keeping = False
+        canvas, _thread_windows.canvas = getattr(_thread_windows, "canvas", None), None
+        if canvas is not None:
+            with contextlib.suppress(Exception):
+                canvas.close()
 
 
 class SolidCanvas:

@@ -3,14 +3,21 @@ engine goes on tracing while a done revision's files and pictures are written.""
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from typing import Callable, ContextManager
+
+from ..photometry.solid_render import kept_window
 
 
 class Writer:
     """A thread that writes the newest result handed to it: one not yet begun when a newer
     one comes is dropped (the newer supersedes it), so writes never queue up."""
 
-    def __init__(self, failed: Callable[[Exception], None]):
+    def __init__(self, failed: Callable[[Exception], None],
+                 around: Callable[[], ContextManager] = kept_window):
+        """``failed(exc)`` hears of a write that raised; the thread runs inside ``around()``:
+        by default the photometric solids its writes draw here (no renderer) share one
+        window, each after the first in about half the time."""
+        self._around = around
         self._cv = threading.Condition()
         self._job: Callable[[], None] | None = None
         self._busy = False
@@ -18,7 +25,7 @@ class Writer:
         self._cheap = False
         self._closed = False
         self._failed = failed
-        self._thread = threading.Thread(target=self._main, name="lumitrace-writer",
+        self._thread = threading.Thread(target=self._run, name="lumitrace-writer",
                                         daemon=True)
         self._thread.start()
 
@@ -47,6 +54,10 @@ class Writer:
             self._closed = True
             self._cv.notify_all()
         self._thread.join()
+
+    def _run(self) -> None:
+        with self._around():
+            self._main()
 
     def _main(self) -> None:
         while True:
