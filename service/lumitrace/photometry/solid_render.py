@@ -92,8 +92,8 @@ class SolidCanvas:
     """An offscreen window that draws photometric solids one after another. A new window
     spends 0.3-0.4 s of its first drawing setting up its OpenGL context and compiling its
     shaders (Mesa's software renderer); a window kept draws the next solid, its PNG
-    included, in about 0.2 s, the same picture to the byte. The renderer keeps one (a
-    service's warmed up as it starts: :meth:`warm_up`)."""
+    included, in about 0.2 s, the same picture to the byte. The renderer keeps one
+    (:func:`kept_window`; a service's warmed up as it starts)."""
 
     def __init__(self):
         self.pv = _quiet_pyvista()
@@ -137,20 +137,6 @@ class SolidCanvas:
         plotter.render()
         return _write_whole(path, plotter.screenshot)
 
-    def warm_up(self) -> None:
-        """Draw a small solid and throw it away: the window's context, its shaders and the
-        PNG writer are then ready for the first real one."""
-        import numpy as np
-
-        c = np.radians(np.linspace(0.0, 360.0, 13))[:, None]
-        g = np.radians(np.linspace(0.0, 180.0, 13))[None, :]
-        r = np.maximum(np.cos(g), 0.0) + 0.0 * c
-        pts = np.stack([r * np.sin(g) * np.cos(c), r * np.sin(g) * np.sin(c),
-                        -r * np.cos(g)], axis=-1)
-        tri = np.array([[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]], np.float32)
-        with tempfile.TemporaryDirectory(prefix="lumitrace-warm-up-") as folder:
-            self.draw(Path(folder) / "warm-up.png", pts, 100.0 * r, tri, "Z", "warm-up")
-
     def close(self) -> None:
         self.plotter.close()
 
@@ -183,8 +169,8 @@ m.serve(warm_up=sys.argv[2:] == ["warm-up"])"""
 
 
 def serve(warm_up: bool = False) -> None:
-    """The renderer's loop: load VTK, say ``ready``, open its window (and with ``warm_up``
-    draw a first small solid in it, see :meth:`Renderer.__init__`), then draw each job
+    """The renderer's loop: load VTK, say ``ready`` (with ``warm_up`` draw a first small
+    solid, see :meth:`Renderer.__init__`), then draw each job, all in one window kept,
     read from standard input (a length and a pickle of ``(id, job file)``; the file, in
     the command's own folder for this renderer, a pickle of ``(path, pts, cd, tri,
     up_axis, title)``) and answer ``ok ID`` or ``error ID MESSAGE``, until standard input
@@ -215,49 +201,40 @@ def serve(warm_up: bool = False) -> None:
     out.write("ready\n")
     out.flush()
     stdin = sys.stdin.buffer
-    canvas = _kept_canvas(stdin, warm_up)
-    while True:
-        head = stdin.read(8)
-        if len(head) < 8:
-            return
-        job = pickle.loads(stdin.read(struct.unpack("<Q", head)[0]))
-        try:
-            with open(job[1], "rb") as fh:
-                args = pickle.load(fh)
-            os.unlink(job[1])
-            if canvas is not None:
-                try:
-                    canvas.draw(*args)
-                except Exception:  # a window in doubt is not drawn in again
-                    with contextlib.suppress(Exception):
-                        canvas.close()
-                    canvas = None
-                    raise
-            else:
+    with kept_window():
+        if warm_up and not select.select([stdin], [], [], 0)[0]:  # (a solid waiting: no)
+            with contextlib.suppress(Exception):  # the first solid makes its own window
+                _warm_up()
+        while True:
+            head = stdin.read(8)
+            if len(head) < 8:
+                return
+            job = pickle.loads(stdin.read(struct.unpack("<Q", head)[0]))
+            try:
+                with open(job[1], "rb") as fh:
+                    args = pickle.load(fh)
+                os.unlink(job[1])
                 draw_solid(*args)
-            out.write(f"ok {job[0]}\n")
-        except Exception as exc:  # noqa: BLE001
-            out.write(f"error {job[0]} {type(exc).__name__}: "
-                      f"{str(exc).splitlines()[0] if str(exc) else ''}\n")
-        out.flush()
+                out.write(f"ok {job[0]}\n")
+            except Exception as exc:  # noqa: BLE001
+                out.write(f"error {job[0]} {type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else ''}\n")
+            out.flush()
 
 
-def _kept_canvas(stdin, warm_up: bool) -> SolidCanvas | None:
-    """The renderer's window, warmed up if asked and no solid is waiting yet (then the
-    warm-up would only delay it); None where it cannot be made (each solid then gets its
-    own)."""
-    try:
-        canvas = SolidCanvas()
-    except Exception:  # noqa: BLE001
-        return None
-    try:
-        if warm_up and not select.select([stdin], [], [], 0)[0]:
-            canvas.warm_up()
-    except Exception:  # noqa: BLE001
-        with contextlib.suppress(Exception):
-            canvas.close()
-        return None
-    return canvas
+def _warm_up() -> None:
+    """Draw a small solid in this thread's kept window and throw it away: the window's
+    context, its shaders and the PNG writer are then ready for the first real one."""
+    import numpy as np
+
+    c = np.radians(np.linspace(0.0, 360.0, 13))[:, None]
+    g = np.radians(np.linspace(0.0, 180.0, 13))[None, :]
+    r = np.maximum(np.cos(g), 0.0) + 0.0 * c
+    pts = np.stack([r * np.sin(g) * np.cos(c), r * np.sin(g) * np.sin(c),
+                    -r * np.cos(g)], axis=-1)
+    tri = np.array([[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]], np.float32)
+    with tempfile.TemporaryDirectory(prefix="lumitrace-warm-up-") as folder:
+        draw_solid(Path(folder) / "warm-up.png", pts, 100.0 * r, tri, "Z", "warm-up")
 
 
 def _lean_matplotlib() -> None:
