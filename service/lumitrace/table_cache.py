@@ -26,16 +26,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .method_cache import cache_folder, owned as _ours
+
 _PACKAGE = Path(__file__).resolve().parent
-
-
-def cache_folder() -> Path | None:
-    """Where tables are kept (None: not on disk)."""
-    env = os.environ.get("LUMITRACE_CACHE_DIR")
-    if env:
-        return None if env.lower() in ("off", "0", "none") else Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "lumitrace"
 
 
 @functools.lru_cache(maxsize=1)
@@ -78,11 +71,6 @@ def _path(fn: Callable, args: tuple) -> Path | None:
         return None
     key = hashlib.blake2b(repr(args).encode(), digest_size=8).hexdigest()
     return folder / f"{fn.__module__}.{fn.__qualname__}-{key}-{sources_stamp()}.pickle"
-
-
-def _ours(st: os.stat_result) -> bool:
-    """Whether a file or folder is this user's and no one else may write it."""
-    return st.st_uid == os.getuid() and not st.st_mode & 0o022
 
 
 def _read(path: Path) -> tuple[bool, Any]:
