@@ -37,6 +37,26 @@ class OutputError(LumitraceError):
     """A result could not be written (nothing half-written is left behind)."""
 
 
+class ClusterLost(LumitraceError):
+    """The Dask scheduler went away mid-run (:mod:`lumitrace.run.cluster`); ``tallies``
+    are the round's batch tallies (:class:`~lumitrace.film.tally.BatchTally`) gathered
+    before it did (a prefix of the round's jobs, in job order)."""
+
+    #: the command line's exit status for it: the outputs hold the batches that finished
+    exit_status = 4
+
+    def __init__(self, message: str, where: str, tallies: list):
+        super().__init__(message, where)
+        self.tallies = tallies
+        self.result = None  # the session's result of the batches that finished
+
+    def written(self, photons: int) -> "ClusterLost":
+        """This error, saying that the outputs of ``photons`` photons were written."""
+        self.message += (f" after {photons:,} photons: the outputs hold the batches that "
+                         "finished")
+        return self
+
+
 class Interrupted(BaseException):
     """SIGINT, SIGTERM or SIGHUP arrived; ``published`` says whether this run's outputs
     were already complete on disk when it did (a BaseException, like KeyboardInterrupt,

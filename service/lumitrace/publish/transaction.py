@@ -39,7 +39,6 @@ import shutil
 import signal
 import threading
 import time
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -58,8 +57,9 @@ _LOCK = ".lumitrace.lock"
 
 
 def new_run_id() -> str:
-    """A short unique id for one run's set of files."""
-    return uuid.uuid4().hex[:16]
+    """A short unique id for one run's set of files: 64 random bits in 16 hex digits (not
+    uuid's, whose loading costs every command 2 ms)."""
+    return os.urandom(8).hex()
 
 
 def _lock_path(folder: Path, name: str) -> Path:

@@ -19,7 +19,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable
 
-from ..errors import LumitraceError
+from ..errors import ClusterLost, LumitraceError
 from ..filenames import EDITS_LAYER_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from . import sweep_table
 
@@ -170,7 +170,6 @@ def run_sweep(cases: list[Case], settings, out: Path, pictures: bool = False,
     after each; return the rows (``traced``: whether this sweep traced the case)."""
     from ..publish.outputs import claim_planned_outputs, write_outputs
     from ..publish.record import input_hash
-    from ..run.cluster import ClusterLost
     from ..run.session import run
 
     out.mkdir(parents=True, exist_ok=True)

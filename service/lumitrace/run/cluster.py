@@ -24,7 +24,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from ..film.accumulate import SparseCounts
-from ..errors import LumitraceError
+from ..errors import ClusterLost, LumitraceError
 from ..film.tally import BatchTally
 from ..scene import Scene
 from ..trace.job import BatchJob
@@ -41,25 +41,6 @@ MAX_RESENDS = 3
 
 _prepared: dict = {}
 _prepare_lock = threading.Lock()
-
-
-class ClusterLost(LumitraceError):
-    """The scheduler went away mid-run; ``tallies`` are the round's batches gathered
-    before it did (a prefix of the round's jobs, in job order)."""
-
-    #: the command line's exit status for it: the outputs hold the batches that finished
-    exit_status = 4
-
-    def __init__(self, message: str, where: str, tallies: list[BatchTally]):
-        super().__init__(message, where)
-        self.tallies = tallies
-        self.result = None  # the session's result of the batches that finished
-
-    def written(self, photons: int) -> "ClusterLost":
-        """This error, saying that the outputs of ``photons`` photons were written."""
-        self.message += (f" after {photons:,} photons: the outputs hold the batches that "
-                         "finished")
-        return self
 
 
 def identity() -> tuple[str, str]:

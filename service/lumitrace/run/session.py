@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from ..errors import LumitraceError, warn
+from ..errors import ClusterLost, LumitraceError, warn
 from ..film.accumulate import Accumulator, flux_scale
 from ..film.goniometer import Goniometer
 from ..film.convergence import MapEstimate, estimate
@@ -24,7 +24,6 @@ from ..trace.job import BatchJob
 from ..trace.prepared import PreparedScene, TracingFrame, prepare
 from ..trace.records import PhotonRecords
 from . import workers
-from .cluster import ClusterLost
 from .memory import check_memory
 from .settings import TraceSettings
 

@@ -13,7 +13,6 @@ import contextlib
 import ctypes
 import signal
 import sys
-from concurrent.futures.thread import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 from ..film.accumulate import compact
@@ -107,11 +106,38 @@ def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int,
             raise
         pool.shutdown(wait=True)
     elif mode == "threads":
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            yield lambda jobs: pool.map(lambda job: _traced(ps, job), jobs)
+        pool = _ThreadPool(ps, threads)
+        try:
+            yield pool.map
+        finally:
+            pool.shutdown()
     else:
         raise ValueError(f"workers must be auto, threads or processes, got {mode!r}")
 
 
 def _noop(_) -> None:
     return None
+
+
+class _ThreadPool:
+    """Jobs traced on ``threads`` threads of this process, in job order. A round of one
+    job is traced in the calling thread (a pool's threads could only wait for it), and
+    the pool, with concurrent.futures (8 ms to load), is made for the first round of
+    more: a small run never loads it."""
+
+    def __init__(self, ps: PreparedScene, threads: int):
+        self.ps, self.threads, self.pool = ps, threads, None
+
+    def map(self, jobs: Iterable[BatchJob]) -> Iterator[BatchTally]:
+        jobs = list(jobs)
+        if len(jobs) == 1:
+            return iter([_traced(self.ps, jobs[0])])
+        if self.pool is None:
+            from concurrent.futures.thread import ThreadPoolExecutor
+
+            self.pool = ThreadPoolExecutor(max_workers=self.threads)
+        return self.pool.map(lambda job: _traced(self.ps, job), jobs)
+
+    def shutdown(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)

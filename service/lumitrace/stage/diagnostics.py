@@ -3,11 +3,14 @@ composition errors judged (an error within the luminaire, a warning elsewhere), 
 error texts made readable."""
 from __future__ import annotations
 
+import functools
+import importlib.util
 import os
 import re
+import sys
 from typing import Callable
 
-from pxr import Pcp, Sdf, Usd, UsdUtils
+from pxr import Pcp, Sdf, Usd
 
 from ..errors import StageError
 from ..filenames import RESULT_LAYER_SUFFIX
@@ -40,7 +43,7 @@ class UsdDiagnostics:
     them as scene warnings, and composition errors itself."""
 
     def __enter__(self) -> "UsdDiagnostics":
-        self._delegate = UsdUtils.CoalescingDiagnosticDelegate()
+        self._delegate = _usd_utils().CoalescingDiagnosticDelegate()
         return self
 
     def __exit__(self, *exc) -> None:
@@ -54,6 +57,32 @@ class UsdDiagnostics:
                 continue
             notes.append(" ".join(_NAMESPACE.sub("", d.commentary).split())[:300])
         return notes
+
+
+@functools.lru_cache(maxsize=1)
+def _usd_utils():
+    """UsdUtils' compiled module, loaded alone: the reader needs its diagnostic delegate,
+    and the package's Python helpers (usdz packages, Sdr schema tools) load zipfile, UsdUI
+    and Sdr, 8 ms of every command. Registered under its own name, so a later ``import
+    pxr.UsdUtils`` takes it as it is; where it cannot be loaded so, the package is."""
+    name = "pxr.UsdUtils._usdUtils"
+    if name not in sys.modules:
+        try:
+            import pxr
+
+            folder = os.path.join(os.path.dirname(pxr.__file__), "UsdUtils")
+            path = next(p for p in (os.path.join(folder, "_usdUtils" + s)
+                                    for s in importlib.machinery.EXTENSION_SUFFIXES)
+                        if os.path.exists(p))
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            sys.modules[name] = module
+        except Exception:  # another layout of the package: load it whole
+            from pxr import UsdUtils
+
+            return UsdUtils
+    return sys.modules[name]
 
 
 def check_composition(stage: Usd.Stage, root: Usd.Prim, layer_where: str,

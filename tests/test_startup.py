@@ -1,0 +1,46 @@
+"""What a small ``lumitrace trace`` loads: only what it uses (each module a command loads
+costs every command its start; the run's own cost is measured by tools/startup.py)."""
+import gc
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import lumitrace_launch
+from lumitrace import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+LAUNCH = "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())"
+
+
+def test_a_small_trace_loads_no_module_it_does_not_use(tmp_path):
+    stage = ROOT / "stages" / "reference" / "isotropic.usda"
+    p = subprocess.run([sys.executable, "-X", "importtime", "-c", LAUNCH, "trace", str(stage),
+                        "--photons", "1000", "--no-pictures", "--quiet", "--no-sublayer",
+                        "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120, check=True)
+    loaded = set(re.findall(r"^import time:.*\|\s*([\w.]+)$", p.stderr, re.M))
+    assert {"lumitrace.cli", "lumitrace.trace.compiled", "pxr.UsdLux"} <= loaded
+    unused = {"concurrent.futures",  # a round of one batch is traced in the calling thread
+              "pxr.UsdUtils", "zipfile",  # the reader needs UsdUtils' delegate alone
+              "uuid", "lumitrace.run.cluster", "numba", "multiprocessing", "vtk", "pyvista"}
+    assert not loaded & unused
+
+
+def test_each_commands_parser_alone_parses_as_the_whole_one():
+    for argv in (["trace", "a.usda", "--photons", "2e6", "--target-error", "0.02", "--json"],
+                 ["serve", "a.usda", "--port", "0", "--target-error", "0.01"],
+                 ["check", "a.usda", "--json"], ["edits", "merge", "a.usda"],
+                 ["report", "a.usda", "--time", "3"], ["bench", "--seconds", "2"],
+                 ["rays", "a.usda", "--photons", "1000"]):
+        assert cli.build_parser(argv[0]).parse_args(argv) == cli.build_parser().parse_args(argv)
+
+
+def test_the_command_loads_lumitrace_without_collections_and_resumes_them():
+    code = ("import gc, lumitrace_launch; lumitrace_launch._load_cli(); "
+            "print(gc.isenabled(), gc.get_freeze_count())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True).stdout.split()
+    assert out[0] == "True" and int(out[1]) > 10_000  # what loading made: frozen
+    assert gc.isenabled() and lumitrace_launch._load_cli()[0] is cli.main
