@@ -1,16 +1,17 @@
-"""The compiled code of dataclasses' generated methods, kept on disk between commands.
+"""The compiled code of dataclasses' generated methods, kept on disk between commands; and
+the cache folder with its trusted reads and whole writes (the layout tables' too).
 
 Python 3.11 makes each dataclass's ``__init__``, ``__repr__``, ``__eq__`` (and a frozen
 one's ``__setattr__``, ``__delattr__``, ``__hash__``) by compiling their source text as
 the class is made: a ``trace`` makes 46 classes, 233 methods, about 45 ms of its start
 (a tenth of the import floor). Compiling the same text gives the same code, so the code
-is kept, keyed by the text itself, and read back: one ``marshal.load`` of about 1 ms.
+is kept, keyed by the text itself, and read back: one ``marshal.loads``, about 1.5 ms.
 The ``lumitrace`` command installs this before lumitrace loads (standard library only, so
 the entry point loads it by its file); importing lumitrace as a library leaves the
 interpreter's ``dataclasses`` as it is.
 
 The file is ``dataclass-methods-TAG.marshal`` (TAG: the interpreter's, as ``cpython-311``)
-in the cache folder of :mod:`lumitrace.table_cache`, written at exit when this process
+in the cache folder (:func:`cache_folder`, the layout tables' too), written at exit when this process
 compiled text the file lacked; like a table, it is read only when it is this user's, in
 a folder no one else may write (it holds code).
 """
@@ -56,19 +57,46 @@ def _path() -> Path | None:
         folder / f"dataclass-methods-{tag}.marshal"
 
 
-def _read(path: Path) -> dict[str, CodeType]:
-    """The codes kept at ``path``; none where the file is absent, unreadable, or not to
-    be trusted (another user's, or in a folder others may write)."""
+def read_kept(path: Path) -> bytes | None:
+    """The bytes kept at ``path`` where they are to be trusted: the file this user's, in a
+    folder no one else may write (code, or a pickle, runs as it loads); else None (absent
+    or unreadable too)."""
     try:
         if not owned(os.stat(path.parent)):
-            return {}
+            return None
         with open(path, "rb") as f:
-            if not owned(os.fstat(f.fileno())):
-                return {}
-            codes = marshal.loads(f.read())  # (load() reads object by object: 10x)
-        return codes if isinstance(codes, dict) else {}
-    except Exception:  # absent, cut short, or another interpreter's format
+            return f.read() if owned(os.fstat(f.fileno())) else None
+    except OSError:
+        return None
+
+
+def write_kept(path: Path, data: bytes) -> bool:
+    """Keep ``data`` at ``path``, in a folder only this user may write: written whole under
+    a name of this process and thread, then renamed (two writers leave one whole file);
+    False where it could not be."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        with open(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+        return True
+    except Exception:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        return False
+
+
+def _read(path: Path) -> dict[str, CodeType]:
+    """The codes kept at ``path``; none where there are none to trust or read."""
+    data = read_kept(path)
+    try:
+        codes = marshal.loads(data) if data is not None else {}
+    except Exception:  # cut short, or another interpreter's format
         return {}
+    return codes if isinstance(codes, dict) else {}
 
 
 def _exec(source, globals=None, locals=None, /):
@@ -88,8 +116,8 @@ def _exec(source, globals=None, locals=None, /):
 
 
 def save() -> None:
-    """Keep the codes this process compiled (merged with what the file holds now, written
-    whole under a name of this process, then renamed); never raises."""
+    """Keep the codes this process compiled, merged with what the file holds now; never
+    raises."""
     path = _path()
     if not _new or path is None:
         return
@@ -97,17 +125,7 @@ def save() -> None:
         codes = {**_read(path), **_codes}
         if len(codes) > MOST:
             codes = {k: v for k, v in _codes.items() if k in _used}
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        with open(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "wb") as f:
-            f.write(marshal.dumps(codes))
-        os.replace(tmp, path)
-    except Exception:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
+    write_kept(path, marshal.dumps(codes))
 
 
 def install() -> None:

@@ -20,13 +20,12 @@ import hashlib
 import os
 import pickle
 import sys
-import threading
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from .method_cache import cache_folder, owned as _ours
+from .method_cache import cache_folder, read_kept, write_kept
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -77,31 +76,21 @@ def _read(path: Path) -> tuple[bool, Any]:
     """(True, the table) kept at ``path``; (False, None) where there is none to trust: a
     pickle runs code as it loads, so only a file this user wrote, in a folder no one else
     may write, is read (another's, or one in a shared folder, is made again instead)."""
+    data = read_kept(path)
     try:
-        if not _ours(os.stat(path.parent)):
-            return False, None
-        with open(path, "rb") as f:
-            if not _ours(os.fstat(f.fileno())):
-                return False, None
-            return True, pickle.load(f)
-    except Exception:  # absent, unreadable or from another layout of the classes: remake
+        return (True, pickle.loads(data)) if data is not None else (False, None)
+    except Exception:  # broken, or from another layout of the classes: remake
         return False, None
 
 
 def _write(path: Path, value: Any) -> None:
-    """Keep ``value`` at ``path`` (written whole under a name of this process and thread,
-    then renamed: two makers of the same table leave one whole file); never raises."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    """Keep ``value`` at ``path`` (:func:`~lumitrace.method_cache.write_kept`: two makers
+    of the same table leave one whole file); never raises."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        with open(tmp, "wb") as f:
-            pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
+        data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
+        return
+    if not write_kept(path, data):
         return
     # the same table kept for sources or a numpy that are no longer these: never read again
     name, _, stamp = path.name.rpartition("-")

@@ -4,6 +4,7 @@ error texts made readable."""
 from __future__ import annotations
 
 import functools
+import importlib.machinery
 import importlib.util
 import os
 import re
