@@ -5,6 +5,7 @@ KeyboardInterrupt raised meanwhile (the run would then go on and publish). So th
 module, which imports only the standard library, records SIGINT, SIGTERM and SIGHUP before
 lumitrace is imported, and hands them to :func:`lumitrace.cli.main`.
 """
+import functools
 import gc
 import os
 import signal
@@ -62,16 +63,18 @@ def _start_renderer(argv: list[str]) -> None:
 
 def _load_early(name: str):
     """The lumitrace module ``name`` (standard library only at import), loaded by its file
-    under its own name before the package, which then finds it there; None where it
-    cannot be."""
-    import importlib.util
-
-    spec = importlib.util.find_spec("lumitrace")
-    if spec is None or not spec.origin:
-        return None
+    under its own name before the package, which then finds it there (or the one loaded
+    already); None where it cannot be."""
     full = f"lumitrace.{name}"
-    path = os.path.join(os.path.dirname(spec.origin), *name.split(".")) + ".py"
+    if full in sys.modules:
+        return sys.modules[full]
+    folder = _package_folder()
+    if folder is None:
+        return None
+    path = os.path.join(folder, *name.split(".")) + ".py"
     try:
+        import importlib.util
+
         module_spec = importlib.util.spec_from_file_location(full, path)
         module = importlib.util.module_from_spec(module_spec)
         sys.modules[full] = module
@@ -80,6 +83,15 @@ def _load_early(name: str):
     except Exception:
         sys.modules.pop(full, None)
         return None
+
+
+@functools.lru_cache(maxsize=1)
+def _package_folder() -> str | None:
+    """lumitrace's folder, found once (without importing it)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("lumitrace")
+    return os.path.dirname(spec.origin) if spec is not None and spec.origin else None
 
 
 if __name__ == "__main__":  # pragma: no cover
