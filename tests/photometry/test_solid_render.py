@@ -62,6 +62,23 @@ def test_the_renderer_draws_the_png_this_process_draws(renderer, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["here.png", "there.png"]  # no temp
 
 
+def test_the_renderer_loads_pyplot_only_when_a_name_of_it_is_read():
+    code = """import sys
+from lumitrace.photometry import solid_render
+solid_render.load_renderer()
+print('matplotlib.figure' in sys.modules)
+import matplotlib.pyplot as plt
+print('matplotlib.figure' in sys.modules)
+fig = plt.figure()  # the first name read: the real pyplot, under its own name
+import matplotlib.pyplot as again
+print(type(fig).__name__, again.figure is plt.figure, sys.modules['matplotlib.pyplot'] is again,
+      plt.rcParams is again.rcParams, 'matplotlib.figure' in sys.modules)"""
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "service"))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=120, check=True).stdout.split("\n")
+    assert out[:3] == ["False", "False", "Figure True True True True"]
+
+
 def test_solids_drawn_one_after_another_in_the_kept_window_are_each_the_fresh_picture(
         renderer, tmp_path):
     """The renderer draws in one window (warmed up, then reused): nothing of a solid drawn

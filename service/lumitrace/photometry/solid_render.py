@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import importlib
+import importlib.machinery
 import os
 import pickle
 import select
@@ -29,6 +31,7 @@ import sys
 import tempfile
 import threading
 import time
+import types
 from pathlib import Path
 
 #: How long a drawing may take in the renderer before it is drawn here instead (s).
@@ -188,12 +191,7 @@ def serve(warm_up: bool = False) -> None:
             pass
     out = sys.stdout
     try:
-        _lean_matplotlib()
-        _quiet_pyvista()  # the point: VTK loaded while the command traces
-        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (the window's libraries)
-        # and pyvista's plotting, which a first Plotter would load (0.6-0.7 s: it brings
-        # matplotlib for its colour maps), before the first solid, not after it came
-        import pyvista.plotting  # noqa: F401
+        load_renderer()  # the point: VTK loaded while the command traces
     except Exception as exc:  # noqa: BLE001  (the command draws it itself)
         out.write(f"unavailable {type(exc).__name__}\n")
         out.flush()
@@ -222,6 +220,17 @@ def serve(warm_up: bool = False) -> None:
             out.flush()
 
 
+def load_renderer() -> None:
+    """Load what drawing a solid needs: pyvista, VTK's window libraries, and pyvista's
+    plotting, which a first Plotter would load, before the first solid, not after it
+    came (matplotlib's pyplot, which pyvista imports but does not use, loaded when
+    first used)."""
+    _lean_matplotlib()
+    _quiet_pyvista()
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (the window's libraries)
+    import pyvista.plotting  # noqa: F401
+
+
 def _warm_up() -> None:
     """Draw a small solid in this thread's kept window and throw it away: the window's
     context, its shaders and the PNG writer are then ready for the first real one."""
@@ -238,17 +247,40 @@ def _warm_up() -> None:
 
 
 def _lean_matplotlib() -> None:
-    """The renderer's matplotlib (pyvista's colour maps load pyplot): the Agg backend, no
-    display looked for, and the Artists' ``set()`` docstrings left short, as
-    :mod:`lumitrace.pyplot` has them in a command's process (nobody reads them here):
-    pyvista's plotting, matplotlib with it, then loads in 0.9 of the time (10 runs in
-    turn)."""
+    """The renderer's matplotlib: the Agg backend, no display looked for, the Artists'
+    ``set()`` docstrings left short, as :mod:`lumitrace.pyplot` has them in a command's
+    process (nobody reads them here), and pyplot, which pyvista imports at load but does
+    not use to draw a solid, loaded only if a name of it is read."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
         import matplotlib.artist as artist
     except ImportError:  # pyvista without matplotlib: nothing to spare
         return
     artist.kwdoc = lambda _artist: "(see the class's set_* methods)"
+    if "matplotlib.pyplot" not in sys.modules:
+        sys.modules["matplotlib.pyplot"] = _OnFirstUse("matplotlib.pyplot")
+
+
+class _OnFirstUse(types.ModuleType):
+    """A module that is loaded when one of its names is first read, not when imported.
+
+    pyvista's colours import ``matplotlib.pyplot`` but read it only in a function the
+    renderer never calls (pyplot is 0.3-0.4 s of the renderer's 1.2 s start). On a first
+    name read, the real module is loaded and its names become this module's."""
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.__spec__ = importlib.machinery.ModuleSpec(name, None)
+
+    def __getattr__(self, attr: str):
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        name = self.__name__
+        if sys.modules.get(name) is self:
+            del sys.modules[name]
+        real = importlib.import_module(name)
+        self.__dict__.update(real.__dict__)
+        return getattr(real, attr)
 
 
 class Renderer:
