@@ -54,7 +54,7 @@ CASES = [(pullpush._pyramid, (64,)), (cubemap._seams, (32,)),
 def test_a_kept_table_reads_back_equal_to_the_one_made(folder, fn, args):
     made = fn.uncached(*args)
     first = fn(*args)  # made and kept
-    files = list(folder.glob(f"{fn.__module__}.{fn.__qualname__}-*.pickle"))
+    files = list(folder.glob(f"{fn.__module__}.{fn.__qualname__}-*.table"))
     assert len(files) == 1
     fn.cache_clear()
     read = fn(*args)  # read back from the file
@@ -81,7 +81,7 @@ def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder, tmp_pat
     try:
         first = table_cache.sources_stamp()
         pullpush._pyramid(8)
-        (old,) = folder.glob("*._pyramid-*.pickle")
+        (old,) = folder.glob("*._pyramid-*.table")
         (package / "film" / "__pycache__" / "ignored.py").write_text("# not a source")
         table_cache.sources_stamp.cache_clear()
         assert table_cache.sources_stamp() == first  # bytecode folders are not sources
@@ -92,21 +92,25 @@ def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder, tmp_pat
         assert table_cache.sources_stamp() != first
         pullpush._pyramid.cache_clear()
         pullpush._pyramid(8)
-        (new,) = folder.glob("*._pyramid-*.pickle")
+        (new,) = folder.glob("*._pyramid-*.table")
         assert new.name != old.name and not old.exists()
     finally:
         table_cache.sources_stamp.cache_clear()
 
 
-def test_a_broken_file_is_made_again_and_replaced_whole(folder):
+@pytest.mark.parametrize("damage", ["not a table", "cut short", "empty", "spans past the end"])
+def test_a_broken_file_is_made_again_and_replaced_whole(folder, damage):
     want = cubemap._seams.uncached(16)
     cubemap._seams(16)
-    (path,) = folder.glob("*._seams-*.pickle")
-    path.write_bytes(b"\x80\x05 not a pickle")
+    (path,) = folder.glob("*._seams-*.table")
+    whole = path.read_bytes()
+    path.write_bytes({"not a table": b"\x80\x05 not a pickle", "cut short": whole[:-100],
+                      "empty": b"", "spans past the end": whole[:24] + b"\xff" * 16
+                      + whole[40:]}[damage])  # (the first buffer's offset and size)
+    assert table_cache._read(path) == (False, None)
     cubemap._seams.cache_clear()
     assert _equal(cubemap._seams(16), want)
-    with open(path, "rb") as f:
-        assert _equal(pickle.load(f), want)
+    assert path.read_bytes() == whole
 
 
 def test_an_unwritable_folder_or_off_costs_only_the_making(tmp_path, monkeypatch, folder):
@@ -137,7 +141,7 @@ def test_a_run_that_reads_the_tables_writes_what_a_run_that_makes_them_writes(tm
                         str(out)], check=True, env=env)
         outs.append(out)
         if k == 0:
-            assert len(list((tmp_path / "cache").glob("*.pickle"))) >= 5
+            assert len(list((tmp_path / "cache").glob("*.table"))) >= 5
     for suffix in (".ies", ".ldt"):  # all but the line naming the run (its own id)
         a, b = ([line for line in (o / f"lambertian_disc{suffix}").read_bytes().splitlines()
                  if b" run " not in line and not line.startswith(b"[_LUMITRACE_RUN]")]
@@ -161,9 +165,8 @@ def test_processes_making_the_same_table_at_once_leave_one_whole_file(folder):
         p.stdin.close()
     assert all(p.wait(timeout=120) == 0 for p in procs)
     files = list(folder.iterdir())
-    assert [f.suffix for f in files] == [".pickle"]
-    with open(files[0], "rb") as f:
-        assert _equal(pickle.load(f), pullpush._pyramid.uncached(48))
+    assert [f.suffix for f in files] == [".table"]
+    assert _equal(table_cache._read(files[0])[1], pullpush._pyramid.uncached(48))
 
 
 class _Planted:
@@ -183,10 +186,10 @@ def test_a_planted_table_is_never_loaded(folder, tmp_path):
     is made again, right. This user's own file in a private folder is read as before."""
     want = cubemap._seams.uncached(8)
     cubemap._seams(8)
-    (path,) = folder.glob("*._seams-*.pickle")
+    (path,) = folder.glob("*._seams-*.table")
     marker = tmp_path / "ran"
     for case in ("another user's file", "a folder others may write"):
-        path.write_bytes(pickle.dumps(_Planted(marker)))
+        path.write_bytes(table_cache._encoded(_Planted(marker)))
         if case == "another user's file":
             os.chown(path, 65534, 65534)
         else:
@@ -196,7 +199,7 @@ def test_a_planted_table_is_never_loaded(folder, tmp_path):
         assert _equal(cubemap._seams(8), want), case
         assert not marker.exists(), case
     folder.chmod(0o700)
-    path.write_bytes(pickle.dumps(_Planted(marker)))  # this user's, private: it is read
+    path.write_bytes(table_cache._encoded(_Planted(marker)))  # this user's, private: it is read
     cubemap._seams.cache_clear()
     cubemap._seams(8)
     assert marker.exists()

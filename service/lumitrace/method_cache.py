@@ -57,15 +57,34 @@ def _path() -> Path | None:
         folder / f"dataclass-methods-{tag}.marshal"
 
 
-def read_kept(path: Path) -> bytes | None:
-    """The bytes kept at ``path`` where they are to be trusted: the file this user's, in a
-    folder no one else may write (code, or a pickle, runs as it loads); else None (absent
-    or unreadable too)."""
+def open_kept(path: Path):
+    """The file kept at ``path``, open for reading, where it is to be trusted: this user's,
+    in a folder no one else may write (code, or a pickle, runs as it loads); else None
+    (absent or unreadable too)."""
     try:
         if not owned(os.stat(path.parent)):
             return None
-        with open(path, "rb") as f:
-            return f.read() if owned(os.fstat(f.fileno())) else None
+        f = open(path, "rb")
+    except OSError:
+        return None
+    try:
+        if owned(os.fstat(f.fileno())):
+            return f
+    except OSError:
+        pass
+    f.close()
+    return None
+
+
+def read_kept(path: Path) -> bytes | None:
+    """The bytes kept at ``path`` where they are to be trusted (:func:`open_kept`); else
+    None."""
+    f = open_kept(path)
+    if f is None:
+        return None
+    try:
+        with f:
+            return f.read()
     except OSError:
         return None
 

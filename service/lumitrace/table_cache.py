@@ -4,8 +4,8 @@ once per argument under the user's cache folder and keyed on lumitrace's sources
 
 A short run spends as long making these tables (the pull-push pyramid, the cube map's
 seams, the lat-long texture's taps, the goniometer's cell directions, the UGR table's
-rooms: about 70 ms at face size 64) as tracing its photons. Reading them back takes a few
-milliseconds. Any edit of a lumitrace source or another numpy makes a new key, so a stale
+rooms: about 70 ms at face size 64) as tracing its photons. Reading them back takes about
+a millisecond: their arrays are the files' pages, mapped. Any edit of a lumitrace source or another numpy makes a new key, so a stale
 table is never read.
 The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
 ``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
@@ -17,15 +17,17 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import mmap
 import os
 import pickle
+import struct
 import sys
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from .method_cache import cache_folder, read_kept, write_kept
+from .method_cache import cache_folder, open_kept, write_kept
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -64,37 +66,86 @@ def _frozen(value: Any) -> Any:
 
 
 def _path(fn: Callable, args: tuple) -> Path | None:
-    """The file of ``fn``'s table for ``args``: NAME-ARGS-STAMP.pickle."""
+    """The file of ``fn``'s table for ``args``: NAME-ARGS-STAMP.table."""
     folder = cache_folder()
     if folder is None:
         return None
     key = hashlib.blake2b(repr(args).encode(), digest_size=8).hexdigest()
-    return folder / f"{fn.__module__}.{fn.__qualname__}-{key}-{sources_stamp()}.pickle"
+    return folder / f"{fn.__module__}.{fn.__qualname__}-{key}-{sources_stamp()}{SUFFIX}"
+
+
+#: A table's file: MAGIC, the number of arrays' buffers and the pickle's length (two
+#: little-endian u64), each buffer's offset and size (two u64 each), the pickle (protocol
+#: 5, its arrays' data out of band), then each buffer, from an offset a multiple of 64.
+SUFFIX = ".table"
+MAGIC = b"LTTABLE1"
+_HEAD = struct.Struct("<8sQQ")
+_SPAN = struct.Struct("<QQ")
 
 
 def _read(path: Path) -> tuple[bool, Any]:
     """(True, the table) kept at ``path``; (False, None) where there is none to trust: a
     pickle runs code as it loads, so only a file this user wrote, in a folder no one else
-    may write, is read (another's, or one in a shared folder, is made again instead)."""
-    data = read_kept(path)
+    may write, is read (another's, or one in a shared folder, is made again instead).
+
+    The arrays are the file's pages, mapped read-only, not copies: the pages a run does
+    not use are not read (11 tables, 16 MB at face size 64: 1 ms, not 12 ms, to load)."""
+    f = open_kept(path)
+    if f is None:
+        return False, None
     try:
-        return (True, pickle.loads(data)) if data is not None else (False, None)
+        with f:
+            kept = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+        magic, count, length = _HEAD.unpack_from(kept, 0)
+        start = _HEAD.size + count * _SPAN.size
+        if magic != MAGIC or start + length > len(kept):
+            return False, None
+        view = memoryview(kept)
+        buffers = []
+        for i in range(count):
+            offset, size = _SPAN.unpack_from(kept, _HEAD.size + i * _SPAN.size)
+            if offset + size > len(kept):
+                return False, None
+            buffers.append(view[offset:offset + size])
+        return True, pickle.loads(kept[start:start + length], buffers=buffers)
     except Exception:  # broken, or from another layout of the classes: remake
         return False, None
+
+
+def _encoded(value: Any) -> bytes:
+    """``value`` in a table's file format (see :data:`MAGIC`)."""
+    raws: list[memoryview] = []
+    body = pickle.dumps(value, protocol=5,
+                        buffer_callback=lambda b: raws.append(b.raw()))
+    spans, offset = [], _HEAD.size + len(raws) * _SPAN.size + len(body)
+    for raw in raws:
+        offset = -(-offset // 64) * 64
+        spans.append((offset, raw.nbytes))
+        offset += raw.nbytes
+    out = bytearray(offset)
+    _HEAD.pack_into(out, 0, MAGIC, len(raws), len(body))
+    for i, span in enumerate(spans):
+        _SPAN.pack_into(out, _HEAD.size + i * _SPAN.size, *span)
+    start = _HEAD.size + len(raws) * _SPAN.size
+    out[start:start + len(body)] = body
+    for (at, size), raw in zip(spans, raws):
+        out[at:at + size] = raw
+    return bytes(out)
 
 
 def _write(path: Path, value: Any) -> None:
     """Keep ``value`` at ``path`` (:func:`~lumitrace.method_cache.write_kept`: two makers
     of the same table leave one whole file); never raises."""
     try:
-        data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+        data = _encoded(value)
     except Exception:
         return
     if not write_kept(path, data):
         return
-    # the same table kept for sources or a numpy that are no longer these: never read again
+    # the same table kept for sources or a numpy that are no longer these (or in an earlier
+    # format): never read again
     name, _, stamp = path.name.rpartition("-")
-    for old in path.parent.glob(f"{name.rpartition('-')[0]}-*.pickle"):
+    for old in path.parent.glob(f"{name.rpartition('-')[0]}-*"):
         if not old.name.endswith(f"-{stamp}"):
             try:
                 old.unlink()
