@@ -24,6 +24,7 @@ which are the same values, move together.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 
@@ -190,11 +191,22 @@ STEP_SAMPLES = 8
 STEP_SIGMAS = 3.0
 
 
-def _line(y: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=4)
+def _offsets(u: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray]:
+    """Offsets ``u`` (samples) a line is fitted at: as an array, less their mean, the sum
+    of squares of that, their mean, and the weights of the samples in the fitted line's
+    value at 0.5 (midway to the next sample)."""
+    u = np.array(u)
+    du = u - u.mean()
+    den = (du * du).sum()
+    return u, du, den, u.mean(), 1.0 / len(u) + du * (0.5 - u.mean()) / den
+
+
+def _line(y: np.ndarray, u: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, float]:
     """Least-squares lines through rows ``y`` at offsets ``u`` (samples): their values at
     the offsets' mean, their slopes (per sample) and that mean."""
-    du = u - u.mean()
-    return y.mean(axis=1), (y * du).sum(axis=1) / (du * du).sum(), u.mean()
+    _, du, den, mean, _ = _offsets(u)
+    return y.mean(axis=1), (y * du).sum(axis=1) / den, mean
 
 
 def _outer_crossing(ang, profs, levels, i, sigma):
@@ -214,17 +226,13 @@ def _outer_crossing(ang, profs, levels, i, sigma):
         return linear
     ok = (i - m > n // 2) & (i + 1 + m < n)  # inside samples past nadir (its cap is wider)
     k = np.where(ok, i, n // 2 + m + 1)[:, None]
-    u_in, u_out = np.arange(-m, 0), np.arange(2, m + 2)
+    inside, outside = tuple(range(-m, 0)), tuple(range(2, m + 2))
+    (u_in, *_, w_in), (u_out, *_, w_out) = _offsets(inside), _offsets(outside)
     k_in, k_out = np.minimum(k + u_in, n - 1), np.minimum(k + u_out, n - 1)
-    a_in, b_in, c_in = _line(profs[rows[:, None], k_in], u_in)
-    a_out, b_out, c_out = _line(profs[rows[:, None], k_out], u_out)
-
-    def weights(u, at):  # a fitted line's value at ``at`` as weights of its samples
-        du = u - u.mean()
-        return 1.0 / len(u) + du * (at - u.mean()) / (du * du).sum()
-
-    var = ((weights(u_in, 0.5) * sigma[k_in]) ** 2).sum(axis=1) \
-        + ((weights(u_out, 0.5) * sigma[k_out]) ** 2).sum(axis=1)
+    a_in, b_in, c_in = _line(profs[rows[:, None], k_in], inside)
+    a_out, b_out, c_out = _line(profs[rows[:, None], k_out], outside)
+    # the lines' values midway between the crossing's samples, as weights of their samples
+    var = ((w_in * sigma[k_in]) ** 2).sum(axis=1) + ((w_out * sigma[k_out]) ** 2).sum(axis=1)
     step = a_in + b_in * (0.5 - c_in) - a_out - b_out * (0.5 - c_out)
     ok &= step > STEP_SIGMAS * np.sqrt(var)
     if not ok.any():
@@ -321,10 +329,14 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             b, a = sides[:, 2 * i], sides[:, 2 * i + 1]
             profs = np.concatenate([b[:, ::-1], a[:, 1:]], axis=1)
             top = tops[c][0] + tops[c][1] * z
-            for f in fractions:
-                if out[c, f][0] is not None:
-                    got = spread_angles(ang, profs, f * top, sigmas[c])
-                    draws[c, f] += got[~np.isnan(got)].tolist()
+            wanted = [f for f in fractions if out[c, f][0] is not None]
+            if not wanted:
+                continue
+            # every fraction's redraws at once: the rows are computed alike, row by row
+            got = spread_angles(ang, np.tile(profs, (len(wanted), 1)),
+                                np.concatenate([f * top for f in wanted]), sigmas[c])
+            for f, row in zip(wanted, got.reshape(len(wanted), d)):
+                draws[c, f] += row[~np.isnan(row)].tolist()
     for key, (angle, _, cross) in out.items():
         if angle is None:
             out[key] = (None, None, ())
