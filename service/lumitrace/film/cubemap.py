@@ -64,8 +64,10 @@ steradians); texel indices are int64 flat indices ``row * res + col`` into the
 """
 from __future__ import annotations
 
+import functools
 
 import numpy as np
+
 from ..table_cache import kept_table
 
 #: Number of faces and their names, in ImfEnvmap's ``CubeMapFace`` order (top to bottom).
@@ -353,14 +355,21 @@ def texel_solid_angles(res: int) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (6 * res, res), float64
-        Positive; all texels together sum to 4 pi (to rounding, ~1e-13).
+    ndarray, shape (6 * res, res), float64, read-only
+        Positive; all texels together sum to 4 pi (to rounding, ~1e-13). Made once per
+        face size and shared (a map's estimate reads it a dozen times).
     """
-    res = _check_res(res)
+    return _texel_solid_angles(_check_res(res))
+
+
+@functools.lru_cache(maxsize=2)
+def _texel_solid_angles(res: int) -> np.ndarray:
     per_face = face_solid_angles(res)
     rows, cols = np.indices(image_shape(res))
     _, px, py = _pif_of_pixel(rows, cols, res)
-    return per_face[py, px]
+    omega = per_face[py, px]
+    omega.flags.writeable = False
+    return omega
 
 
 def canonical_texels(res: int) -> np.ndarray:
