@@ -10,8 +10,8 @@ cylinder (radius 25 mm, 50 mm long) that is a 95% specular mirror or 85% white p
 
 Per scene:
 
-- throughput: ``lumitrace trace`` run as a user runs it (a subprocess, ``--photons``, no
-  pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second,
+- throughput: ``lumitrace trace`` run as a user runs it (the ``lumitrace`` command in a
+  subprocess, ``--photons``, no pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second,
   and the same of the peer, run interleaved with it (one of each, in turn);
 - the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
   on the files, the default), whole process, CPU and wall seconds, against the peer's CPU
@@ -66,6 +66,13 @@ from lumitrace.report.convergence_report import crossing_time  # noqa: E402
 from lumitrace.report.references import expected_intensity, read_expectation  # noqa: E402
 from lumitrace.run.session import TraceSettings, run  # noqa: E402
 from lumitrace.stage.reader import read_stage  # noqa: E402
+
+#: The ``lumitrace`` command as a user starts it: the installed entry point (its launcher
+#: keeps the compiled dataclass methods and loads with the collector paused), else the
+#: same launcher through this interpreter.
+_SCRIPT = Path(sys.executable).with_name("lumitrace")
+LUMITRACE = [str(_SCRIPT)] if _SCRIPT.is_file() else [
+    sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())"]
 
 #: Process CPU seconds of the peer tracer at 10M photons (median of 3), stored from an
 #: earlier run: the reference when the peer cannot be built.
@@ -144,7 +151,7 @@ def throughput(stage: Path, name: str, photons: int, repeats: int, out: Path,
                peer: Path | None) -> dict:
     """Process CPU seconds of ``lumitrace trace`` (median of ``repeats``), as run by a user,
     and of the peer on the same scene, interleaved; or the stored peer figure."""
-    ours = [sys.executable, "-m", "lumitrace.cli", "trace", str(stage), "--photons",
+    ours = [*LUMITRACE, "trace", str(stage), "--photons",
             str(photons), "--no-pictures", "--quiet", "--no-sublayer", "--out", str(out),
             "--replace-results"]
     runs, peer_cpu = [], []
@@ -347,7 +354,7 @@ def user_view(stage: Path, out: Path, t: dict) -> dict:
     at the stop; against the peer's CPU seconds to E on its grid."""
     rows = {}
     for lv in LEVELS:
-        cmd = [sys.executable, "-m", "lumitrace.cli", "trace", str(stage), "--target-error",
+        cmd = [*LUMITRACE, "trace", str(stage), "--target-error",
                str(lv), "--no-pictures", "--json", "--no-progress", "--no-sublayer",
                "--out", str(out), "--replace-results"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
