@@ -48,3 +48,20 @@ def test_a_running_thread_is_waited_for_as_by_the_usual_exit():
     """)
     assert p.returncode == 4
     assert p.stdout == "thread done\nhandler ran\n"
+
+
+def test_a_daemon_thread_does_not_hold_the_quick_exit_and_the_handlers_still_run():
+    p = _run("""
+        import os
+        class Late:
+            def __del__(self):
+                os.write(1, b"teardown")
+        keep = Late()
+        threading.Thread(target=time.sleep, args=(30,), daemon=True).start()
+        joined = threading.Thread(target=lambda: (time.sleep(0.3), print("joined", flush=True)),
+                                  daemon=True)
+        joined.start()
+        atexit.register(joined.join)  # as the schema registry's build is
+        sys.exit(finish(5))
+    """)
+    assert (p.returncode, p.stdout) == (5, "joined\nhandler ran\n")

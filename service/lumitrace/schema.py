@@ -332,6 +332,12 @@ def register_schema() -> None:
     Importing :mod:`lumitrace` calls this. USD ignores a registration made after its schema
     registry was first loaded: if that happened (pxr used before ``import lumitrace``), a
     warning says so and the API schemas stay unknown for this process.
+
+    Where pxr's Usd was not loaded before (a command, a fresh interpreter), USD's schema
+    registry, which the first stage builds (20 ms), is built at once on another thread
+    (USD builds it without holding the interpreter) while the rest of lumitrace loads,
+    and checked there; where it was (a DCC's interpreter, a script that used pxr first),
+    it is built and checked here.
     """
     global _registered
     if _registered:
@@ -341,14 +347,40 @@ def register_schema() -> None:
                       "schemas are unknown to USD (attribute values are still read)",
                       RuntimeWarning, stacklevel=2)
         return
-    from pxr import Plug
+    import sys
+
+    maybe_late = "pxr.Usd" in sys.modules
+    from pxr import Plug, Usd  # noqa: F401  (loaded here, not first on the thread)
 
     Plug.Registry().RegisterPlugins(str(SCHEMA_DIR))
     _registered = True
+    if maybe_late:
+        _check_registered(stacklevel=3)
+    else:
+        _build_in_background(_check_registered)
+
+
+def _check_registered(stacklevel: int = 1) -> None:
+    """Warn where USD's schema registry (built by this call if it was not) lacks the
+    lumitrace API schemas: it was loaded before they were registered."""
     if not is_registered():
         warnings.warn("the lumitrace USD schema was registered after USD's schema registry "
                       "was loaded: import lumitrace before composing any stage",
-                      RuntimeWarning, stacklevel=2)
+                      RuntimeWarning, stacklevel=stacklevel)
+
+
+def _build_in_background(build) -> None:
+    """Call ``build`` on a thread of its own, joined before this process forks or exits
+    (a child must not inherit USD's locks mid-build, nor exit run under it)."""
+    import atexit
+    import os
+    import threading
+
+    thread = threading.Thread(target=build, name="lumitrace-usd-schemas", daemon=True)
+    thread.start()
+    atexit.register(thread.join)
+    if hasattr(os, "register_at_fork"):
+        os.register_at_fork(before=thread.join)
 
 
 def is_registered() -> bool:

@@ -112,9 +112,7 @@ FRESH_INTERPRETER = textwrap.dedent("""
 """)
 
 
-def test_registration_in_a_fresh_interpreter(tmp_path):
-    """A stage file opened right after ``import lumitrace`` in a new process sees the
-    schema: registration happens at import, before any stage is composed."""
+def _fresh_stage(tmp_path):
     path = tmp_path / "fresh.usda"
     path.write_text(textwrap.dedent("""\
         #usda 1.0
@@ -139,11 +137,48 @@ def test_registration_in_a_fresh_interpreter(tmp_path):
             }
         }
         """))
-    result = subprocess.run([sys.executable, "-c", FRESH_INTERPRETER, str(path)],
+    return path
+
+
+def test_registration_in_a_fresh_interpreter(tmp_path):
+    """A stage file opened right after ``import lumitrace`` in a new process sees the
+    schema: registration happens at import, before any stage is composed (and the stage
+    waits for the schema registry that import began building on another thread)."""
+    result = subprocess.run([sys.executable, "-c", FRESH_INTERPRETER, str(_fresh_stage(tmp_path))],
                             capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "ok"
     assert "registered after" not in result.stderr
+
+
+FORK_AT_ONCE = """
+import os, sys
+import lumitrace
+pid = os.fork()  # at once: the schema registry's build joined first, not inherited mid-way
+""" + FRESH_INTERPRETER.replace("import sys\nimport lumitrace\n", "") + """
+if pid == 0:
+    sys.stdout.flush()
+    os._exit(0)
+_, status = os.waitpid(pid, 0)
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no fork here")
+def test_a_process_that_forks_right_after_import_sees_the_schema_on_both_sides(tmp_path):
+    result = subprocess.run([sys.executable, "-c", FORK_AT_ONCE, str(_fresh_stage(tmp_path))],
+                            capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["ok", "ok"]
+
+
+def test_a_process_that_ends_right_after_import_exits_cleanly():
+    """The registry's build, begun at import, is waited for at exit: no crash in USD's
+    teardown, five times over."""
+    for _ in range(5):
+        result = subprocess.run([sys.executable, "-c", "import lumitrace"],
+                                capture_output=True, text=True, timeout=120)
+        assert (result.returncode, result.stderr) == (0, "")
 
 
 def test_generated_plug_info_is_portable():
