@@ -11,8 +11,9 @@ cylinder (radius 25 mm, 50 mm long) that is a 95% specular mirror or 85% white p
 Per scene:
 
 - throughput: ``lumitrace trace`` run as a user runs it (the ``lumitrace`` command in a
-  subprocess, ``--photons``, no pictures), its process CPU seconds (median of ``--repeats``) and photons per CPU second,
-  and the same of the peer, run interleaved with it (one of each, in turn);
+  subprocess, ``--photons``, no pictures), its process CPU seconds (median of
+  ``--repeats``) and photons per CPU second, and the same of the peer, run interleaved
+  with it (one of each, in turn);
 - the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
   on the files, the default), whole process, CPU and wall seconds, against the peer's CPU
   seconds to E on its grid; and the files' true error at the stop against the closed form;

@@ -5,8 +5,8 @@ once per argument under the user's cache folder and keyed on lumitrace's sources
 A short run spends as long making these tables (the pull-push pyramid, the cube map's
 seams, the lat-long texture's taps, the goniometer's cell directions, the UGR table's
 rooms: about 70 ms at face size 64) as tracing its photons. Reading them back takes about
-a millisecond: their arrays are the files' pages, mapped. Any edit of a lumitrace source or another numpy makes a new key, so a stale
-table is never read.
+a millisecond: their arrays are the files' pages, mapped. Any edit of a lumitrace source
+or another numpy makes a new key, so a stale table is never read.
 The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
 ``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
 cannot be written, or a file that cannot be read, costs only the making; a file that is

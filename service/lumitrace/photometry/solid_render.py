@@ -266,7 +266,8 @@ class _OnFirstUse(types.ModuleType):
 
     pyvista's colours import ``matplotlib.pyplot`` but read it only in a function the
     renderer never calls: deferred, the renderer is ready 0.61-0.87 s after its start, not
-    0.70-1.00 s (medians 0.78 and 0.96 s, six starts each, in turn). On a first name read, the real module is loaded and its names become this module's."""
+    0.70-1.00 s (medians 0.78 and 0.96 s, six starts each, in turn). On a first name read,
+    the real module is loaded and its names become this module's."""
 
     def __init__(self, name: str):
         super().__init__(name)
