@@ -2,7 +2,7 @@
 
     python tools/side_by_side.py [--photons 10000000] [--repeats 3] [--max-photons 64000000]
                                  [--scenes isotropic lambertian mirror_cup diffuse_cup]
-                                 [--peer auto|none|PATH] [--json]
+                                 [--peer auto|none|PATH] [--throughput-only] [--json]
 
 The four scenes are built as stages (in a temporary folder): an isotropic point source and
 a Lambertian disc in free space, and a Lambertian point source at the rim of an open
@@ -391,6 +391,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-user-view", action="store_true",
                     help="leave out the real trace --target-error commands")
+    ap.add_argument("--throughput-only", action="store_true",
+                    help="photons per CPU second against the peer alone (no convergence "
+                         "runs, no user view)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     from lumitrace.trace.aot import warm_up
@@ -404,6 +407,11 @@ def main(argv=None) -> int:
             stage = build(name, folder)
             t = throughput(stage, name, args.photons, args.repeats, folder / f"out_{name}",
                            peer)
+            if args.throughput_only:
+                rows[name] = t
+                if not args.json:
+                    _print_throughput(name, t)
+                continue
             t.update(convergence(stage, args.max_photons, args.resolution))
             t["cpu_seconds_to"] = time_to_levels(t)
             if not args.no_user_view:
@@ -422,11 +430,16 @@ def _fmt(x, unit):
     return f"{x / 1e6:.2f}M" if unit == "photons" else f"{x:.2f} s"
 
 
-def _print(name: str, t: dict) -> None:
+def _print_throughput(name: str, t: dict, end: str = "\n") -> None:
     print(f"\n{name}: {t['photons_per_cpu_second'] / 1e6:.2f}M photons per CPU s "
           f"({t['cpu_seconds']:.2f} CPU s, {t['wall_seconds']:.2f} s wall); peer "
           f"{t['peer_photons_per_cpu_second'] / 1e6:.2f}M ({t['peer']}), ratio "
-          f"{t['ratio_to_peer']:.2f}; reference: {t['reference']}")
+          f"{t['ratio_to_peer']:.2f}", end=end, flush=True)
+
+
+def _print(name: str, t: dict) -> None:
+    _print_throughput(name, t, end="")
+    print(f"; reference: {t['reference']}")
     for key in ("raw", "filtered"):
         cells = [f"{lv:.0%}: {_fmt(t[f'{key}_{lv:g}']['photons'], 'photons')} photons, "
                  f"{_fmt(t[f'{key}_{lv:g}']['seconds'], 'seconds')}" for lv in LEVELS]
