@@ -65,37 +65,58 @@ def test_a_kept_table_reads_back_equal_to_the_one_made(folder, fn, args):
     assert all(not a.flags.writeable for a in arrays)  # shared: read-only
 
 
-def test_an_edited_source_makes_a_new_key_and_the_old_table_goes(folder, tmp_path,
-                                                                  monkeypatch):
+def test_an_edited_source_makes_a_new_key_and_the_oldest_tables_go(folder, tmp_path,
+                                                                   monkeypatch):
     """The key follows every source file (here a copy of two of them, so the package itself
-    is left alone): touching one makes a new key, and the table made under it removes the
-    one kept for the sources before."""
+    is left alone): touching one makes a new key. The tables of the
+    :data:`~lumitrace.table_cache.KEPT_STAMPS` sources stamps written last before it stay
+    (another install sharing the folder keeps its own); older ones go."""
     package = tmp_path / "package"
     (package / "film").mkdir(parents=True)
     for name in ("film/pullpush.py", "film/cubemap.py"):
         (package / name).write_bytes((Path(pullpush.__file__).parents[1] / name).read_bytes())
     (package / "film" / "__pycache__").mkdir()
-    (package / "film" / "__pycache__" / "ignored.py").write_text("")
+    (package / "film" / "__pycache__" / "ignored.py").write_text("# a first")
     monkeypatch.setattr(table_cache, "_PACKAGE", package)
     table_cache.sources_stamp.cache_clear()
+    source = package / "film" / "cubemap.py"
+    made = []
     try:
         first = table_cache.sources_stamp()
-        pullpush._pyramid(8)
-        (old,) = folder.glob("*._pyramid-*.table")
         (package / "film" / "__pycache__" / "ignored.py").write_text("# not a source")
         table_cache.sources_stamp.cache_clear()
         assert table_cache.sources_stamp() == first  # bytecode folders are not sources
-        source = package / "film" / "cubemap.py"
-        st = source.stat()
-        os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
-        table_cache.sources_stamp.cache_clear()
-        assert table_cache.sources_stamp() != first
-        pullpush._pyramid.cache_clear()
-        pullpush._pyramid(8)
-        (new,) = folder.glob("*._pyramid-*.table")
-        assert new.name != old.name and not old.exists()
+        for k in range(table_cache.KEPT_STAMPS + 2):
+            if k:  # an edit: a new stamp
+                st = source.stat()
+                os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+                table_cache.sources_stamp.cache_clear()
+            pullpush._pyramid.cache_clear()
+            pullpush._pyramid(8)
+            (new,) = set(folder.glob("*._pyramid-*.table")) - set(made)
+            os.utime(new, ns=(k * 10**9, k * 10**9))  # written in this order
+            made.append(new)
+            assert len({p.name.rpartition("-")[2] for p in made}) == k + 1
+        kept = sorted(p.name for p in folder.glob("*._pyramid-*.table"))
+        assert kept == sorted(p.name for p in made[-table_cache.KEPT_STAMPS - 1:])
     finally:
         table_cache.sources_stamp.cache_clear()
+
+
+def test_two_installs_sharing_the_folder_each_keep_their_tables(folder, monkeypatch):
+    """Runs of two sources stamps in turn (a release and a checkout) each read their own
+    table after the first: none is made again."""
+    stamps = ["aaaaaaaaaaaaaaaaaaaa", "bbbbbbbbbbbbbbbbbbbb"]
+    made = []
+    for turn in range(4):
+        monkeypatch.setattr(table_cache, "sources_stamp", lambda s=stamps[turn % 2]: s)
+        pullpush._pyramid.cache_clear()
+        before = {p.name: p.stat().st_ino for p in folder.glob("*.table")} \
+            if folder.exists() else {}
+        pullpush._pyramid(8)
+        after = {p.name: p.stat().st_ino for p in folder.glob("*.table")}
+        made.append(sorted(set(after.items()) - set(before.items())))
+    assert [len(m) for m in made] == [1, 1, 0, 0]
 
 
 @pytest.mark.parametrize("damage", ["not a table", "cut short", "empty", "spans past the end"])

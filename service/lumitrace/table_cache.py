@@ -6,7 +6,8 @@ A short run spends as long making these tables (the pull-push pyramid, the cube 
 seams, the lat-long texture's taps, the goniometer's cell directions, the UGR table's
 rooms: about 70 ms at face size 64) as tracing its photons. Reading them back takes about
 a millisecond: their arrays are the files' pages, mapped. Any edit of a lumitrace source
-or another numpy makes a new key, so a stale table is never read.
+or another numpy makes a new key, so a stale table is never read; a table written removes
+its copies kept for other keys but the :data:`KEPT_STAMPS` written last.
 The folder is ``LUMITRACE_CACHE_DIR``, else ``$XDG_CACHE_HOME/lumitrace``, else
 ``~/.cache/lumitrace``; ``LUMITRACE_CACHE_DIR=off`` keeps nothing on disk. A folder that
 cannot be written, or a file that cannot be read, costs only the making; a file that is
@@ -14,6 +15,7 @@ not this user's, or a folder others may write, is never read (a pickle runs code
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -142,15 +144,39 @@ def _write(path: Path, value: Any) -> None:
         return
     if not write_kept(path, data):
         return
-    # the same table kept for sources or a numpy that are no longer these (or in an earlier
-    # format): never read again
-    name, _, stamp = path.name.rpartition("-")
-    for old in path.parent.glob(f"{name.rpartition('-')[0]}-*"):
-        if not old.name.endswith(f"-{stamp}"):
-            try:
-                old.unlink()
-            except OSError:
-                pass
+    _drop_stale(path)
+
+
+#: Other sources stamps whose tables are kept beside a new one's: another install of
+#: lumitrace sharing the folder (a release and a checkout) keeps its own, not remade at
+#: every run of either; an edited checkout's older stamps go.
+KEPT_STAMPS = 2
+
+
+def _drop_stale(path: Path) -> None:
+    """Remove the same function's tables kept for sources stamps other than ``path``'s,
+    but for the :data:`KEPT_STAMPS` most recently written, and any in an earlier format."""
+    name, _, own = path.name.rpartition("-")
+    newest: dict[str, int] = {}
+    others: list[tuple[str, Path]] = []
+    for other in path.parent.glob(f"{name.rpartition('-')[0]}-*"):
+        stamp = other.name.rpartition("-")[2]
+        if stamp == own:
+            continue
+        try:
+            if not stamp.endswith(SUFFIX):  # an earlier format: never read again
+                other.unlink()
+                continue
+            when = other.stat().st_mtime_ns
+        except OSError:
+            continue
+        newest[stamp] = max(newest.get(stamp, when), when)
+        others.append((stamp, other))
+    kept = set(sorted(newest, key=newest.__getitem__, reverse=True)[:KEPT_STAMPS])
+    for stamp, other in others:
+        if stamp not in kept:
+            with contextlib.suppress(OSError):
+                other.unlink()
 
 
 def kept_table(fn: Callable) -> Callable:
