@@ -114,7 +114,7 @@ def _read(path: Path) -> tuple[bool, Any]:
         return False, None
 
 
-def _encoded(value: Any) -> bytes:
+def _encoded(value: Any) -> bytearray:
     """``value`` in a table's file format (see :data:`MAGIC`)."""
     raws: list[memoryview] = []
     body = pickle.dumps(value, protocol=5,
@@ -132,7 +132,7 @@ def _encoded(value: Any) -> bytes:
     out[start:start + len(body)] = body
     for (at, size), raw in zip(spans, raws):
         out[at:at + size] = raw
-    return bytes(out)
+    return out
 
 
 def _write(path: Path, value: Any) -> None:
@@ -154,8 +154,9 @@ KEPT_STAMPS = 2
 
 
 def _drop_stale(path: Path) -> None:
-    """Remove the same function's tables kept for sources stamps other than ``path``'s,
-    but for the :data:`KEPT_STAMPS` most recently written, and any in an earlier format."""
+    """Remove the same function's tables kept for sources stamps other than ``path``'s
+    (an earlier format's files, another suffix, count as stamps of their own), but for the
+    :data:`KEPT_STAMPS` most recently written."""
     name, _, own = path.name.rpartition("-")
     newest: dict[str, int] = {}
     others: list[tuple[str, Path]] = []
@@ -164,9 +165,6 @@ def _drop_stale(path: Path) -> None:
         if stamp == own:
             continue
         try:
-            if not stamp.endswith(SUFFIX):  # an earlier format: never read again
-                other.unlink()
-                continue
             when = other.stat().st_mtime_ns
         except OSError:
             continue
