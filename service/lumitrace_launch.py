@@ -50,13 +50,18 @@ def _load_cli():
 
 def _start_renderer(argv: list[str]) -> None:
     """A ``trace`` that will draw pictures starts the photometric solid's renderer now,
-    before lumitrace and USD load, so that loading VTK overlaps all of the run."""
+    before lumitrace and USD load, so that loading VTK overlaps all of the run: by default
+    forked from this process once pyplot is loaded, which both processes then have."""
     if argv[1:2] != ["trace"] or any(a in ("--no-pictures", "-h", "--help") for a in argv):
         return
     module = _load_early("photometry.solid_render")
     if module is not None:
         try:
-            module.start_renderer()
+            if module.mode(fork=True) == "fork":  # pyplot loaded before the fork, for both
+                plots = _load_early("pyplot")
+                if plots is not None:
+                    plots.short_setter_docs()  # (as the command line has it)
+            module.start_renderer(fork=True)
         except Exception:  # the command starts it itself, or draws in its own process
             pass
 

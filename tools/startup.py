@@ -10,9 +10,10 @@ A child process is started as a user starts the CLI (``lumitrace trace STAGE --p
 the emission kernel first returns (the first photons exist). Medians of ``--repeats``; the stage is traced from a
 copy, into a temporary folder.
 
-Then the whole process against the floor: the ``lumitrace`` command (without pictures, with
-them drawn in its own process, and with the solid drawn by the renderer process a
-terminal's run starts, ``LUMITRACE_RENDERER=process``) and ``python -c "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"``
+Then the whole process against the floor: the ``lumitrace`` command (without pictures; with
+them, the solid drawn by the renderer it forks, as by default; drawn in its own process,
+``LUMITRACE_RENDERER=inline``; and by a renderer in an interpreter of its own,
+``LUMITRACE_RENDERER=process``) and ``python -c "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"``
 (no USD tool starts faster), in turn, each a fresh process timed from its start until it is
 reaped, with its CPU seconds and peak resident memory from the kernel's accounting of the
 child (``os.wait4``), after a first run of each that is not counted (Python's bytecode
@@ -110,12 +111,12 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
     trace = [sys.executable, "-c", COMMAND, "trace", str(stage), "--photons", str(photons),
              "--out", str(out)]
     cmds = {"floor": [sys.executable, "-c", FLOOR], "plain": trace + ["--no-pictures"],
-            "pictures": trace, "renderer": trace}
-    # the solid drawn in the command's process (as for a script: standard error is not a
-    # terminal), and by the renderer process a terminal's run starts (its CPU counted
-    # in the command's, as the command waits for it; the peak is the larger process's)
-    envs = {name: dict(env, LUMITRACE_RENDERER="process" if name == "renderer" else "inline")
-            for name in cmds}
+            "pictures": trace, "inline": trace, "renderer": trace}
+    # the solid drawn by the renderer the command forks (the default), in the command's
+    # own process, and by a renderer in a new interpreter (a renderer's CPU is counted in
+    # the command's, as the command waits for it; the peak is the larger process's)
+    envs = {name: dict(env, LUMITRACE_RENDERER={"inline": "inline", "renderer": "process"}
+                       .get(name, "auto")) for name in cmds}
     rows: dict[str, list] = {k: [] for k in cmds}
     for first in [True] + [False] * repeats:
         for name, cmd in cmds.items():
@@ -126,15 +127,14 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
     med = lambda xs: statistics.median(xs)  # noqa: E731
     keys = ("wall_s", "cpu_s", "peak_mb")
     summary = {name: {k: med([r[k] for r in runs]) for k in keys} for name, runs in rows.items()}
-    pairs = list(zip(rows["floor"], rows["plain"], rows["pictures"], rows["renderer"]))
-    summary["plain_over_floor"] = {k: med([p[k] / f[k] for f, p, _, _ in pairs])
-                                   for k in keys}
+    summary["plain_over_floor"] = {k: med([p[k] / f[k] for f, p in
+                                            zip(rows["floor"], rows["plain"])]) for k in keys}
     summary["plain_minus_floor_mb"] = med([p["peak_mb"] - f["peak_mb"]
-                                           for f, p, _, _ in pairs])
-    summary["pictures_minus_plain"] = {k: med([q[k] - p[k] for _, p, q, _ in pairs])
-                                       for k in keys}
-    summary["renderer_minus_plain"] = {k: med([q[k] - p[k] for _, p, _, q in pairs])
-                                       for k in keys}
+                                           for f, p in zip(rows["floor"], rows["plain"])])
+    for name in ("pictures", "inline", "renderer"):
+        summary[f"{name}_minus_plain"] = {k: med([q[k] - p[k] for p, q in
+                                                  zip(rows["plain"], rows[name])])
+                                          for k in keys}
     return summary
 
 
@@ -177,15 +177,17 @@ def main(argv=None) -> int:
     w = summary["whole"]
     print("whole processes, in turn (medians; ratios and differences run by run):")
     for name, label in (("floor", "import floor"), ("plain", "--no-pictures"),
-                        ("pictures", "with pictures"), ("renderer", "and a renderer")):
+                        ("pictures", "with pictures"), ("inline", "drawn in-process"),
+                        ("renderer", "a new renderer")):
         s = w[name]
         print(f"  {label:>14s}: {s['wall_s']:.2f} s wall, {s['cpu_s']:.2f} CPU s, "
               f"peak {s['peak_mb']:.0f} MB")
     r = w["plain_over_floor"]
     print(f"  --no-pictures / floor: {r['wall_s']:.2f} wall, {r['cpu_s']:.2f} CPU, "
           f"+{w['plain_minus_floor_mb']:.0f} MB")
-    for key, label in (("pictures_minus_plain", "pictures - no pictures"),
-                       ("renderer_minus_plain", "pictures by a renderer - none")):
+    for key, label in (("pictures_minus_plain", "pictures (forked renderer) - none"),
+                       ("inline_minus_plain", "pictures drawn in-process - none"),
+                       ("renderer_minus_plain", "pictures by a new renderer - none")):
         d = w[key]
         print(f"  {label}: +{d['wall_s']:.2f} s wall, +{d['cpu_s']:.2f} CPU s, "
               f"+{d['peak_mb']:.0f} MB")

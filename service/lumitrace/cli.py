@@ -280,7 +280,7 @@ def cmd_trace(args) -> int:
     if not args.no_pictures:  # VTK loads on another core while the photons are traced
         from .photometry.solid_render import start_renderer
 
-        start_renderer()
+        start_renderer(fork=True)
     if args.edits is not None:
         from .delta.edits import open_with_edits
         from .stage.reader import scene_from_stage

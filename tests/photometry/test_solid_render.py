@@ -19,14 +19,15 @@ from lumitrace.photometry import solid_render  # noqa: E402
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
-def _module_renderer():
-    """Renderers for this module's tests: one is shared until a test ends it (each start
-    loads VTK again, a second and a half of CPU that the suite's other worker feels)."""
+@pytest.fixture(scope="module", params=["process", "fork"])
+def _module_renderer(request):
+    """Renderers for this module's tests, of each kind (a new interpreter, and forked from
+    this process): one is shared until a test ends it (each start loads VTK again, a second
+    of CPU that the suite's other worker feels)."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("LUMITRACE_RENDERER", "process")
+        mp.setenv("LUMITRACE_RENDERER", request.param)
         solid_render.stop_renderer()
-        yield
+        yield request.param
         solid_render.stop_renderer()
 
 
@@ -36,6 +37,7 @@ def renderer(_module_renderer):
     r = solid_render.start_renderer()
     if r is None:
         pytest.skip("no renderer on this machine (one core)")
+    assert isinstance(r.proc, solid_render._Forked) is (_module_renderer == "fork")
     return r
 
 
@@ -202,14 +204,16 @@ def test_an_abandoned_picture_is_never_written(renderer, tmp_path):
 
 
 def _renderers(parent: int | None = None) -> set[int]:
-    """Pids of the running renderer processes (by their command line), of ``parent``'s
-    only when given (other tests running beside this one start renderers of their own)."""
+    """Pids of the running renderer processes (by their command line, or a forked one's
+    name), of ``parent``'s only when given (other tests running beside this one start
+    renderers of their own)."""
     out = set()
     for d in os.listdir("/proc"):
         if d.isdigit():
             try:
-                with open(f"/proc/{d}/cmdline", "rb") as f:
-                    if b"_lumitrace_solid_render" not in f.read():
+                with open(f"/proc/{d}/cmdline", "rb") as f, open(f"/proc/{d}/comm") as c:
+                    if b"_lumitrace_solid_render" not in f.read() and \
+                            c.read().strip() != "lumitrace-solid":
                         continue
                 with open(f"/proc/{d}/stat") as f:
                     ppid = int(f.read().rsplit(")", 1)[1].split()[1])
@@ -222,16 +226,17 @@ def _renderers(parent: int | None = None) -> set[int]:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="no renderer on one core")
-def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
+@pytest.mark.parametrize("kind", ["process", "auto"])
+def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path, kind):
     """The ``lumitrace`` entry point starts the renderer before lumitrace loads (seen while
-    the run traces), the solid it draws is written, and once the command has ended no
-    renderer of it is left; a SIGTERM mid-run leaves none either."""
+    the run traces; by default forked), the solid it draws is written, and once the
+    command has ended no renderer of it is left; a SIGTERM mid-run leaves none either."""
     stage = tmp_path / "cup.usda"
     stage.write_bytes((ROOT / "stages" / "reference" / "mirror_cup.usda").read_bytes())
     cmd = [sys.executable, "-c", "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())",
            "trace", str(stage), "--photons", "100000", "--no-progress", "--no-sublayer",
            "--out", str(tmp_path / "out")]
-    env = dict(os.environ, LUMITRACE_RENDERER="process")  # (stderr is not a terminal)
+    env = dict(os.environ, LUMITRACE_RENDERER=kind)  # (stderr is not a terminal)
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=env)
     seen = set()
@@ -264,9 +269,11 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path):
     assert not (seen & _renderers())
 
 
-def test_by_default_a_terminal_gets_a_renderer_and_a_script_does_not(monkeypatch):
-    """``auto`` follows standard error: a terminal's user waits for the pictures, a farm's
-    job pays for the second interpreter's CPU; ``process`` and ``inline`` say it outright."""
+def test_by_default_a_trace_forks_its_renderer_and_a_service_follows_its_terminal(
+        monkeypatch):
+    """``auto``: a ``trace`` (which may fork) forks its renderer, at a terminal or not; a
+    service gets a renderer process at a terminal and draws in its own process for a
+    script; ``process``, ``fork`` and ``inline`` say it outright; one core draws here."""
     class Stream:
         def __init__(self, tty):
             self.tty = tty
@@ -275,14 +282,65 @@ def test_by_default_a_terminal_gets_a_renderer_and_a_script_does_not(monkeypatch
             return self.tty
 
     monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 2)
-    for mode, tty, want in (("auto", True, True), ("auto", False, False),
-                            ("process", False, True), ("inline", True, False)):
-        monkeypatch.setenv("LUMITRACE_RENDERER", mode)
+    for how, tty, fork, want in (("auto", True, True, "fork"), ("auto", False, True, "fork"),
+                                 ("auto", True, False, "process"),
+                                 ("auto", False, False, "inline"),
+                                 ("process", False, True, "process"),
+                                 ("fork", True, False, "fork"),
+                                 ("inline", True, True, "inline")):
+        monkeypatch.setenv("LUMITRACE_RENDERER", how)
         monkeypatch.setattr(solid_render.sys, "stderr", Stream(tty))
-        assert solid_render.wanted() is want, (mode, tty)
+        assert solid_render.mode(fork) == want, (how, tty, fork)
+        assert solid_render.wanted(fork) is (want != "inline")
     monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 1)
-    monkeypatch.setenv("LUMITRACE_RENDERER", "process")
-    assert not solid_render.wanted()
+    for how in ("process", "fork", "auto"):
+        monkeypatch.setenv("LUMITRACE_RENDERER", how)
+        assert solid_render.mode(True) == "inline" and not solid_render.wanted(True)
+
+
+def test_a_renderer_is_forked_only_from_the_main_thread(monkeypatch):
+    """Another thread of a process that may run others (a library's caller) draws here:
+    a fork copies one thread and whatever the others hold."""
+    monkeypatch.setenv("LUMITRACE_RENDERER", "fork")
+    monkeypatch.setattr(solid_render, "_renderer", None)
+    started = []
+    t = threading.Thread(target=lambda: started.append(solid_render.start_renderer(fork=True)))
+    t.start()
+    t.join()
+    assert started == [None] and solid_render.renderer() is None
+
+
+FORKED = """
+import atexit, os, sys
+import numpy as np
+from lumitrace.photometry import solid_render
+atexit.register(lambda: print("exit handler", flush=True))
+print("written before the fork", end="")  # still in this process's buffer at the fork
+r = solid_render.start_renderer(fork=True)
+assert isinstance(r.proc, solid_render._Forked), r
+g = np.radians(np.linspace(0, 180, 8))[None, :] + 0 * np.radians(np.linspace(0, 360, 10))[:, None]
+pts = np.stack([np.sin(g), 0 * g, -np.cos(g)], -1)
+job = r.submit(sys.argv[1], pts, 10 * np.cos(g) + 10, np.zeros((0, 3, 3)), "Z", "")
+assert r.wait(job), "not drawn"
+with open(f"/proc/{r.proc.pid}/comm") as f:
+    print(" |", f.read().strip(), "|", r.proc.pid != os.getpid())
+solid_render.stop_renderer()
+assert r.proc.returncode is not None
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork") or not sys.platform.startswith("linux"),
+                    reason="forks; reads /proc")
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="no renderer on one core")
+def test_a_forked_renderer_leaves_the_process_s_output_and_exit_handlers_alone(tmp_path):
+    """The forked child ends without this process's exit handlers and never writes what
+    this process had buffered at the fork: each line below comes once, from here."""
+    p = subprocess.run([sys.executable, "-c", FORKED, str(tmp_path / "solid.png")],
+                       capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, LUMITRACE_RENDERER="fork"))
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == "written before the fork | lumitrace-solid | True\nexit handler\n"
+    assert (tmp_path / "solid.png").stat().st_size > 10_000
 
 
 def test_a_solid_handed_over_does_not_wait_for_the_renderer_to_read(tmp_path, monkeypatch):

@@ -284,6 +284,89 @@ class _OnFirstUse(types.ModuleType):
         return getattr(real, attr)
 
 
+class _Forked:
+    """A renderer forked from this process: what :class:`Renderer` uses of
+    :class:`subprocess.Popen` (``pid``, ``stdin``, ``stdout``, ``poll``, ``wait``,
+    ``kill``). The child has what this process loaded already (numpy, and lumitrace where
+    it is forked after it loaded), so it starts drawing sooner and for less CPU than a new
+    interpreter; it runs :func:`serve` on two pipes and ends without this process's exit
+    handlers."""
+
+    def __init__(self, warm_up: bool):
+        for stream in (sys.stdout, sys.stderr):  # what is buffered is this process's
+            with contextlib.suppress(Exception):
+                stream.flush()
+        jobs, self_jobs = os.pipe()
+        answers_here, answers = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover  (the child: coverage does not follow a fork)
+            _forked_child(jobs, self_jobs, answers_here, answers, warm_up)
+        os.close(jobs)
+        os.close(answers)
+        self.pid = pid
+        self.returncode: int | None = None
+        self.stdin = open(self_jobs, "wb")
+        self.stdout = open(answers_here, "rb", buffering=0)
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            with contextlib.suppress(ChildProcessError):
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+                if pid:
+                    self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.poll() is None:
+            if deadline is None:
+                with contextlib.suppress(ChildProcessError):
+                    self.returncode = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+                continue
+            if time.monotonic() >= deadline:
+                raise subprocess.TimeoutExpired("renderer", timeout)
+            time.sleep(0.005)
+        return self.returncode
+
+    def kill(self) -> None:
+        if self.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, 9)
+
+
+def _forked_child(jobs: int, self_jobs: int, answers_here: int, answers: int,
+                  warm_up: bool) -> None:
+    """The forked renderer: its jobs on standard input, its answers on standard output,
+    nothing on standard error; ended by ``os._exit``, never returning to the code that
+    forked it."""
+    code = 1
+    try:
+        import signal
+
+        os.close(self_jobs)
+        os.close(answers_here)
+        null = os.open(os.devnull, os.O_RDWR)
+        for fd, to in ((jobs, 0), (answers, 1), (null, 2)):
+            os.dup2(fd, to)
+            if fd > 2:
+                os.close(fd)
+        sys.stdin = open(0, "r", closefd=False)
+        sys.stdout = open(1, "w", closefd=False)
+        sys.stderr = open(2, "w", closefd=False)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        import faulthandler
+
+        faulthandler.disable()  # a crash here is this process's own: drawn there instead
+        with contextlib.suppress(Exception):
+            import ctypes
+
+            ctypes.CDLL(None).prctl(15, b"lumitrace-solid")  # PR_SET_NAME, for ps and top
+        serve(warm_up)
+        code = 0
+    finally:
+        os._exit(code)
+
+
 class Renderer:
     """A renderer process: started at once, used by :meth:`submit` and :meth:`wait`.
 
@@ -291,17 +374,20 @@ class Renderer:
     place. A picture no longer wanted (its set rolled back, a newer revision come) is just
     not waited for: it never reaches its place, and the renderer goes on to the next."""
 
-    def __init__(self, warm_up: bool = False):
+    def __init__(self, warm_up: bool = False, fork: bool = False):
         """``warm_up``: draw a small solid as soon as VTK is loaded, so that the first real
         one is drawn in a window that has drawn before (0.2 s, not 0.4-0.5 s). That costs
         0.5 CPU s at once: a service, idle between edits, gains it back from its second
         solid on; a command tracing on every core would only be slowed by it (a 10M-photon
         run with pictures took 1.1 times as long with it, 6 runs in turn on 2 cores)."""
         self.folder = Path(tempfile.mkdtemp(prefix="lumitrace-renderer-"))
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", _BOOT, os.path.abspath(__file__)]
-            + (["warm-up"] if warm_up else []), stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, close_fds=True)
+        if fork:
+            self.proc = _Forked(warm_up)
+        else:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", _BOOT, os.path.abspath(__file__)]
+                + (["warm-up"] if warm_up else []), stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, close_fds=True)
         self._ids = iter(range(1, 1 << 62))
         self._targets: dict[int, Path] = {}  # job -> where its picture goes once waited for
         #: whether it died of a signal while it drew (VTK crashed, most likely: drawing
@@ -415,36 +501,56 @@ def vtk_crashed() -> bool:
     return _vtk_crashed.is_set()
 
 
-def wanted() -> bool:
-    """Whether this process's pictures are drawn by a renderer: ``LUMITRACE_RENDERER`` is
-    ``process`` (always) or ``inline`` (never); by default only for a command run at a
-    terminal, whose user waits for it (0.5-0.8 s sooner), not for a farm's or a script's,
-    which pays for its CPU (0.6-0.9 CPU s more: a second interpreter loads numpy and VTK).
-    Never on one core, where a process of its own only adds its start."""
-    mode = os.environ.get("LUMITRACE_RENDERER", "auto").lower()
-    if mode == "inline" or (os.cpu_count() or 1) < 2:
-        return False
-    if mode == "process":
-        return True
-    try:
-        return sys.stderr.isatty()
-    except (AttributeError, ValueError):
-        return False
+def mode(fork: bool = False) -> str:
+    """How this process's solids are drawn, as ``LUMITRACE_RENDERER`` says: ``fork`` (by a
+    renderer forked from this process), ``process`` (by a renderer in an interpreter of its
+    own) or ``inline`` (here). ``auto``, the default: forked where the caller may fork
+    (``fork``: a ``trace`` command, at its start), else a renderer process for a command
+    run at a terminal (a service's) and here for others. Always ``inline`` on one core,
+    where a process of its own only adds its start."""
+    how = os.environ.get("LUMITRACE_RENDERER", "auto").lower()
+    if how == "inline" or (os.cpu_count() or 1) < 2:
+        return "inline"
+    if how == "auto" and fork:
+        how = "fork"
+    elif how not in ("process", "fork"):
+        try:
+            how = "process" if sys.stderr.isatty() else "inline"
+        except (AttributeError, ValueError):
+            how = "inline"
+    return "process" if how == "fork" and not hasattr(os, "fork") else how
 
 
-def start_renderer(warm_up: bool = False) -> Renderer | None:
+def wanted(fork: bool = False) -> bool:
+    """Whether this process's pictures are drawn by a renderer (see :func:`mode`)."""
+    return mode(fork) != "inline"
+
+
+def start_renderer(warm_up: bool = False, fork: bool = False) -> Renderer | None:
     """Start this process's renderer where it is :func:`wanted` (once; None where it is
     not, pyvista is not installed or the process cannot be started), to be used by the
-    pictures this process draws; ``warm_up``: see :class:`Renderer`."""
+    pictures this process draws; ``warm_up``: see :class:`Renderer`; ``fork``: the
+    caller may fork (see :func:`mode`), which it does only from the main thread (another
+    thread draws here), after loading pyplot where :mod:`lumitrace.pyplot` is loaded:
+    both processes then share it (the command draws the polar curve with it, and pyvista
+    loads most of matplotlib), and a run's pictures cost the CPU of drawing them here
+    (+1.30 CPU s against +1.24 s, +1.49 s for a renderer process, medians of five)."""
     global _renderer
     if _renderer is not None and _renderer.alive():
         return _renderer
     import importlib.util
 
-    if not wanted() or importlib.util.find_spec("pyvista") is None:
+    how = mode(fork)
+    if how == "inline" or importlib.util.find_spec("pyvista") is None:
         return None
+    if how == "fork":
+        if threading.current_thread() is not threading.main_thread():
+            return None
+        plots = sys.modules.get("lumitrace.pyplot")
+        if plots is not None:
+            plots.pyplot()
     try:
-        _renderer = Renderer(warm_up)
+        _renderer = Renderer(warm_up, fork=how == "fork")
     except OSError:
         _renderer = None
         return None
