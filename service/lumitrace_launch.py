@@ -50,17 +50,16 @@ def _load_cli():
 
 def _start_renderer(argv: list[str]) -> None:
     """A ``trace`` that will draw pictures starts the photometric solid's renderer now,
-    before lumitrace and USD load, so that loading VTK overlaps all of the run: by default
-    forked from this process once pyplot is loaded, which both processes then have."""
+    before lumitrace and USD load, so that loading VTK overlaps all of the run (by
+    default forked from this process, see lumitrace.photometry.solid_render.mode)."""
     if argv[1:2] != ["trace"] or any(a in ("--no-pictures", "-h", "--help") for a in argv):
         return
     module = _load_early("photometry.solid_render")
+    plots = _load_early("pyplot")  # (the renderer may load pyplot before it forks)
     if module is not None:
         try:
-            if module.mode(fork=True) == "fork":  # pyplot loaded before the fork, for both
-                plots = _load_early("pyplot")
-                if plots is not None:
-                    plots.short_setter_docs()  # (as the command line has it)
+            if plots is not None:
+                plots.short_setter_docs()  # as the command line has it
             module.start_renderer(fork=True)
         except Exception:  # the command starts it itself, or draws in its own process
             pass

@@ -84,17 +84,36 @@ FLOOR = "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"
 COMMAND = "import sys, lumitrace_launch; sys.exit(lumitrace_launch.main())"
 
 
-def whole(cmd: list[str], cwd: Path, env: dict) -> dict:
+def whole(cmd: list[str], cwd: Path, env: dict, terminal: bool = False) -> dict:
     """One command as a fresh process: wall seconds from its start until it is reaped, its
-    CPU seconds (user + system) and peak resident memory (MB), as the kernel counted them."""
+    CPU seconds (user + system) and peak resident memory (MB), as the kernel counted them;
+    ``terminal``: its standard error a terminal (a pseudo-terminal read here), as a user
+    at a terminal runs it."""
+    import pty
+
+    master, slave = pty.openpty() if terminal else (None, subprocess.PIPE)
     t = time.perf_counter()
     p = subprocess.Popen(cmd, cwd=cwd, env=env, stdin=subprocess.DEVNULL,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = p.stderr.read()
+                         stdout=subprocess.DEVNULL, stderr=slave)
+    if terminal:
+        os.close(slave)
+        chunks = []
+        while True:
+            try:
+                chunk = os.read(master, 65536)
+            except OSError:  # the terminal's other side closed
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+        os.close(master)
+        err = b"".join(chunks)
+    else:
+        err = p.stderr.read()
+        p.stderr.close()
     _, status, ru = os.wait4(p.pid, 0)
     wall = time.perf_counter() - t
     p.returncode = os.waitstatus_to_exitcode(status)
-    p.stderr.close()
     if p.returncode:
         raise SystemExit(f"{' '.join(cmd[:4])} ... failed:\n{err.decode(errors='replace')}")
     return {"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "peak_mb": ru.ru_maxrss / 1024}
@@ -111,17 +130,18 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
     trace = [sys.executable, "-c", COMMAND, "trace", str(stage), "--photons", str(photons),
              "--out", str(out)]
     cmds = {"floor": [sys.executable, "-c", FLOOR], "plain": trace + ["--no-pictures"],
-            "pictures": trace, "inline": trace, "renderer": trace}
-    # the solid drawn by the renderer the command forks (the default), in the command's
-    # own process, and by a renderer in a new interpreter (a renderer's CPU is counted in
-    # the command's, as the command waits for it; the peak is the larger process's)
+            "pictures": trace, "terminal": trace, "inline": trace, "renderer": trace}
+    # the solid drawn by the renderer the command forks (the default; at a terminal too,
+    # where the command also draws its progress), in the command's own process, and by a
+    # renderer in a new interpreter (a renderer's CPU is counted in the command's, as the command waits
+    # for it; the peak is the larger process's)
     envs = {name: dict(env, LUMITRACE_RENDERER={"inline": "inline", "renderer": "process"}
                        .get(name, "auto")) for name in cmds}
     rows: dict[str, list] = {k: [] for k in cmds}
     for first in [True] + [False] * repeats:
         for name, cmd in cmds.items():
             shutil.rmtree(out, ignore_errors=True)
-            figures = whole(cmd, stage.parent, envs[name])
+            figures = whole(cmd, stage.parent, envs[name], terminal=name == "terminal")
             if not first:
                 rows[name].append(figures)
     med = lambda xs: statistics.median(xs)  # noqa: E731
@@ -131,7 +151,7 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
                                             zip(rows["floor"], rows["plain"])]) for k in keys}
     summary["plain_minus_floor_mb"] = med([p["peak_mb"] - f["peak_mb"]
                                            for f, p in zip(rows["floor"], rows["plain"])])
-    for name in ("pictures", "inline", "renderer"):
+    for name in ("pictures", "terminal", "inline", "renderer"):
         summary[f"{name}_minus_plain"] = {k: med([q[k] - p[k] for p, q in
                                                   zip(rows["plain"], rows[name])])
                                           for k in keys}
@@ -177,7 +197,8 @@ def main(argv=None) -> int:
     w = summary["whole"]
     print("whole processes, in turn (medians; ratios and differences run by run):")
     for name, label in (("floor", "import floor"), ("plain", "--no-pictures"),
-                        ("pictures", "with pictures"), ("inline", "drawn in-process"),
+                        ("pictures", "with pictures"), ("terminal", "at a terminal"),
+                        ("inline", "drawn in-process"),
                         ("renderer", "a new renderer")):
         s = w[name]
         print(f"  {label:>14s}: {s['wall_s']:.2f} s wall, {s['cpu_s']:.2f} CPU s, "
@@ -186,6 +207,7 @@ def main(argv=None) -> int:
     print(f"  --no-pictures / floor: {r['wall_s']:.2f} wall, {r['cpu_s']:.2f} CPU, "
           f"+{w['plain_minus_floor_mb']:.0f} MB")
     for key, label in (("pictures_minus_plain", "pictures (forked renderer) - none"),
+                       ("terminal_minus_plain", "the same at a terminal - none"),
                        ("inline_minus_plain", "pictures drawn in-process - none"),
                        ("renderer_minus_plain", "pictures by a new renderer - none")):
         d = w[key]

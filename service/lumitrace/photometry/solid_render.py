@@ -1,16 +1,19 @@
-"""The photometric solid's picture drawn by VTK (pyvista), here or in a process of its own
+"""The photometric solid's picture drawn by VTK (pyvista), here or in a renderer process
 started ahead of the run, so that loading VTK and rendering overlap the tracing, the files
 and the polar curve on another core.
 
 Loading pyvista and VTK costs a run that writes pictures about a second, and a solid drawn
 in a new window 0.4-0.5 s more, all while the interpreter is held. A command that will
 draw starts a renderer (:func:`start_renderer`) before it loads lumitrace (a service, as
-it starts); the renderer loads VTK while the photons are traced, opens one window (a
-service's warmed up with a small solid), then draws each solid it is sent in that window
-(a window that has drawn before draws the next in half the time) into a folder of its own,
-and the PNG is put in its place when it is waited for: a picture no longer wanted (an edit
-came, a set was rolled back) never lands, and the renderer goes on. Wherever it cannot (it
-did not start, died, or failed a picture), the solid is drawn here, in a window of its own.
+it starts): a ``trace`` forks it from its own process once matplotlib's pyplot is loaded
+(which both then share: the command draws the polar curve with it, pyvista loads most of
+matplotlib), a service starts a new interpreter. The renderer loads VTK while the photons
+are traced, opens one window (a service's warmed up with a small solid), then draws each
+solid it is sent in that window (a window that has drawn before draws the next in half
+the time) into a folder of its own, and the PNG is put in its place when it is waited
+for: a picture no longer wanted (an edit came, a set was rolled back) never lands, and the
+renderer goes on. Wherever it cannot (it did not start, died, or failed a picture), the
+solid is drawn here, in a window of its own.
 
 This module needs only the standard library, numpy and pyvista: the renderer loads it by
 its file, without lumitrace and USD.
@@ -285,12 +288,13 @@ class _OnFirstUse(types.ModuleType):
 
 
 class _Forked:
-    """A renderer forked from this process: what :class:`Renderer` uses of
+    """A renderer forked from this process, with what :class:`Renderer` uses of
     :class:`subprocess.Popen` (``pid``, ``stdin``, ``stdout``, ``poll``, ``wait``,
-    ``kill``). The child has what this process loaded already (numpy, and lumitrace where
-    it is forked after it loaded), so it starts drawing sooner and for less CPU than a new
-    interpreter; it runs :func:`serve` on two pipes and ends without this process's exit
-    handlers."""
+    ``kill``). The child has what this process loaded (numpy and matplotlib, which a new
+    interpreter would load again); it runs :func:`serve` on two pipes and ends without
+    this process's exit handlers. Forked from the main thread only: a fork copies one
+    thread, and the child uses nothing another may hold (USD's and Embree's pools, which a
+    command starts after)."""
 
     def __init__(self, warm_up: bool):
         for stream in (sys.stdout, sys.stderr):  # what is buffered is this process's
@@ -356,7 +360,7 @@ def _forked_child(jobs: int, self_jobs: int, answers_here: int, answers: int,
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         import faulthandler
 
-        faulthandler.disable()  # a crash here is this process's own: drawn there instead
+        faulthandler.disable()  # a crash here is answered by drawing the solid there
         with contextlib.suppress(Exception):
             import ctypes
 
@@ -514,11 +518,16 @@ def mode(fork: bool = False) -> str:
     if how == "auto" and fork:
         how = "fork"
     elif how not in ("process", "fork"):
-        try:
-            how = "process" if sys.stderr.isatty() else "inline"
-        except (AttributeError, ValueError):
-            how = "inline"
+        how = "process" if _at_terminal() else "inline"
     return "process" if how == "fork" and not hasattr(os, "fork") else how
+
+
+def _at_terminal() -> bool:
+    """Whether this process's standard error is a terminal: a user waits for the run."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def wanted(fork: bool = False) -> bool:
@@ -533,8 +542,9 @@ def start_renderer(warm_up: bool = False, fork: bool = False) -> Renderer | None
     caller may fork (see :func:`mode`), which it does only from the main thread (another
     thread draws here), after loading pyplot where :mod:`lumitrace.pyplot` is loaded:
     both processes then share it (the command draws the polar curve with it, and pyvista
-    loads most of matplotlib), and a run's pictures cost the CPU of drawing them here
-    (+1.30 CPU s against +1.24 s, +1.49 s for a renderer process, medians of five)."""
+    loads most of matplotlib), and a run's pictures cost about the CPU of drawing them
+    here (``tools/startup.py``: +1.29 CPU s against +1.38 s; a new interpreter's +1.56 s),
+    in two thirds of the time."""
     global _renderer
     if _renderer is not None and _renderer.alive():
         return _renderer
