@@ -310,6 +310,21 @@ def test_a_renderer_is_forked_only_from_the_main_thread(monkeypatch):
     assert started == [None] and solid_render.renderer() is None
 
 
+def test_a_forked_renderer_reaped_elsewhere_is_not_waited_for_again(renderer, tmp_path):
+    """A forked renderer whose end was collected by someone else (a handler of the
+    caller's that waits for any child): waiting for its picture and closing it return,
+    and the picture is drawn here."""
+    if not isinstance(renderer.proc, solid_render._Forked):
+        pytest.skip("a renderer process of its own is waited for by subprocess")
+    pts, cd, tri = _solid()
+    os.kill(renderer.proc.pid, signal.SIGKILL)
+    os.waitpid(renderer.proc.pid, 0)
+    job = renderer.submit(tmp_path / "x.png", pts, cd, tri, "Z", "")
+    assert job is None or not renderer.wait(job, timeout=10)
+    renderer.close()
+    assert renderer.proc.returncode is not None and not renderer.alive()
+
+
 FORKED = """
 import atexit, os, sys
 import numpy as np
