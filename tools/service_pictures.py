@@ -1,11 +1,12 @@
 """A designer's edit as it reaches the pictures: a real ``lumitrace serve`` (its solids drawn
-by its renderer, or in its own process with ``--renderer inline``) on a copy of the stage, converged to 2% first; then ``--edits`` material
+by the renderer it forks; ``--renderer process``: by one in a new interpreter; ``inline``:
+in its own process) on a copy of the stage, converged to 2% first; then ``--edits`` material
 edits (the reflector's specular reflectance), each sent once the last one's revision is
 traced, written and drawn. Timed on the client, from the send to the status saying the
 revision's pictures are written (polar curve and photometric solid in place).
 
     python tools/service_pictures.py [--stage stages/downlight.usda] [--edits 8]
-                                     [--renderer process|inline] [--json]
+                                     [--renderer fork|process|inline] [--json]
 
 Run it against another checkout (``PYTHONPATH=OTHER/service``) in turn with this one to
 compare the two.
@@ -57,22 +58,28 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--stage", type=Path, default=HERE.parent / "stages" / "downlight.usda")
     p.add_argument("--edits", type=int, default=8)
-    p.add_argument("--renderer", choices=("process", "inline"), default="process",
-                   help="the solids drawn by a renderer process (a service started at a "
-                        "terminal) or in the service's own (one started by a script)")
+    p.add_argument("--renderer", choices=("fork", "process", "inline"), default="fork",
+                   help="the solids drawn by the renderer the service forks (the default), "
+                        "by one in a new interpreter, or in the service's own process")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     os.environ["LUMITRACE_RENDERER"] = args.renderer
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     times = measure(args.stage, args.edits)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     out = {"stage": str(args.stage), "edits": args.edits, "renderer": args.renderer,
-           "median_s": statistics.median(times), "max_s": max(times)}
+           "median_s": statistics.median(times), "max_s": max(times), "service_cpu_s": cpu}
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"{args.stage.name}, {args.edits} material edits, solids drawn "
-              f"{'by a renderer' if args.renderer == 'process' else 'in the service'}: from "
+        where = {"fork": "by the renderer it forks", "process": "by a new interpreter",
+                 "inline": "in the service"}[args.renderer]
+        print(f"{args.stage.name}, {args.edits} material edits, solids drawn {where}: from "
               f"the send to the pictures written, median {out['median_s']:.2f} s, slowest "
-              f"{out['max_s']:.2f} s")
+              f"{out['max_s']:.2f} s; the service's CPU (its renderer's included) {cpu:.1f} s")
     return 0
 
 

@@ -407,8 +407,8 @@ def cmd_serve(args) -> int:
     from .photometry.solid_render import start_renderer
 
     # the solids drawn off this process's interpreter, which edits need, in a window
-    # warmed up while the service starts
-    start_renderer(warm_up=True)
+    # warmed up while the service starts (forked now: no other thread runs yet)
+    start_renderer(warm_up=True, fork=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
                  deliverables=args.deliverables)

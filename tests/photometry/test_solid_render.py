@@ -14,6 +14,7 @@ import pytest
 
 pytest.importorskip("pyvista")
 
+from helpers.renderers import renderers  # noqa: E402
 from lumitrace.photometry import solid_render  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -203,27 +204,6 @@ def test_an_abandoned_picture_is_never_written(renderer, tmp_path):
     assert renderer.alive() and not list(renderer.folder.iterdir())
 
 
-def _renderers(parent: int | None = None) -> set[int]:
-    """Pids of the running renderer processes (by their command line, or a forked one's
-    name), of ``parent``'s only when given (other tests running beside this one start
-    renderers of their own)."""
-    out = set()
-    for d in os.listdir("/proc"):
-        if d.isdigit():
-            try:
-                with open(f"/proc/{d}/cmdline", "rb") as f, open(f"/proc/{d}/comm") as c:
-                    if b"_lumitrace_solid_render" not in f.read() and \
-                            c.read().strip() != "lumitrace-solid":
-                        continue
-                with open(f"/proc/{d}/stat") as f:
-                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-                if parent is None or ppid == parent:
-                    out.add(int(d))
-            except (OSError, ValueError, IndexError):
-                pass
-    return out
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="no renderer on one core")
 @pytest.mark.parametrize("kind", ["process", "auto"])
@@ -241,7 +221,7 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path, kind):
                          env=env)
     seen = set()
     for _ in range(100):
-        seen = _renderers(p.pid)
+        seen = renderers(p.pid)
         if seen or p.poll() is not None:
             break
         time.sleep(0.02)
@@ -250,12 +230,12 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path, kind):
     assert seen, "no renderer started"
     assert (tmp_path / "out" / "cup.solid.png").stat().st_size > 10_000
     time.sleep(0.2)
-    assert not (seen & _renderers())
+    assert not (seen & renderers())
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=env)
     seen = set()
     for _ in range(100):
-        seen = _renderers(p.pid)
+        seen = renderers(p.pid)
         if seen:
             break
         time.sleep(0.02)
@@ -263,10 +243,10 @@ def test_the_command_starts_a_renderer_at_once_and_leaves_none(tmp_path, kind):
     p.send_signal(signal.SIGTERM)
     p.communicate(timeout=120)
     for _ in range(50):  # the renderer ends with its command
-        if not (seen & _renderers()):
+        if not (seen & renderers()):
             break
         time.sleep(0.05)
-    assert not (seen & _renderers())
+    assert not (seen & renderers())
 
 
 def test_by_default_a_trace_forks_its_renderer_and_a_service_follows_its_terminal(

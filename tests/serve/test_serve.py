@@ -5,6 +5,7 @@ and restart; signals; concurrent clients."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -22,6 +23,7 @@ from lumitrace.client import ServiceError
 from lumitrace.publish.exr import read_intensity_exr
 from lumitrace.publish.runs import published_run_ids
 from helpers.paths import ROOT
+from helpers.renderers import renderers
 
 DEMO = ROOT / "stages" / "downlight.usda"
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
@@ -364,6 +366,29 @@ def test_kill_9_and_restart_loses_no_accepted_delta(stage):
         s.wait_done(3)
         edits = (stage.parent / "downlight.lumitrace-edits.usda").read_text()
         assert f"float {SPEC} = 0.5" in edits
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="no renderer on one core")
+def test_a_script_s_service_draws_in_the_renderer_it_forked_which_ends_with_it(stage):
+    """A service started by a script (standard error not a terminal) forks its renderer
+    as it starts; its pictures are drawn and written; killed with SIGKILL, it takes its
+    renderer with it (none is left running)."""
+    with Service(stage, *FAST) as s:
+        kids = renderers(s.proc.pid)
+        assert len(kids) == 1, kids
+        s.wait_done(0)
+        layer = (stage.parent / "downlight.lumitrace.usda").read_text()
+        assert "photometricSolid" in layer
+        assert (stage.parent / "downlight.solid.png").stat().st_size > 10_000
+        assert renderers(s.proc.pid) == kids  # the same renderer drew it and goes on
+        s.proc.send_signal(signal.SIGKILL)
+        s.proc.wait(30)
+    for _ in range(100):
+        if not kids & renderers():
+            break
+        time.sleep(0.05)
+    assert not kids & renderers()
 
 
 def test_sigterm_while_tracing_writes_a_final_result(stage):

@@ -5,9 +5,9 @@ and the polar curve on another core.
 Loading pyvista and VTK costs a run that writes pictures about a second, and a solid drawn
 in a new window 0.4-0.5 s more, all while the interpreter is held. A command that will
 draw starts a renderer (:func:`start_renderer`) before it loads lumitrace (a service, as
-it starts): a ``trace`` forks it from its own process once matplotlib's pyplot is loaded
-(which both then share: the command draws the polar curve with it, pyvista loads most of
-matplotlib), a service starts a new interpreter. The renderer loads VTK while the photons
+it starts), forked from its own process once matplotlib's pyplot is loaded (which both
+then share: the command draws the polar curve with it, pyvista loads most of
+matplotlib). The renderer loads VTK while the photons
 are traced, opens one window (a service's warmed up with a small solid), then draws each
 solid it is sent in that window (a window that has drawn before draws the next in half
 the time) into a folder of its own, and the PNG is put in its place when it is waited
@@ -518,8 +518,8 @@ def mode(fork: bool = False) -> str:
     """How this process's solids are drawn, as ``LUMITRACE_RENDERER`` says: ``fork`` (by a
     renderer forked from this process), ``process`` (by a renderer in an interpreter of its
     own) or ``inline`` (here). ``auto``, the default: forked where the caller may fork
-    (``fork``: a ``trace`` command, at its start), else a renderer process for a command
-    run at a terminal (a service's) and here for others. Always ``inline`` on one core,
+    (``fork``: a ``trace`` or ``serve`` command, as it starts), else a renderer process
+    for a process run at a terminal and here for others. Always ``inline`` on one core,
     where a process of its own only adds its start."""
     how = os.environ.get("LUMITRACE_RENDERER", "auto").lower()
     if how == "inline" or (os.cpu_count() or 1) < 2:
