@@ -291,9 +291,9 @@ class _Forked:
     :class:`subprocess.Popen` (``pid``, ``stdin``, ``stdout``, ``poll``, ``wait``,
     ``kill``). The child has what this process loaded (numpy and matplotlib, which a new
     interpreter would load again); it runs :func:`serve` on two pipes and ends without
-    this process's exit handlers. Forked from the main thread only: a fork copies one
-    thread, and the child uses nothing another may hold (USD's and Embree's pools, which a
-    command starts after)."""
+    this process's exit handlers. Forked from the main thread only, before the tracer's
+    threads start: a fork copies one thread, and the child never calls USD or Embree,
+    whose thread pools it does not have."""
 
     def __init__(self, warm_up: bool):
         for stream in (sys.stdout, sys.stderr):  # what is buffered is this process's
