@@ -133,8 +133,8 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
             "pictures": trace, "terminal": trace, "inline": trace, "renderer": trace}
     # the solid drawn by the renderer the command forks (the default; at a terminal too,
     # where the command also draws its progress), in the command's own process, and by a
-    # renderer in a new interpreter (a renderer's CPU is counted in the command's, as the command waits
-    # for it; the peak is the larger process's)
+    # renderer in a new interpreter (a renderer's CPU is counted in the command's, as the
+    # command waits for it; the peak is the larger process's)
     envs = {name: dict(env, LUMITRACE_RENDERER={"inline": "inline", "renderer": "process"}
                        .get(name, "auto")) for name in cmds}
     rows: dict[str, list] = {k: [] for k in cmds}
