@@ -155,12 +155,14 @@ FORK_AT_ONCE = """
 import os, sys
 import lumitrace
 pid = os.fork()  # at once: the schema registry's build joined first, not inherited mid-way
+if pid:  # the parent checks once its child has (their lines would otherwise interleave)
+    _, status = os.waitpid(pid, 0)
+    if os.waitstatus_to_exitcode(status):
+        sys.exit(os.waitstatus_to_exitcode(status))
 """ + FRESH_INTERPRETER.replace("import sys\nimport lumitrace\n", "") + """
 if pid == 0:
     sys.stdout.flush()
     os._exit(0)
-_, status = os.waitpid(pid, 0)
-sys.exit(os.waitstatus_to_exitcode(status))
 """
 
 
