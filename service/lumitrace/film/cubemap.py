@@ -154,7 +154,7 @@ def face_and_pixel_position(directions, res: int) -> tuple[np.ndarray, np.ndarra
     amax = np.abs(major)
     zero = amax == 0  # only (0, 0, 0): ImfEnvmap returns +X at (0, 0)
     s = res - 1
-    pif = np.empty((len(d), 2), dtype=np.float64)
+    pif = np.zeros((len(d), 2), dtype=np.float64)  # (where zero: 0, not what was there)
     # Minor components in ImfEnvmap's order: (y, z) on X faces, (x, z) on Y, (x, y) on Z.
     np.divide(np.where(is_x, y, x), amax, out=pif[:, 0], where=~zero)
     np.divide(np.where(is_z, y, z), amax, out=pif[:, 1], where=~zero)
