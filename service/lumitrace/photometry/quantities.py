@@ -199,7 +199,10 @@ def _offsets(u: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, float, float, 
     u = np.array(u)
     du = u - u.mean()
     den = (du * du).sum()
-    return u, du, den, u.mean(), 1.0 / len(u) + du * (0.5 - u.mean()) / den
+    weights = 1.0 / len(u) + du * (0.5 - u.mean()) / den
+    for shared in (u, du, weights):  # (made once, read by every call)
+        shared.flags.writeable = False
+    return u, du, den, u.mean(), weights
 
 
 def _line(y: np.ndarray, u: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, float]:

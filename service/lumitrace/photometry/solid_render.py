@@ -6,14 +6,13 @@ Loading pyvista and VTK costs a run that writes pictures about a second, and a s
 in a new window 0.4-0.5 s more, all while the interpreter is held. A command that will
 draw starts a renderer (:func:`start_renderer`) before it loads lumitrace (a service, as
 it starts), forked from its own process once matplotlib's pyplot is loaded (which both
-then share: the command draws the polar curve with it, pyvista loads most of
-matplotlib). The renderer loads VTK while the photons
-are traced, opens one window (a service's warmed up with a small solid), then draws each
-solid it is sent in that window (a window that has drawn before draws the next in half
-the time) into a folder of its own, and the PNG is put in its place when it is waited
-for: a picture no longer wanted (an edit came, a set was rolled back) never lands, and the
-renderer goes on. Wherever it cannot (it did not start, died, or failed a picture), the
-solid is drawn here, in a window of its own.
+then share: the command draws the polar curve with it, pyvista loads most of matplotlib).
+The renderer loads VTK while the photons are traced, opens one window (a service's warmed
+up with a small solid), then draws each solid it is sent in that window (a window that has
+drawn before draws the next in half the time) into a folder of its own, and the PNG is put
+in its place when it is waited for: a picture no longer wanted (an edit came, a set was
+rolled back) never lands, and the renderer goes on. Wherever it cannot (it did not start,
+died, or failed a picture), the solid is drawn here, in a window of its own.
 
 This module needs only the standard library, numpy and pyvista: the renderer loads it by
 its file, without lumitrace and USD.
@@ -392,7 +391,8 @@ class Renderer:
         one is drawn in a window that has drawn before (0.2 s, not 0.4-0.5 s). That costs
         0.5 CPU s at once: a service, idle between edits, gains it back from its second
         solid on; a command tracing on every core would only be slowed by it (a 10M-photon
-        run with pictures took 1.1 times as long with it, 6 runs in turn on 2 cores)."""
+        run with pictures took 1.1 times as long with it, 6 runs in turn on 2 cores).
+        ``fork``: forked from this process (:class:`_Forked`), not a new interpreter."""
         self.folder = Path(tempfile.mkdtemp(prefix="lumitrace-renderer-"))
         if fork:
             self.proc = _Forked(warm_up)
