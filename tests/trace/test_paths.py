@@ -96,10 +96,11 @@ def _lines(start: int, stop: int) -> range:
 
 
 def test_the_counts_a_hit_adds_to_and_embrees_ray_share_no_cache_line():
-    """Two tracing threads each write a part-hit count at every hit and an RTCRayHit at
-    every ray: each sits on cache lines that hold nothing but its own buffer, so the two
-    threads' small allocations never share a line (a shared one cost 10% more CPU)."""
-    from lumitrace.trace.kernels.paths import _RAYHIT_WORDS, _rayhit
+    """Two tracing threads each write a part-hit count at every hit and a packet of rays
+    (RTCRayHit4) at every Embree call: each sits on cache lines that hold nothing but its
+    own buffer, so the two threads' small allocations never share a line (a shared one
+    cost 10% more CPU)."""
+    from lumitrace.trace.kernels.paths import _LANES, _PACKET_WORDS, _packet
 
     ps = prepare(read_stage(STAGES / "reference/mirror_cup.usda"))
     hits = trace_batch(ps, BatchJob(0, 0, 2000, 0, 16)).part_hits
@@ -110,8 +111,10 @@ def test_the_counts_a_hit_adds_to_and_embrees_ray_share_no_cache_line():
     assert min(_lines(first, last)) * 64 >= whole.ctypes.data
     assert (max(_lines(first, last)) + 1) * 64 <= whole.ctypes.data + whole.nbytes
     for _ in range(4):  # wherever the allocation lands
-        buf = np.empty(_RAYHIT_WORDS, np.uint32)
-        f, u, addr = _rayhit(buf)
-        assert addr % 64 == 0 and addr > buf.ctypes.data  # the ray's first line is its own
-        assert addr + 128 <= buf.ctypes.data + buf.nbytes  # and so is its second
-        assert u.ctypes.data == f.ctypes.data == addr
+        # the packet's valid mask on a line of its own, its RTCRayHit4 (20 rows of _LANES
+        # words) on the lines after it, up to the end of the last
+        buf = np.empty(_PACKET_WORDS, np.uint32)
+        f, u, valid, packet = _packet(buf)
+        assert valid % 64 == 0 and valid > buf.ctypes.data and packet == valid + 64
+        assert u.ctypes.data == f.ctypes.data == valid
+        assert packet + -(-20 * 4 * _LANES // 64) * 64 <= buf.ctypes.data + buf.nbytes

@@ -47,7 +47,7 @@ _API = {"rtcNewDevice": (_P, [ctypes.c_char_p]), "rtcNewScene": (_P, [_P]),
         "rtcAttachGeometryByID": (None, [_P, _P, ctypes.c_uint]),
         "rtcDetachGeometry": (None, [_P, ctypes.c_uint]), "rtcCommitScene": (None, [_P]),
         "rtcReleaseScene": (None, [_P]), "rtcGetDeviceError": (ctypes.c_int, [_P]),
-        "rtcIntersect1": (None, [_P, _P, _P]),
+        "rtcIntersect4": (None, [_P, _P, _P, _P]),
         "rtcSetGeometryInstancedScene": (None, [_P, _P]),
         "rtcSetGeometryTransform": (None, [_P, ctypes.c_uint, ctypes.c_int, _P])}
 _lock = threading.Lock()
@@ -105,7 +105,7 @@ class PartScene:
         self._scenes: dict[int, int] = {}  # two-level: each part's own Embree scene
 
         self._lib, self._intersect = library(), intersect
-        self._fn = ctypes.cast(self._lib.rtcIntersect1, ctypes.c_void_p).value
+        self._fn = ctypes.cast(self._lib.rtcIntersect4, ctypes.c_void_p).value
         self._part = part = _parts(part_index, len(triangles))
         self.order = np.argsort(part, kind="stable").astype(np.int64)
         self._in_order = bool(np.all(self.order == np.arange(len(part))))
@@ -229,7 +229,7 @@ class PartScene:
 
     @property
     def hit_args(self) -> tuple:
-        """``rtcIntersect1``'s address, the scene's, and the part layout (offsets, order), as
+        """``rtcIntersect4``'s address, the scene's, and the part layout (offsets, order), as
         :func:`~lumitrace.trace.kernels.intersect` and a deep bounce take them."""
         return np.uint64(self._fn), np.uint64(self.scene), self.offsets, self.order
 

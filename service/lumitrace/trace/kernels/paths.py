@@ -1,6 +1,6 @@
 """The path loop: photons followed bounce by bounce (a wave at a time from Embree's hits,
-or each whole, casting its own rays through Embree's ``rtcIntersect1``), spectral
-throughputs carried along, escapes handed to the binning."""
+or each whole, four side by side casting their rays together through Embree's
+``rtcIntersect4``), spectral throughputs carried along, escapes handed to the binning."""
 from __future__ import annotations
 
 import math
@@ -133,6 +133,59 @@ def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, ne
 
 # --- one bounce of a wave, or whole paths ----------------------------------------------------
 
+#: Rays Embree intersects at once on a deep bounce (``rtcIntersect4``): four photons are
+#: followed side by side, each lane taking the next photon when its own ends.
+_LANES = 4
+#: uint32 words of the buffer a packet is placed in: its valid mask (4 words) and, from the
+#: next cache line, its RTCRayHit4 (20 rows of 4 words, room for a 21st), 64-byte aligned.
+_PACKET_WORDS = 16 + 24 * _LANES + 16
+_HIT = 16  # the RTCRayHit4's first word
+# its rows: org x y z, tnear, dir x y z, time, tfar, mask, id, flags, Ng x y z, u, v,
+# primID, geomID, instID
+_TFAR, _MASK, _PRIM, _GEOM, _INST = 8, 9, 17, 18, 19
+
+
+@numba.njit(**_ALWAYS)
+def _packet(buf):
+    """An RTCRayHit4 in ``buf`` (:data:`_PACKET_WORDS` uint32) after its valid mask: the
+    words as float32 and as uint32, the mask's address and the packet's. Embree writes
+    each ray's hit there, so it has cache lines of its own: small allocations of two
+    threads can sit side by side, and a shared line would move between the cores at every
+    call. No ray is valid yet."""
+    k = (64 - buf.ctypes.data % 64) // 4
+    buf[k:k + _LANES] = 0
+    a = numba.uint64(buf.ctypes.data + 4 * k)
+    return buf[k:].view(np.float32), buf[k:], a, a + numba.uint64(4 * _HIT)
+
+
+@numba.njit(**_ALWAYS)
+def _cast(lane, f, u, ox, oy, oz, dx, dy, dz):
+    """Ray ``lane`` of the packet (``f``, ``u``: its words) from (``ox``..``oz``) along
+    (``dx``..``dz``), made float32, no hit yet, and marked valid. Returns 1 (a ray cast)."""
+    u[lane] = 0xFFFFFFFF
+    b = _HIT + lane
+    f[b], f[b + 4], f[b + 8], f[b + 12] = ox, oy, oz, 0.0  # origin, tnear
+    f[b + 16], f[b + 20], f[b + 24], f[b + 28] = dx, dy, dz, 0.0  # direction, time
+    f[b + 4 * _TFAR] = np.inf
+    u[b + 4 * _MASK], u[b + 40], u[b + 44] = 0xFFFFFFFF, 0, 0  # mask, id, flags
+    u[b + 4 * _GEOM], u[b + 4 * _INST] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
+    return 1
+
+
+@numba.njit(**_ALWAYS)
+def _met(lane, f, u, offsets, order):
+    """Ray ``lane``'s closest hit in the packet: its triangle (-1: none) and float32
+    distance (inf: none). The triangle's part is its geometry's ID, or in a two-level scene
+    its instance's."""
+    b = _HIT + lane
+    geom = u[b + 4 * _GEOM]
+    if geom == 0xFFFFFFFF:
+        return np.int64(-1), np.inf
+    inst = u[b + 4 * _INST]
+    g = geom if inst == 0xFFFFFFFF else inst
+    return np.int64(order[offsets[g] + u[b + 4 * _PRIM]]), np.float64(f[b + 4 * _TFAR])
+
+
 @numba.njit(**_JIT)
 def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
            o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
@@ -158,14 +211,15 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
 
     With ``deep`` each photon is instead followed to its end from its emission (``o``,
     ``d``, ``pol``: the start points, directions and surface normals (3, N), world, moved
-    as :func:`start` moves them), its state in registers, each ray cast through Embree as it
-    goes (``fn`` .. ``order``: see :func:`intersect`; 0: no geometry) unless it misses the
-    box ``reach_lo``..``reach_hi``, as :func:`cull` has it; the same numbers are drawn, so
-    the tallies are the same. Returns (survivors, escaped bins, cut, absorbed, segments).
+    as :func:`start` moves them), :data:`_LANES` side by side, their rays cast together
+    through Embree as they go (``fn``: ``rtcIntersect4``, 0: no geometry; ``scene`` ..
+    ``order``: see :func:`intersect`) unless a ray misses the box ``reach_lo``..``reach_hi``,
+    as :func:`cull` has it; each photon draws the numbers it draws alone, so the tallies are
+    the same. Returns (survivors, escaped bins, cut, absorbed, segments).
     """
     n_out, cut, absorbed, segments = 0, 0, 0, 0
     n_parts = part_hits.shape[0]
-    rf, ru, addr = _rayhit(np.empty(_RAYHIT_WORDS, np.uint32))  # deep: Embree's ray
+    f, u, valid, packet = _packet(np.empty(_PACKET_WORDS, np.uint32))  # deep: Embree's rays
     staged = np.empty((6, _CHUNK))  # escapes staged for binning, and its scratch
     sbin = np.empty((2, _CHUNK), np.int64)
     binning = (staged, sbin, np.empty((3, _CHUNK)), np.empty((4, _CHUNK), np.int64))
@@ -173,28 +227,57 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             n_gamma, lo, hi, side, n_bins, escaped, spectral, escaped_xz, xz, records,
             rec_texel, rec_cell, rec_exit, exits, exit_pos, exit_dir)
     ns = 0
-    for i in range(prim.shape[0]):
-        h = base[i]
-        step = depth
-        if deep:  # emitted: unpolarised, in row i
-            ox, oy, oz = _started(o, pol, i, center, scale, epsilon)
-            dx, dy, dz = d[0, i], d[1, i], d[2, i]
-            qx, qy, qz = math.nan, (math.nan if polarised else 0.0), \
-                (math.nan if polarised else 0.0)
-            row = j = i  # (j: where a survivor's spectral throughput goes)
-            tri, t32 = np.int64(-1), np.inf
-            if fn != 0 and _reaches((ox, oy, oz), (dx, dy, dz), reach_lo, reach_hi):
-                tri, t32 = _closest(fn, scene, addr, rf, ru, ox, oy, oz, dx, dy, dz, offsets,
-                                    order)
-        else:
-            ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
-            dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-            qx = pol[i, 0] if polarised else math.nan
-            qy = pol[i, 1] if polarised else 0.0
-            qz = pol[i, 2] if polarised else 0.0
-            row, j = pid[i], n_out
-            tri, t32 = np.int64(prim[i]), np.float64(tfar[i])
-        while True:
+    # a wave's photons go through one lane in turn; whole paths through four, each lane
+    # taking the next photon when its own ends
+    lanes = _LANES if deep else 1
+    lane = np.full(_LANES, -1, np.int64)  # the photon in each lane (-1: none)
+    at = np.empty((_LANES, 9))  # its ray's origin, direction, and its polarisation
+    steps = np.empty(_LANES, np.int64)  # its bounces
+    hit = np.empty(_LANES, np.int64)  # its ray's triangle (-1: none)
+    hit_t = np.empty(_LANES)  # and float32 distance
+    nxt, cast = 0, 0
+    while True:
+        busy = 0
+        for k in range(lanes):
+            if lane[k] < 0 and nxt < prim.shape[0]:
+                i = nxt
+                nxt += 1
+                lane[k], steps[k], hit[k], hit_t[k] = i, depth, -1, np.inf
+                if deep:  # emitted: unpolarised, in row i
+                    ox, oy, oz = _started(o, pol, i, center, scale, epsilon)
+                    dx, dy, dz = d[0, i], d[1, i], d[2, i]
+                    qx, qy, qz = math.nan, (math.nan if polarised else 0.0), \
+                        (math.nan if polarised else 0.0)
+                    if fn != 0 and _reaches((ox, oy, oz), (dx, dy, dz), reach_lo, reach_hi):
+                        cast += _cast(k, f, u, ox, oy, oz, dx, dy, dz)
+                else:
+                    ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+                    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+                    qx = pol[i, 0] if polarised else math.nan
+                    qy = pol[i, 1] if polarised else 0.0
+                    qz = pol[i, 2] if polarised else 0.0
+                    hit[k], hit_t[k] = prim[i], tfar[i]
+                at[k, 0], at[k, 1], at[k, 2], at[k, 3], at[k, 4] = ox, oy, oz, dx, dy
+                at[k, 5], at[k, 6], at[k, 7], at[k, 8] = dz, qx, qy, qz
+            busy += lane[k] >= 0
+        if busy == 0:
+            break
+        if cast:
+            _call_void4(fn, valid, scene, packet, numba.uint64(0))
+            for k in range(lanes):
+                if u[k]:
+                    hit[k], hit_t[k] = _met(k, f, u, offsets, order)
+                    u[k] = 0
+            cast = 0
+        for k in range(lanes):
+            i = lane[k]
+            if i < 0:
+                continue
+            row, j = (i, i) if deep else (pid[i], n_out)  # (j: a survivor's throughput row)
+            h, step, tri, t32 = base[i], steps[k], hit[k], hit_t[k]
+            ox, oy, oz, dx, dy, dz = at[k, 0], at[k, 1], at[k, 2], at[k, 3], at[k, 4], at[k, 5]
+            qx, qy, qz = at[k, 6], at[k, 7], at[k, 8]
+            lane[k] = -1  # unless it goes on
             segments += 1
             if records and rec_segments[row] < 65535:
                 rec_segments[row] += 1
@@ -219,7 +302,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                     qx, qy, qz = _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi)
                     _mark_segment(rec_cells, rec_slabs, row, ox, oy, oz, qx, qy, qz, glo, ghi,
                                   gn, m0, m1, m2)
-                break
+                continue
             if n_parts:
                 part_hits[part_index[tri]] += 1
             # Embree's float32 tfar can put the hit a few ulps beyond the surface, behind an
@@ -235,7 +318,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                 cut += 1
                 if records:
                     rec_texel[row] = CUT
-                break
+                continue
             cos_in = _dot(dx, dy, dz, nx, ny, nz)
             stay = False
             if t32 * abs(cos_in) < near_hit:
@@ -264,15 +347,15 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                         nx, ny, nz, u0, u1, u2, u3, polarised, qx, qy, qz)
             if not alive:
                 absorbed += 1
-                break
+                continue
             side_sign = _dot(dx, dy, dz, nx, ny, nz)
-            k = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
-            px, py, pz = px + k * nx, py + k * ny, pz + k * nz
+            off = epsilon if side_sign > 0.0 else (-epsilon if side_sign < 0.0 else 0.0)
+            px, py, pz = px + off * nx, py + off * ny, pz + off * nz
             if deep:  # on, from here
-                ox, oy, oz = px, py, pz
-                step += 1
-                tri, t32 = _closest(fn, scene, addr, rf, ru, px, py, pz, dx, dy, dz, offsets,
-                                    order)
+                lane[k], steps[k] = i, step + 1
+                at[k, 0], at[k, 1], at[k, 2], at[k, 3], at[k, 4] = px, py, pz, dx, dy
+                at[k, 5], at[k, 6], at[k, 7], at[k, 8] = dz, qx, qy, qz
+                cast += _cast(k, f, u, px, py, pz, dx, dy, dz)
                 continue
             o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
             d2[n_out, 0], d2[n_out, 1], d2[n_out, 2] = dx, dy, dz
@@ -288,68 +371,39 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                     for b in range(tp.shape[1]):
                         tp[n_out, b] = tp[i, b]
             n_out += 1
-            break
     if ns:
         n_escaped = _bin_escapes(ns, *binning, n_escaped, *bins)
     return n_out, n_escaped, cut, absorbed, segments
 
 
-# --- intersection ---------------------------------------------------------------------------
-
 @intrinsic
-def _call_void3(typingctx, fn, a, b, c):
-    """Call the C function at address ``fn`` with three pointer arguments (addresses), no
-    result: Embree's ``rtcIntersect1(scene, rayhit, args)``, whose address is known only
-    at run time."""
-    sig = types.void(types.uint64, types.uint64, types.uint64, types.uint64)
-
+def _call_void4(typingctx, fn, a, b, c, e):
+    """Call the C function at address ``fn`` with four pointer arguments (addresses), no
+    result: Embree's ``rtcIntersect4(valid, scene, rayhit4, args)``, whose address is known
+    only at run time."""
     def codegen(context, builder, signature, args):
         ptr = ir.IntType(8).as_pointer()
-        f = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [ptr] * 3).as_pointer())
+        f = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [ptr] * 4).as_pointer())
         builder.call(f, [builder.inttoptr(a, ptr) for a in args[1:]])
         return context.get_dummy_value()
-    return sig, codegen
-
-
-#: uint32 words of the buffer an RTCRayHit (80 bytes) is placed in: room for it to start on
-#: the first cache line after the buffer's first byte and to have its two lines alone.
-_RAYHIT_WORDS = 48
-
-
-@numba.njit(**_ALWAYS)
-def _rayhit(buf):
-    """An RTCRayHit in ``buf`` (:data:`_RAYHIT_WORDS` uint32): its words as float32 and as
-    uint32, and its address. Embree writes each ray's hit there, so it shares no cache
-    line with anything else: small allocations of two threads can sit side by side, and a
-    shared line would move between the cores at every ray."""
-    k = (64 - buf.ctypes.data % 64) // 4
-    return buf[k:].view(np.float32), buf[k:], numba.uint64(buf.ctypes.data + 4 * k)
-
-
-@numba.njit(**_ALWAYS)
-def _closest(fn, scene, addr, f, u, ox, oy, oz, dx, dy, dz, offsets, order):
-    """Embree's closest hit of one ray (made float32) through the RTCRayHit at ``addr``
-    (``f``, ``u``: its words): the triangle (-1: none), its float32 distance (inf: none)."""
-    f[0], f[1], f[2], f[3] = ox, oy, oz, 0.0  # origin, tnear
-    f[4], f[5], f[6], f[7] = dx, dy, dz, 0.0  # direction, time
-    f[8] = np.inf
-    u[9], u[10], u[11] = 0xFFFFFFFF, 0, 0  # mask, id, flags
-    u[18], u[19] = 0xFFFFFFFF, 0xFFFFFFFF  # no geometry, no instance
-    _call_void3(fn, scene, addr, numba.uint64(0))
-    if u[18] == 0xFFFFFFFF:
-        return np.int64(-1), np.inf
-    # the part: the geometry's ID, or in a two-level scene its instance's
-    g = u[18] if u[19] == 0xFFFFFFFF else u[19]
-    return np.int64(order[offsets[g] + u[17]]), np.float64(f[8])
+    return types.void(*[types.uint64] * 5), codegen
 
 
 @numba.njit(**_JIT)
 def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
     geometry, or one instance of a scene of it, per part; triangle j of part g is
-    ``order[offsets[g] + j]``): triangle
-    ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``: ``rtcIntersect1``."""
-    f, u, addr = _rayhit(np.empty(_RAYHIT_WORDS, np.uint32))
-    for i in range(o32.shape[0]):
-        prim[i], tfar[i] = _closest(fn, scene, addr, f, u, o32[i, 0], o32[i, 1], o32[i, 2],
-                                    d32[i, 0], d32[i, 1], d32[i, 2], offsets, order)
+    ``order[offsets[g] + j]``): triangle ``prim`` (-1: none) and distance ``tfar`` (inf:
+    none). ``fn``: ``rtcIntersect4``, :data:`_LANES` rays a call."""
+    f, u, valid, packet = _packet(np.empty(_PACKET_WORDS, np.uint32))
+    n = o32.shape[0]
+    for s in range(0, n, _LANES):
+        m = min(_LANES, n - s)
+        for k in range(_LANES):
+            u[k] = 0
+            if k < m:
+                _cast(k, f, u, o32[s + k, 0], o32[s + k, 1], o32[s + k, 2], d32[s + k, 0],
+                      d32[s + k, 1], d32[s + k, 2])
+        _call_void4(fn, valid, scene, packet, numba.uint64(0))
+        for k in range(m):
+            prim[s + k], tfar[s + k] = _met(k, f, u, offsets, order)
