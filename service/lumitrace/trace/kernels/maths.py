@@ -77,11 +77,15 @@ def _turn(u):
     r = q - k  # exact
     flip = r > 0.5
     x = (1.0 - r if flip else r) * (0.5 * math.pi)  # in [0, pi/4]
+    # the polynomials in x^2 by Estrin's scheme: pairs, then pairs of pairs, so the
+    # multiplications run side by side (a chain of 4 steps, not Horner's 8)
     x2 = x * x
-    s = x + x * x2 * (_SIN[0] + x2 * (_SIN[1] + x2 * (_SIN[2] + x2 * (_SIN[3] + x2 * (
-        _SIN[4] + x2 * (_SIN[5] + x2 * _SIN[6]))))))
-    c = 1.0 + x2 * (_COS[0] + x2 * (_COS[1] + x2 * (_COS[2] + x2 * (_COS[3] + x2 * (
-        _COS[4] + x2 * (_COS[5] + x2 * (_COS[6] + x2 * _COS[7])))))))
+    x4 = x2 * x2
+    x8 = x4 * x4
+    s = x + x * x2 * ((_SIN[0] + x2 * _SIN[1]) + x4 * (_SIN[2] + x2 * _SIN[3])
+                      + x8 * ((_SIN[4] + x2 * _SIN[5]) + x4 * _SIN[6]))
+    c = 1.0 + x2 * ((_COS[0] + x2 * _COS[1]) + x4 * (_COS[2] + x2 * _COS[3])
+                    + x8 * ((_COS[4] + x2 * _COS[5]) + x4 * (_COS[6] + x2 * _COS[7])))
     # the quadrant by selects and exact sign flips, no branches, so a loop that draws
     # directions runs on several photons at once: k = 0: (c, s), 1: (-s, c), 2: (-c, -s),
     # 3: (s, -c), the octant's swap first
