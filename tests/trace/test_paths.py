@@ -118,3 +118,14 @@ def test_the_counts_a_hit_adds_to_and_embrees_ray_share_no_cache_line():
         assert valid % 64 == 0 and valid > buf.ctypes.data and packet == valid + 64
         assert u.ctypes.data == f.ctypes.data == valid
         assert packet + -(-20 * 4 * _LANES // 64) * 64 <= buf.ctypes.data + buf.nbytes
+
+
+def test_a_new_packet_has_no_valid_ray_whatever_its_buffer_held():
+    """A deep bounce casts only the lanes it fills: a lane left from the buffer's old bytes
+    would send Embree a ray of garbage and hand back a hit on no triangle of ours."""
+    from lumitrace.trace.kernels.paths import _LANES, _PACKET_WORDS, _packet
+
+    buf = np.full(_PACKET_WORDS, 0xFFFFFFFF, np.uint32)
+    f, u, valid, packet = _packet(buf)
+    assert not u[:_LANES].any()
+    assert np.all(u[_LANES:] == 0xFFFFFFFF)  # the rest is written ray by ray
