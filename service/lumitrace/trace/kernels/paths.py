@@ -136,8 +136,9 @@ def _spectral_hit(m, kind, alpha, s_refl, s_spec, s_trans, s_ior, dispersive, ne
 #: Rays Embree intersects at once on a deep bounce (``rtcIntersect4``): four photons are
 #: followed side by side, each lane taking the next photon when its own ends.
 _LANES = 4
-#: uint32 words of the buffer a packet is placed in: its valid mask (4 words) and, from the
-#: next cache line, its RTCRayHit4 (20 rows of 4 words, room for a 21st), 64-byte aligned.
+#: uint32 words of the buffer a packet is placed in: up to 16 to the first cache line after
+#: its start, the valid mask's line (16 words, 4 used), the RTCRayHit4 (20 rows of 4 words,
+#: five lines), 16 to spare.
 _PACKET_WORDS = 16 + 24 * _LANES + 16
 _HIT = 16  # the RTCRayHit4's first word
 # its rows: org x y z, tnear, dir x y z, time, tfar, mask, id, flags, Ng x y z, u, v,
