@@ -17,6 +17,9 @@ Per scene:
 - the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
   on the files, the default), whole process, CPU and wall seconds, against the peer's CPU
   seconds to E on its grid; and the files' true error at the stop against the closed form;
+  beside it the USD floor (Python, numpy and USD loaded, the stage opened: what any USD
+  tool pays) in the same run, over the same peer's CPU seconds: the least ratio any
+  tool that reads the stage with USD can show;
 - convergence: a run in this process that records, after every iteration, the relative RMS
   error ``sqrt(sum(Omega (I - I_ref)^2) / sum(Omega I_ref^2))`` over the cells of a
   C 15 deg x gamma 5 deg grid, of the raw estimate (the goniophotometer's counts: what
@@ -349,12 +352,20 @@ def files_true_error(stage: Path, photometry_json: Path) -> float | None:
                      / float((omega * ref ** 2).sum()))
 
 
+#: The least any USD tool pays to read a stage: Python with numpy and USD's schemas
+#: loaded and the stage opened (``python -c``, the stage's path after it).
+USD_FLOOR = ("import sys, numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade; "
+             "Usd.Stage.Open(sys.argv[1])")
+
+
 def user_view(stage: Path, out: Path, t: dict) -> dict:
     """The real ``lumitrace trace --target-error E`` (files judged, the default), whole
     process, at each level: CPU and wall seconds, photons, the files' stated and true error
-    at the stop; against the peer's CPU seconds to E on its grid."""
+    at the stop; against the peer's CPU seconds to E on its grid, and the USD floor's
+    (:data:`USD_FLOOR`, run just before) against it: below the floor no USD tool goes."""
     rows = {}
     for lv in LEVELS:
+        floor = _cpu_of([sys.executable, "-c", USD_FLOOR, str(stage)])[0]
         cmd = [*LUMITRACE, "trace", str(stage), "--target-error",
                str(lv), "--no-pictures", "--json", "--no-progress", "--no-sublayer",
                "--out", str(out), "--replace-results"]
@@ -375,7 +386,8 @@ def user_view(stage: Path, out: Path, t: dict) -> dict:
             "files_true_error": files_true_error(stage, Path(summary["outputs"]
                                                              ["photometry_data"])),
             "map_error_bound": summary["relative_error_bound"], "peer_cpu_seconds": peer,
-            "cpu_over_peer": cpu / peer if peer else None}
+            "cpu_over_peer": cpu / peer if peer else None, "usd_floor_cpu_seconds": floor,
+            "usd_floor_over_peer": floor / peer if peer else None}
     return rows
 
 
@@ -457,7 +469,10 @@ def _print(name: str, t: dict) -> None:
         print(f"  trace --target-error {float(lv):.0%}: {u['photons'] / 1e6:.2f}M photons, "
               f"{u['cpu_seconds']:.2f} CPU s ({u['wall_seconds']:.2f} s wall), files "
               f"{u['files_error']:.2%} (worst lit {u['files_worst']:.2%}), true {true}; "
-              f"peer to {float(lv):.0%} on its grid {peer}: {ratio} of the peer's")
+              f"peer to {float(lv):.0%} on its grid {peer}: {ratio} of the peer's; the USD "
+              f"floor {u['usd_floor_cpu_seconds']:.2f} CPU s"
+              + ("" if u["usd_floor_over_peer"] is None else
+                 f", {u['usd_floor_over_peer']:.2f} of the peer's"))
     sys.stdout.flush()
 
 

@@ -77,3 +77,24 @@ def test_zone_of_cell_edges():
     # C cells centred within 90 deg of C0 are forward, the others back
     assert set(np.unique(zone[0])) >= {0, 1, 2, 3, 8, 9}
     assert set(np.unique(zone[100])) >= {4, 5, 6, 7, 8, 9}
+
+
+def test_zone_counts_of_dense_and_listed_cells_are_equal():
+    """The dense counts' zones (C planes summed per side first) equal the cells' zones
+    summed cell by cell, as the listed (sparse) counts are: exactly."""
+    rng = np.random.default_rng(7)
+    values = rng.integers(0, 50, bug.N_CELLS + 3).astype(np.uint32)
+    idx = np.arange(bug.N_CELLS + 3)
+
+    class Counts:
+        def __init__(self, dense):
+            self.dense = dense
+
+        def emitter_cells(self):
+            yield 0.01, 1e6, values, None if self.dense else idx
+
+    dense, listed = bug.zone_lumens(Counts(True)), bug.zone_lumens(Counts(False))
+    by_cell = np.bincount(bug.zone_of_cell(), weights=values[:bug.N_CELLS].astype(float),
+                          minlength=len(bug.ZONES))
+    assert np.array_equal(dense[0], listed[0]) and np.array_equal(dense[1], listed[1])
+    assert np.array_equal(dense[0], 0.01 * by_cell)

@@ -31,3 +31,34 @@ def test_cells_read_where_a_fit_reaches_equal_the_whole_sphere(name, monkeypatch
         flux, var = whole(lit)
         assert (flux > 0).sum() > 1000 and np.all((var > 0) == (flux > 0))
         assert np.all(var <= flux * flux)  # n (1 - n / N) <= n^2 for a count n >= 1
+
+
+def _cells_within_every_plane(centre, radius_deg):
+    """The cells within ``radius_deg`` of ``centre``, every cell of the sphere tested."""
+    inside = peak._cell_directions() @ centre >= np.cos(np.radians(radius_deg))
+    return np.flatnonzero(inside)
+
+
+def test_cells_within_a_cap_are_every_cell_the_whole_sphere_finds():
+    """The fit's cells, looked for in the gamma band and C planes a cap can reach, are
+    those of the whole sphere: near the poles, across C 0/360 and anywhere at random."""
+    rng = np.random.default_rng(11)
+    centres = [peak._direction(c, g) for c, g in
+               [(0.0, 0.0), (0.3, 1.0), (359.9, 20.0), (0.1, 90.0), (180.0, 179.5),
+                (45.0, 9.9), (270.0, 170.1), (359.4, 60.0), (0.62, 45.0)]]
+    centres += [peak._direction(c, g) for c, g in
+                zip(rng.uniform(0, 360, 40), np.degrees(np.arccos(rng.uniform(-1, 1, 40))))]
+    for centre in centres:
+        for radius in (1.5, 3.0, 10.0, 20.0):
+            got = peak._cells_within(centre, radius)
+            np.testing.assert_array_equal(got, _cells_within_every_plane(centre, radius))
+
+
+def test_tangent_basis_is_orthonormal():
+    rng = np.random.default_rng(5)
+    for p in [np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -1.0]),
+              *(v / np.linalg.norm(v) for v in rng.normal(size=(20, 3)))]:
+        u, v = peak._tangent_basis(p)
+        basis = np.stack([p, u, v])
+        np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(np.cross(p, u), v, atol=1e-15)

@@ -138,14 +138,20 @@ def test_a_run_that_would_not_fit_in_memory_is_refused_at_once(downlight, monkey
 
 def test_a_target_error_is_not_taken_from_the_first_small_rounds(downlight):
     """The split-half error of a few thousand photons can be far too low: a session stops
-    at its target only once MIN_PHOTONS_FOR_TARGET photons are in."""
-    from lumitrace.run.session import MIN_PHOTONS_FOR_TARGET, run
+    at a target on the map only once MIN_PHOTONS_FOR_TARGET photons are in; at one on the
+    files (their cells' variances the counts' own) once MIN_PHOTONS_FOR_FILES_TARGET are,
+    the end of the second round."""
+    from lumitrace.run.session import MIN_PHOTONS_FOR_FILES_TARGET, MIN_PHOTONS_FOR_TARGET, run
     from lumitrace.run.settings import TraceSettings
 
     result = run(downlight, TraceSettings(target_error=0.5, resolution=8, threads=1,
-                                          workers="threads"))
+                                          workers="threads", target_of="map"))
     assert result.estimate.error <= 0.5
     assert MIN_PHOTONS_FOR_TARGET <= result.photons < 4 * MIN_PHOTONS_FOR_TARGET
+    result = run(downlight, TraceSettings(target_error=0.5, resolution=8, threads=1,
+                                          workers="threads"))
+    assert result.files_accuracy.meets(0.5)
+    assert MIN_PHOTONS_FOR_FILES_TARGET <= result.photons < MIN_PHOTONS_FOR_TARGET
 
 
 def test_many_small_emitters_are_not_split_into_tiny_jobs():

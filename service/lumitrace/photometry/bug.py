@@ -10,6 +10,7 @@ a rating that a zone moved by two standard errors would change is shown as a ran
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,14 +45,27 @@ def zone_of_cell() -> np.ndarray:
     return zone.astype(np.int64).ravel()
 
 
+@functools.lru_cache(maxsize=1)
+def _zone_rows() -> tuple[np.ndarray, np.ndarray]:
+    """Which C planes are forward (N_C,), and the zone of each gamma cell (2, N_GAMMA) on
+    the forward planes and on the back ones: a cell's zone depends on its side and gamma
+    alone."""
+    zone = zone_of_cell().reshape(N_C, N_GAMMA)
+    forward = np.isin(zone, (0, 1, 2, 3)).any(axis=1)
+    return forward, np.stack([zone[np.argmax(forward)], zone[np.argmin(forward)]])
+
+
 def zone_lumens(acc: Accumulator) -> tuple[np.ndarray, np.ndarray]:
     """Lumens in each of :data:`ZONES` and their standard errors: per emitter, a zone's
     count is binomial, var = sum w^2 n (1 - n / N)."""
     zone = zone_of_cell()
+    forward, zone_rows = _zone_rows()
     flux, var = np.zeros(len(ZONES)), np.zeros(len(ZONES))
     for w, total, values, idx in acc.emitter_cells():
-        if idx is None:
-            n = np.bincount(zone, weights=values[:N_CELLS].astype(np.float64),
+        if idx is None:  # the C planes of each side summed first: exact integer counts
+            planes = values[:N_CELLS].reshape(N_C, N_GAMMA)
+            sides = np.stack([planes[forward].sum(axis=0), planes[~forward].sum(axis=0)])
+            n = np.bincount(zone_rows.ravel(), weights=sides.ravel().astype(np.float64),
                             minlength=len(ZONES))
         else:
             keep = idx < N_CELLS

@@ -87,13 +87,31 @@ def _gamma_centres() -> np.ndarray:
 
 
 def _cells_within(centre: np.ndarray, radius_deg: float) -> np.ndarray:
-    """Flat indices of the goniometer cells whose centres lie within ``radius_deg`` of the
-    unit vector ``centre``: looked for only in the gamma band that can hold them."""
+    """Flat indices (ascending) of the goniometer cells whose centres lie within
+    ``radius_deg`` of the unit vector ``centre``: looked for only in the gamma band and the
+    C planes that can hold them."""
     gamma = math.degrees(math.acos(max(-1.0, min(1.0, -float(centre[2])))))
     g = np.flatnonzero(np.abs(_gamma_centres() - gamma) <= radius_deg + GAMMA_STEP)
-    cells = (np.arange(N_C)[:, None] * N_GAMMA + g[None, :]).ravel()
+    rows = _planes_within(centre, gamma, radius_deg)
+    cells = (rows[:, None] * N_GAMMA + g[None, :]).ravel()
     inside = _cell_directions()[cells] @ centre >= math.cos(math.radians(radius_deg))
-    return np.sort(cells[inside])
+    return cells[inside]
+
+
+def _planes_within(centre: np.ndarray, gamma: float, radius_deg: float) -> np.ndarray:
+    """The C planes (ascending) a cap of ``radius_deg`` about ``centre`` (at ``gamma``, deg)
+    can reach: a cap clear of both poles spans asin(sin r / sin gamma) either side of its
+    own C (a plane's width more kept as margin); one over a pole, every plane."""
+    if radius_deg + 1e-6 >= min(gamma, 180.0 - gamma):
+        return np.arange(N_C)
+    half = math.degrees(math.asin(min(1.0, math.sin(math.radians(radius_deg))
+                                      / math.sin(math.radians(gamma))))) + C_STEP
+    c = math.degrees(math.atan2(float(centre[1]), float(centre[0])))
+    first = math.ceil((c - half) / C_STEP - 0.5)
+    last = math.floor((c + half) / C_STEP - 0.5)
+    if last - first + 1 >= N_C:
+        return np.arange(N_C)
+    return np.sort(np.arange(first, last + 1) % N_C)
 
 
 def _direction(c_deg: float, gamma_deg: float) -> np.ndarray:
@@ -163,11 +181,13 @@ class HalfCells:
 
 
 def _tangent_basis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors orthogonal to ``p`` and to each other."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(p[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(p, a)
-    u /= np.linalg.norm(u)
-    return u, np.cross(p, u)
+    """Two unit vectors orthogonal to the unit vector ``p`` and to each other: u = p x a
+    (a the x axis, or y where p lies near x) normalised, v = p x u."""
+    x, y, z = float(p[0]), float(p[1]), float(p[2])
+    ux, uy, uz = (0.0, z, -y) if abs(x) < 0.9 else (-z, 0.0, x)
+    n = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / n, uy / n, uz / n
+    return np.array([ux, uy, uz]), np.array([y * uz - z * uy, z * ux - x * uz, x * uy - y * ux])
 
 
 def local_fit(cells: HalfCells, centre: np.ndarray, radius_deg: float
