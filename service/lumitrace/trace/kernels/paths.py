@@ -187,6 +187,14 @@ def _met(lane, f, u, offsets, order):
     return np.int64(order[offsets[g] + u[b + 4 * _PRIM]]), np.float64(f[b + 4 * _TFAR])
 
 
+@numba.njit(**_ALWAYS)
+def _hold(at, lane, ox, oy, oz, dx, dy, dz, qx, qy, qz):
+    """Keep a lane's photon between two packets: its ray's origin and direction and its
+    polarisation, row ``lane`` of ``at``."""
+    at[lane, 0], at[lane, 1], at[lane, 2], at[lane, 3], at[lane, 4] = ox, oy, oz, dx, dy
+    at[lane, 5], at[lane, 6], at[lane, 7], at[lane, 8] = dz, qx, qy, qz
+
+
 @numba.njit(**_JIT)
 def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, pid2,
            o32, d32, normals, corners, material_index, part_index, kind, refl, spec, trans,
@@ -258,8 +266,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
                     qy = pol[i, 1] if polarised else 0.0
                     qz = pol[i, 2] if polarised else 0.0
                     hit[k], hit_t[k] = prim[i], tfar[i]
-                at[k, 0], at[k, 1], at[k, 2], at[k, 3], at[k, 4] = ox, oy, oz, dx, dy
-                at[k, 5], at[k, 6], at[k, 7], at[k, 8] = dz, qx, qy, qz
+                _hold(at, k, ox, oy, oz, dx, dy, dz, qx, qy, qz)
             busy += lane[k] >= 0
         if busy == 0:
             break
@@ -354,8 +361,7 @@ def bounce(depth, last, prim, tfar, o, d, pol, base, pid, o2, d2, pol2, base2, p
             px, py, pz = px + off * nx, py + off * ny, pz + off * nz
             if deep:  # on, from here
                 lane[k], steps[k] = i, step + 1
-                at[k, 0], at[k, 1], at[k, 2], at[k, 3], at[k, 4] = px, py, pz, dx, dy
-                at[k, 5], at[k, 6], at[k, 7], at[k, 8] = dz, qx, qy, qz
+                _hold(at, k, px, py, pz, dx, dy, dz, qx, qy, qz)
                 cast += _cast(k, f, u, px, py, pz, dx, dy, dz)
                 continue
             o2[n_out, 0], o2[n_out, 1], o2[n_out, 2] = px, py, pz
