@@ -232,3 +232,31 @@ def test_polarised_reflectance_at_brewster_angle():
     refl = out_s[:, 2] > 0
     assert abs(refl.mean() - rs) < 4.5 * np.sqrt(rs * (1 - rs) / m)
     assert np.allclose(np.abs(pol_s[:, 1]), 1.0)  # s stays s
+
+
+@pytest.mark.parametrize("counter", [0, 5 * rng.DIMS_PER_BOUNCE])
+def test_seeds_give_independent_poisson_counts(counter):
+    """The judged errors take every cell's count as binomial: photons independent within a
+    seed and between seeds. 200 seeds of 65,536 photons binned on 64 x 64 cells of a draw's
+    pair (an emission's, a fifth bounce's): each seed's chi-square per degree of freedom has
+    mean 1 and spread sqrt(2 / dof), none is an outlier for 200 seeds, and the seeds pooled
+    are as Poisson as one (shared or shifted streams would pile up there)."""
+    seeds, n, side = 200, 65_536, 64
+    dof = side * side - 1
+    expected = n / side ** 2
+    idx = np.arange(n, dtype=np.int64)
+    stats, pooled = [], np.zeros(side * side)
+    for seed in range(1, seeds + 1):
+        base = rng.photon_hash(rng.stream_key(seed, 0x5EED), idx)
+        u, v = rng.uniforms_from(base, counter, 2)
+        k = np.bincount((u * side).astype(np.int64) * side + (v * side).astype(np.int64),
+                        minlength=side * side)
+        pooled += k
+        stats.append(((k - expected) ** 2 / expected).sum() / dof)
+    stats = np.array(stats)
+    spread = np.sqrt(2.0 / dof)
+    assert abs(stats.mean() - 1.0) < 4.0 * spread / np.sqrt(seeds)
+    assert 0.8 < stats.std() / spread < 1.25
+    assert (stats - 1.0).max() / spread < 5.5
+    e_pooled = seeds * expected
+    assert abs(((pooled - e_pooled) ** 2 / e_pooled).sum() / dof - 1.0) < 5.0 * spread
