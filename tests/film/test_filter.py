@@ -192,3 +192,42 @@ def test_the_error_bound_is_above_the_true_error_and_not_far(name):
     for e, true in _estimates_at_default(name):
         assert true <= e.error_bound <= 2.0 * true, (true, e.error, e.error_bound)
         assert e.error_bound >= e.error
+
+
+@pytest.mark.parametrize("res", [2, 8, 33, 64])
+def test_the_compiled_push_gives_numpys_bits(res, monkeypatch):
+    """The tracer's compiled push (registered when its kernels load) and the film's numpy
+    push filter to the same bits: adaptive or not, sharpened or not, with colour channels,
+    and replaying the weights of a first map on a second (split halves)."""
+    from lumitrace.film import pullpush
+    from lumitrace.trace import compiled
+
+    assert pullpush.compiled_level is compiled.push_level
+    rng = np.random.default_rng(res)
+    omega = texel_solid_angles(res)
+    shape = np.ones((6 * res, res))
+    shape[: max(1, res // 2)] *= 40.0  # a bright face and a beam's edge across it
+    shape[3 * res:3 * res + max(1, res // 8)] *= 300.0
+
+    def filtered():
+        out = []
+        for lam in (0.3, 5.0, 300.0):
+            counts = rng.poisson(lam * shape / shape.mean())
+            flux = counts * 0.37
+            out.append(pull_push(flux, counts, 1e4, omega))
+            out.append(pull_push(flux, counts, 2500.0, omega, sharpen=False))
+            out.append(pull_push(flux, counts, 1e4, omega, adaptive=False))
+            weights = []
+            out.append(pull_push(flux, counts, 5000.0, omega, weights=weights))
+            out.append(pull_push(flux * 0.5, counts // 2, 5000.0, omega, weights=weights))
+            y, xz = pull_push(flux, counts, 1e4, omega,
+                              extra=np.stack([flux * 0.3, flux * 1.1 + 0.01 * counts]))
+            out += [y, xz]
+        return out
+
+    state = rng.bit_generator.state
+    compiled_maps = filtered()
+    rng.bit_generator.state = state
+    monkeypatch.setattr(pullpush, "compiled_level", None)
+    for a, b in zip(compiled_maps, filtered()):
+        assert np.array_equal(a, b)

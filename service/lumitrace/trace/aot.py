@@ -45,6 +45,13 @@ def warm_up() -> None:
     d = np.array([[0.0], [0.0], [-1.0]])
     scatter(MaterialTable.from_materials((glass,)), np.zeros(1, np.int64), d, -d,
             [np.full(1, 0.5)] * 4, pol=np.array([[1.0], [0.0], [0.0]]))
+    # the map's filter, adaptive and sharpened, on a map with a bright patch (its tables
+    # read-only, as runs read them)
+    from ..film.pullpush import pull_push
+
+    counts = np.random.default_rng(0).poisson(50.0, (6 * 8, 8)).astype(np.int64)
+    counts[:4, :4] += 2000
+    pull_push(counts * 1e-3, counts, 100.0)
 
 
 def _type_spec(t) -> list | str:

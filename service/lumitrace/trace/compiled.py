@@ -24,10 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..film import pullpush as _pullpush
 from . import kernel_sources
 
 #: The kernels the tracer calls, in the order the build exports them.
-ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect")
+ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
+                "push_level")
 #: The sources whose text the compiled code depends on (the kernels' constants included).
 SOURCES = kernel_sources.SOURCES
 MODULE = "kernels_aot"
@@ -155,8 +157,10 @@ def _load() -> tuple[dict, str]:
 
 
 _built, _state = _load()
-start, cull, bounce, emit_photons, scatter_many, intersect = (Kernel(n, _built[n])
-                                                              for n in ENTRY_POINTS)
+start, cull, bounce, emit_photons, scatter_many, intersect, push_level = (
+    Kernel(n, _built[n]) for n in ENTRY_POINTS)
+# the map's filter (in the film, which comes before the tracer) pushes with the compiled level
+_pullpush.use_compiled_level(push_level)
 
 
 def backend() -> str:

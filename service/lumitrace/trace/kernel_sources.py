@@ -9,7 +9,7 @@ from pathlib import Path
 #: The kernels' modules and the constants they compile in (relative to this folder).
 SOURCES = ("kernels/__init__.py", "kernels/jit.py", "kernels/maths.py",
            "kernels/scattering.py", "kernels/binning.py", "kernels/emission.py",
-           "kernels/paths.py", "codes.py", "rng.py", "records.py")
+           "kernels/paths.py", "kernels/filtering.py", "codes.py", "rng.py", "records.py")
 HERE = Path(__file__).resolve().parent
 
 

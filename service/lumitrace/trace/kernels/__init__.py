@@ -12,7 +12,8 @@ and scattered by its material's model. The same loop can instead advance a wave 
 photons by one bounce, from Embree's hits of a batch of rays (for embreex).
 
 The modules by job: :mod:`.maths` (random numbers, vectors), :mod:`.emission`,
-:mod:`.scattering`, :mod:`.binning` and :mod:`.paths` (the loop); numba's disk cache is
+:mod:`.scattering`, :mod:`.binning` and :mod:`.paths` (the loop); beside them the map's
+filter, :mod:`.filtering` (the pull-push's push step, built with them); numba's disk cache is
 keyed on all of them (:mod:`.jit`). Per photon the arithmetic is scalar float64, the same
 for any wave size, batch size or thread, so maps stay bit-identical across them.
 """
@@ -21,10 +22,12 @@ from __future__ import annotations
 from .binning import (_CHUNK, _acos_fast, _atan2_fast, _gonio_cell_exact, gonio_bins,
                       texels)
 from .emission import cull, emit_photons, start
+from .filtering import push_level
 from .maths import _turn, _uniform_pair
 from .paths import bounce, intersect
 from .scattering import scatter_many, scatter_one
 
-__all__ = ["start", "cull", "bounce", "emit_photons", "scatter_many", "intersect", "texels",
+__all__ = ["start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
+           "push_level", "texels",
            "gonio_bins", "scatter_one", "_CHUNK", "_acos_fast", "_atan2_fast",
            "_gonio_cell_exact", "_turn", "_uniform_pair"]
