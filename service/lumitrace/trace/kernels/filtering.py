@@ -1,7 +1,7 @@
 """The pull-push filter's push step (:mod:`lumitrace.film.pullpush`), compiled: one level's
 blend of its own intensities with the coarser level's, its weights and its welded seams in
 one pass over its texels, where numpy took a score of array passes (a map's estimate is
-four filters: a tenth of a small run, and the live view's every round).
+four filters, at the end of every run and in every round the live view shows).
 
 The arithmetic is the film's numpy level (:func:`lumitrace.film.pullpush._level`), operation
 for operation and sum for sum in the same order (``np.bincount`` adds in input order, a
