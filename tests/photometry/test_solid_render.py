@@ -271,11 +271,10 @@ def test_by_default_a_trace_forks_its_renderer_and_a_service_follows_its_termina
         monkeypatch.setenv("LUMITRACE_RENDERER", how)
         monkeypatch.setattr(solid_render.sys, "stderr", Stream(tty))
         assert solid_render.mode(fork) == want, (how, tty, fork)
-        assert solid_render.wanted(fork) is (want != "inline")
     monkeypatch.setattr(solid_render.os, "cpu_count", lambda: 1)
     for how in ("process", "fork", "auto"):
         monkeypatch.setenv("LUMITRACE_RENDERER", how)
-        assert solid_render.mode(True) == "inline" and not solid_render.wanted(True)
+        assert solid_render.mode(True) == "inline"
 
 
 def test_a_renderer_is_forked_only_from_the_main_thread(monkeypatch):

@@ -539,13 +539,8 @@ def _at_terminal() -> bool:
         return False
 
 
-def wanted(fork: bool = False) -> bool:
-    """Whether this process's pictures are drawn by a renderer (see :func:`mode`)."""
-    return mode(fork) != "inline"
-
-
 def start_renderer(warm_up: bool = False, fork: bool = False) -> Renderer | None:
-    """Start this process's renderer where it is :func:`wanted` (once; None where it is
+    """Start this process's renderer where :func:`mode` asks for one (once; None where it is
     not, pyvista is not installed or the process cannot be started), to be used by the
     pictures this process draws; ``warm_up``: see :class:`Renderer`; ``fork``: the
     caller may fork (see :func:`mode`), which it does only from the main thread (another
