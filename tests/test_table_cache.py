@@ -128,7 +128,7 @@ def test_a_broken_file_is_made_again_and_replaced_whole(folder, damage):
     path.write_bytes({"not a table": b"\x80\x05 not a pickle", "cut short": whole[:-100],
                       "empty": b"", "spans past the end": whole[:24] + b"\xff" * 16
                       + whole[40:]}[damage])  # (the first buffer's offset and size)
-    assert table_cache._read(path) == (False, None)
+    assert table_cache.read_table(path) == (False, None)
     cubemap._seams.cache_clear()
     assert _equal(cubemap._seams(16), want)
     assert path.read_bytes() == whole
@@ -187,7 +187,7 @@ def test_processes_making_the_same_table_at_once_leave_one_whole_file(folder):
     assert all(p.wait(timeout=120) == 0 for p in procs)
     files = list(folder.iterdir())
     assert [f.suffix for f in files] == [".table"]
-    assert _equal(table_cache._read(files[0])[1], pullpush._pyramid.uncached(48))
+    assert _equal(table_cache.read_table(files[0])[1], pullpush._pyramid.uncached(48))
 
 
 class _Planted:

@@ -267,7 +267,7 @@ def cmd_trace(args) -> int:
     _QUIET = bool(args.quiet)
     from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
     from .run.settings import TraceSettings, default_threads
-    from .stage.reader import read_stage
+    from .stage.scene_cache import read_stage
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
@@ -290,7 +290,7 @@ def cmd_trace(args) -> int:
         scene = scene_from_stage(open_with_edits(args.stage, args.edits), args.luminaire,
                                  time=args.time_code)
     else:
-        scene = read_stage(args.stage, args.luminaire, time=args.time_code)
+        scene = read_stage(args.stage, args.luminaire, time_code=args.time_code)
     if not args.no_sublayer:
         if args.replace_results:
             from .publish.check import strip_result_opinions

@@ -324,6 +324,8 @@ RESULT_KINDS: dict[str, str] = {f.attribute: f.kind for f in RESULT_FIELDS if f.
 RESULT_ATTRIBUTES = {RESULT_PREFIX + k: v for k, v in RESULT_KINDS.items()}
 
 _registered = False
+#: The environment variable USD's plugin registry takes plugin folders from.
+PLUGIN_PATH_VARIABLE = "PXR_PLUGINPATH_NAME"
 
 
 def register_schema() -> None:
@@ -333,11 +335,13 @@ def register_schema() -> None:
     registry was first loaded: if that happened (pxr used before ``import lumitrace``), a
     warning says so and the API schemas stay unknown for this process.
 
-    Where pxr's Usd was not loaded before (a command, a fresh interpreter), USD's schema
-    registry, which the first stage builds (20 ms), is built at once on another thread
-    (USD builds it without holding the interpreter) while the rest of lumitrace loads,
-    and checked there; where it was (a DCC's interpreter, a script that used pxr first),
-    it is built and checked here.
+    Where no pxr module was loaded before (a command, a fresh interpreter), the schema's
+    folder is put first on ``PXR_PLUGINPATH_NAME``, which USD's plugin registry reads when
+    it is made: USD is not loaded for it (0.1 s), and child processes inherit it. Where pxr
+    was loaded but not its Usd, the folder is registered at once and USD's schema registry
+    (20 ms) built on another thread while the rest of lumitrace loads, and checked there;
+    where Usd was (a DCC's interpreter, a script that used pxr first), it is built and
+    checked here.
     """
     global _registered
     if _registered:
@@ -347,8 +351,19 @@ def register_schema() -> None:
                       "schemas are unknown to USD (attribute values are still read)",
                       RuntimeWarning, stacklevel=2)
         return
+    import os
     import sys
 
+    if not any(name == "pxr" or name.startswith("pxr.") for name in sys.modules):
+        # USD not loaded yet: its plugin registry, made when USD first needs it, reads
+        # the plugin path from the environment; USD then loads only when a stage is read
+        # (a trace of a kept scene never loads it)
+        paths = os.environ.get(PLUGIN_PATH_VARIABLE, "").split(os.pathsep)
+        if str(SCHEMA_DIR) not in paths:
+            os.environ[PLUGIN_PATH_VARIABLE] = os.pathsep.join(
+                [str(SCHEMA_DIR), *(p for p in paths if p)])
+        _registered = True
+        return
     maybe_late = "pxr.Usd" in sys.modules
     from pxr import Plug, Usd  # noqa: F401  (loaded here, not first on the thread)
 

@@ -85,7 +85,7 @@ _HEAD = struct.Struct("<8sQQ")
 _SPAN = struct.Struct("<QQ")
 
 
-def _read(path: Path) -> tuple[bool, Any]:
+def read_table(path: Path) -> tuple[bool, Any]:
     """(True, the table) kept at ``path``; (False, None) where there is none to trust: a
     pickle runs code as it loads, so only a file this user wrote, in a folder no one else
     may write, is read (another's, or one in a shared folder, is made again instead).
@@ -135,16 +135,23 @@ def _encoded(value: Any) -> bytearray:
     return out
 
 
-def _write(path: Path, value: Any) -> None:
+def write_table(path: Path, value: Any, most_bytes: int | None = None) -> bool:
     """Keep ``value`` at ``path`` (:func:`~lumitrace.method_cache.write_kept`: two makers
-    of the same table leave one whole file); never raises."""
+    of the same table leave one whole file), unless it is larger than ``most_bytes``;
+    whether it was kept. Never raises."""
     try:
         data = _encoded(value)
     except Exception:
-        return
-    if not write_kept(path, data):
-        return
-    _drop_stale(path)
+        return False
+    if most_bytes is not None and len(data) > most_bytes:
+        return False
+    return write_kept(path, data)
+
+
+def _write(path: Path, value: Any) -> None:
+    """Keep the table ``value`` at ``path`` and drop its copies for other stamps."""
+    if write_table(path, value):
+        _drop_stale(path)
 
 
 #: Other sources stamps whose tables are kept beside a new one's: another install of
@@ -187,7 +194,7 @@ def kept_table(fn: Callable) -> Callable:
     def cached(*args):
         path = _path(fn, args)
         if path is not None:
-            found, value = _read(path)
+            found, value = read_table(path)
             if found:
                 return _frozen(value)
         value = _frozen(fn(*args))

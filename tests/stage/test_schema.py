@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -23,6 +24,35 @@ def test_registry_knows_the_api_schemas():
         assert registry.FindAppliedAPIPrimDefinition(name) is not None, name
         assert Usd.SchemaRegistry.IsAppliedAPISchema(name)
         assert not Usd.SchemaRegistry.IsMultipleApplyAPISchema(name)
+
+
+_ORDERS = {
+    # lumitrace first: the plugin path is set, USD loads only when asked for
+    "lumitrace first": "import lumitrace\nloaded = [m for m in sys.modules if m.startswith('pxr')]\n"
+                       "assert loaded == [], loaded\nfrom pxr import Usd\n",
+    # pxr loaded but no stage composed: the folder is registered at once
+    "pxr first": "from pxr import Usd\nimport lumitrace\n",
+}
+
+
+@pytest.mark.parametrize("order", list(_ORDERS))
+def test_the_schema_is_known_whichever_loads_first(order):
+    """A fresh process that imports lumitrace before composing a stage knows the API
+    schemas, whether it loaded pxr before or not; one that did not load pxr has its
+    plugin folder first on PXR_PLUGINPATH_NAME (a user's own folders kept after it)."""
+    code = ("import os, sys\n" + _ORDERS[order] +
+            "from lumitrace.schema import is_registered, PLUGIN_PATH_VARIABLE, SCHEMA_DIR\n"
+            "assert is_registered()\n"
+            "paths = os.environ.get(PLUGIN_PATH_VARIABLE, '').split(os.pathsep)\n"
+            "print(paths.index(str(SCHEMA_DIR)) if str(SCHEMA_DIR) in paths else -1, "
+            "paths[-1])\n")
+    env = {**os.environ, schema.PLUGIN_PATH_VARIABLE: "/a/folder/of/the/user"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    index, last = out.stdout.split()
+    assert last == "/a/folder/of/the/user"
+    assert int(index) == (0 if order == "lumitrace first" else -1)
 
 
 def test_material_api_properties_and_fallbacks():

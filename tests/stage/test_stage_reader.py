@@ -3,6 +3,7 @@ and the errors bad input gets."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from numpy.testing import assert_allclose
 
 import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
 from lumitrace.errors import StageError
+from lumitrace.schema import PLUGIN_PATH_VARIABLE
 from lumitrace.stage import (light_flux, luminance, preview_surface_values, read_stage,
                              scene_from_stage, shaping_fraction)
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
@@ -695,8 +697,11 @@ def test_applied_api_counts_even_when_the_schema_registered_too_late(tmp_path):
     mesh.GetAttribute("lumitrace:scattering").Set("mirror")
     add_disk(stage)
     stage.Save()
+    # a process of its own: not a child of one that imported lumitrace, whose plugin path
+    # (PXR_PLUGINPATH_NAME) it would inherit
+    env = {k: v for k, v in os.environ.items() if k != PLUGIN_PATH_VARIABLE}
     result = subprocess.run([sys.executable, "-c", LATE_REGISTRATION,
                              stage.GetRootLayer().realPath],
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=120, env=env)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "ok"

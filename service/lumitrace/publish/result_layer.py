@@ -26,9 +26,11 @@ from typing import Any, Mapping
 from ..atomic import atomic_path
 from ..errors import OutputError
 from ..filenames import result_layer_path
-from ..schema import EMITTER_API, LUMINAIRE_API, LUMINOUS_FLUX, RESULT_KINDS, RESULT_PREFIX
+from ..schema import RESULT_KINDS, RESULT_PREFIX
+from . import layer_text
+from .layer_text import PHOTOMETRIC_LIGHT, REPRESENTATION  # noqa: F401
 from .sublayer import ResultLayerWarning, file_mode, reload_if_open, sublayer_into_root
-from ..stage.diagnostics import tf_message
+from ..stage.pxr_messages import tf_message
 
 __all__ = ["ResultLayerWarning", "ResultValueError", "RESULT_KINDS", "convert_results",
            "result_layer_path", "write_result_layer"]
@@ -67,7 +69,7 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
     light : mapping, optional
         The IES-shaped UsdLux light standing in for the luminaire, authored in the
         ``photometric`` variant of the ``lumitraceRepresentation`` variant set (see
-        :func:`_photometric_variant` for its keys); missing keys raise ``ValueError``.
+        :func:`~lumitrace.publish.layer_text.photometric_variant` for its keys); missing keys raise ``ValueError``.
 
     Returns
     -------
@@ -113,7 +115,12 @@ def result_layer_text(stage: Path | None, luminaire_path: str | None,
         # every asset path of the layer written alike: relative, ./ or ../ first
         light = {**light, "ies": _relative_asset(light["ies"], layer_dir, "the light's IES")}
     prim_path = _luminaire_path(stage, luminaire_path)
-    return _result_layer_text(stage, prim_path, values, light, layer_data, units)
+    documentation = (f"lumitrace result for {stage.name}, sublayered into it; rewritten "
+                     "by every run." if stage is not None else
+                     f"lumitrace result for the luminaire {prim_path} of a stage with no "
+                     "file of its own; rewritten by every run.")
+    return layer_text.result_layer_text(prim_path, values, light, layer_data, units,
+                                        documentation)
 
 
 def write_layer_file(stage: Path | None, path: Path, text: str) -> None:
@@ -135,9 +142,7 @@ def write_layer_file(stage: Path | None, path: Path, text: str) -> None:
 
 def convert_results(results: Mapping[str, Any], layer_dir: str | os.PathLike) -> dict:
     """Check and convert result values to the Python types of their Sdf value types
-    (assets become ``Sdf.AssetPath`` relative to ``layer_dir``). Raises ``ValueError``."""
-    from pxr import Sdf
-
+    (an asset becomes its path relative to ``layer_dir``). Raises ``ValueError``."""
     if not isinstance(results, Mapping):
         raise ResultValueError(f"results must be a mapping, got {type(results).__name__}")
     unknown = sorted(set(results) - set(RESULT_KINDS))
@@ -151,7 +156,7 @@ def convert_results(results: Mapping[str, Any], layer_dir: str | os.PathLike) ->
         value = results[key]
         name = RESULT_PREFIX + key
         if kind == "asset":
-            out[key] = Sdf.AssetPath(_relative_asset(value, Path(layer_dir), name))
+            out[key] = _relative_asset(value, Path(layer_dir), name)
         elif kind in _INT_RANGE:
             out[key] = _as_int(value, kind, name, non_negative=key in _NON_NEGATIVE)
         elif kind == "double":
@@ -187,9 +192,7 @@ def _as_int(value: Any, kind: str, name: str, non_negative: bool) -> int:
 
 
 def _relative_asset(value: Any, layer_dir: Path, name: str) -> str:
-    from pxr import Sdf
-
-    if isinstance(value, Sdf.AssetPath):
+    if type(value).__name__ == "AssetPath":  # an Sdf.AssetPath, taken without loading USD
         value = value.path
     if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
         raise ResultValueError(f"{name}: expected a file path, got {value!r}")
@@ -210,101 +213,20 @@ def _relative_asset(value: Any, layer_dir: Path, name: str) -> str:
 # ------------------------------------------------------------------------------------------
 
 
-def _luminaire_path(stage: Path, luminaire_path: str | None):
-    from pxr import Sdf
-
+def _luminaire_path(stage: Path, luminaire_path: str | None) -> str:
+    """The luminaire's absolute prim path: the one given, else the stage's defaultPrim."""
     if luminaire_path is None or str(luminaire_path) == "":
         layer = _open_copy(stage, metadata_only=True)
         if not layer.defaultPrim:
             raise ResultValueError(f"{stage}: no luminaire prim given and the stage has no "
                              "defaultPrim")
         luminaire_path = "/" + layer.defaultPrim
-    path = Sdf.Path(str(luminaire_path))
-    if path.isEmpty or not path.IsAbsolutePath() or not path.IsPrimPath() \
-            or path == Sdf.Path.absoluteRootPath:
+    path = str(luminaire_path)
+    names = path.split("/")
+    if len(names) < 2 or names[0] != "" or not all(n.isidentifier() for n in names[1:]):
         raise ResultValueError(f"luminaire path must be an absolute prim path, got "
                          f"{str(luminaire_path)!r}")
     return path
-
-
-def _result_layer_text(stage: Path | None, prim_path, values: dict, light: Mapping | None = None,
-                       layer_data: Mapping[str, str] | None = None,
-                       units: tuple[str, float] | None = None) -> str:
-    from pxr import Sdf, UsdGeom
-
-    type_names = {"asset": Sdf.ValueTypeNames.Asset, "int64": Sdf.ValueTypeNames.Int64,
-                  "int": Sdf.ValueTypeNames.Int, "double": Sdf.ValueTypeNames.Double,
-                  "bool": Sdf.ValueTypeNames.Bool, "string": Sdf.ValueTypeNames.String}
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    layer.documentation = (f"lumitrace result for {stage.name}, sublayered into it; "
-                           "rewritten by every run." if stage is not None else
-                           f"lumitrace result for the luminaire {prim_path} of a stage with "
-                           "no file of its own; rewritten by every run.")
-    if layer_data:
-        layer.customLayerData = {f"lumitrace:{k}": str(v) for k, v in layer_data.items()}
-    spec = Sdf.CreatePrimInLayer(layer, prim_path)
-    spec.specifier = Sdf.SpecifierOver
-    if prim_path.IsRootPrimPath():
-        layer.defaultPrim = prim_path.name
-    if units is not None:
-        layer.pseudoRoot.SetInfo(UsdGeom.Tokens.upAxis, units[0])
-        layer.pseudoRoot.SetInfo(UsdGeom.Tokens.metersPerUnit, float(units[1]))
-    spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=[LUMINAIRE_API]))
-    for key, value in values.items():
-        attr = Sdf.AttributeSpec(spec, RESULT_PREFIX + key,
-                                 type_names[RESULT_KINDS[key]],
-                                 Sdf.VariabilityVarying, declaresCustom=False)
-        attr.default = value
-    if light is not None:
-        _photometric_variant(layer, prim_path, light)
-    return layer.ExportToString()
-
-
-#: Variant set on the luminaire: "geometry" (its own emitters, the default) or
-#: "photometric" (one UsdLux light shaped by the computed IES file, emitters off).
-REPRESENTATION = "lumitraceRepresentation"
-PHOTOMETRIC_LIGHT = "lumitracePhotometricLight"
-
-
-def _photometric_variant(layer, prim_path, light: Mapping) -> None:
-    """Author the ``photometric`` variant: a DiskLight the size of the luminous opening at
-    its centre, emitting down (local -Z to nadir, local +X to C0), shaped by the IES file,
-    with the luminaire's flux; the traced emitters deactivated in that variant.
-
-    ``light`` holds ``ies`` (asset path relative to the layer), ``flux`` (lm), ``radius``
-    and ``position`` (stage units, luminaire space), ``up_axis`` and ``emitters`` (paths).
-    """
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
-
-    stage = Usd.Stage.Open(layer)
-    prim = stage.OverridePrim(prim_path)
-    vset = prim.GetVariantSets().AddVariantSet(REPRESENTATION)
-    vset.AddVariant("geometry")
-    vset.AddVariant("photometric")
-    vset.SetVariantSelection("photometric")
-    with vset.GetVariantEditContext():
-        disk = UsdLux.DiskLight.Define(stage, prim_path.AppendChild(PHOTOMETRIC_LIGHT))
-        disk.CreateRadiusAttr(float(light["radius"]))
-        flux = float(light["flux"])
-        disk.CreateNormalizeAttr(True)
-        disk.CreateIntensityAttr(flux / math.pi)  # normalised: flux = pi * luminance
-        p = disk.GetPrim()
-        p.AddAppliedSchema(EMITTER_API)
-        p.CreateAttribute(LUMINOUS_FLUX, Sdf.ValueTypeNames.Float).Set(flux)
-        shaping = UsdLux.ShapingAPI.Apply(p)
-        shaping.CreateShapingIesFileAttr(Sdf.AssetPath(str(light["ies"])))
-        shaping.CreateShapingIesNormalizeAttr(True)
-        xf = UsdGeom.Xformable(p)
-        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*light["position"]))
-        if light.get("up_axis", "Z") == "Y":
-            xf.AddRotateXOp().Set(-90.0)  # local -Z to -Y (nadir), local +X stays C0
-    # the emitters off, as specs in the variant (one change block: an LED board's 10,000
-    # lights through the stage's API would recompose it once per light)
-    target = vset.GetVariantEditTarget()
-    with Sdf.ChangeBlock():
-        for path in light.get("emitters", ()):
-            Sdf.CreatePrimInLayer(layer, target.MapToSpecPath(Sdf.Path(path))).active = False
-    vset.SetVariantSelection("geometry")
 
 
 def _open_copy(path: Path, metadata_only: bool = False):

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from ..filenames import IES_SUFFIX, INTENSITY_SUFFIX, LDT_SUFFIX, RESULT_LAYER_SUFFIX
 from .exr import read_exr_metadata
+from .layer_text import custom_layer_data
 
 
 def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
@@ -36,14 +37,18 @@ def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
 
 def layer_data(layer: Path) -> dict[str, str]:
     """The ``lumitrace:*`` customLayerData of a result layer (run id, stage), without the
-    ``lumitrace:`` prefix; empty for a layer that cannot be read or says nothing."""
-    from pxr import Sdf, Tf
+    ``lumitrace:`` prefix; empty for a layer that cannot be read or says nothing. Read
+    from the text where it is plain (:func:`~.layer_text.custom_layer_data`), else by USD."""
+    entries = custom_layer_data(layer)
+    if entries is None:
+        from pxr import Sdf, Tf
 
-    try:
-        data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
-    except Tf.ErrorException:
-        return {}
-    if data is None:
-        return {}
-    return {k.split(":", 1)[1]: v for k, v in data.customLayerData.items()
+        try:
+            data = Sdf.Layer.OpenAsAnonymous(str(layer), metadataOnly=True)
+        except Tf.ErrorException:
+            return {}
+        if data is None:
+            return {}
+        entries = data.customLayerData
+    return {k.split(":", 1)[1]: v for k, v in entries.items()
             if k.startswith("lumitrace:")}

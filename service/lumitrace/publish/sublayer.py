@@ -6,6 +6,7 @@ import ctypes
 import errno
 import os
 import stat
+import sys
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from ..atomic import fsync_path
 from ..filenames import RESULT_LAYER_SUFFIX
 from .ownership import belongs_to
 from .usda_text import insert_sublayer_text
-from ..stage.diagnostics import tf_message
+from ..stage.pxr_messages import tf_message
 
 
 class ResultLayerWarning(OutputWarning):
@@ -259,7 +260,10 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> RootEdit:
 
 
 def reload_if_open(path: Path) -> None:
-    """Reload a layer this process has open, so its stages see the new file."""
+    """Reload a layer this process has open, so its stages see the new file (none is,
+    where USD's Sdf is not loaded)."""
+    if "pxr.Sdf" not in sys.modules:
+        return
     from pxr import Sdf
 
     layer = Sdf.Layer.Find(str(path))

@@ -15,9 +15,9 @@ from pxr import Pcp, Sdf, Usd
 
 from ..errors import StageError
 from ..filenames import RESULT_LAYER_SUFFIX
+from .pxr_messages import NAMESPACE as _NAMESPACE, tf_message  # noqa: F401
 from .validate import check_layer_file
 
-_NAMESPACE = re.compile(r"pxrInternal_v\d+_\d+(?:_\d+)?__pxrReserved__::")
 #: The session layer USD adds to layer stacks in messages: ",@anon:0x...:NAME-session.usda@".
 _ANON_LAYER = re.compile(r",@anon:[^@]*@")
 
@@ -137,29 +137,3 @@ def _arc_property(message: str) -> str:
         if word in text:
             return field_name
     return "references"
-
-
-def _safe_str(value) -> str:
-    try:
-        return str(value)
-    except UnicodeDecodeError:
-        return "(message not readable: it quotes bytes that are not UTF-8)"
-
-
-def tf_message(error) -> str:
-    """The readable part of a pxr error (Tf.ErrorException or a composition error)."""
-    try:
-        text = str(error)
-    except UnicodeDecodeError:  # a message quoting bytes that are not UTF-8
-        text = " ".join(a.decode("utf-8", "replace") if isinstance(a, bytes) else
-                        _safe_str(a) for a in getattr(error, "args", ()))
-    text = _NAMESPACE.sub("", text).strip()
-    messages = []
-    for chunk in re.split(r"\s*Error in ", text):
-        _, sep, body = chunk.partition(" : '")
-        if sep:
-            messages.append(body.strip().rstrip("'"))
-    message = messages[0] if messages else text or "(USD gave no readable message)"
-    # parser internals between "parse error" and the offending text
-    message = re.sub(r" matching .*? at '", " at '", message, flags=re.DOTALL)
-    return " ".join(message.split())[:300]

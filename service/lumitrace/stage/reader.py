@@ -92,6 +92,14 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
         The file is missing or not a USD stage, or the stage has no luminaire, no emitter
         or a bad value; the message names the file or the prim and property.
     """
+    return read_stage_file(path, luminaire, time=time)[0]
+
+
+def read_stage_file(path: str | Path, luminaire: str | None = None, *,
+                    time: Usd.TimeCode | float | None = None) -> tuple[Scene, bool]:
+    """:func:`read_stage`, and whether the stage composed whole: no layer, reference or
+    payload it names is missing or refused (a scene read without one depends on a
+    file's absence too)."""
     file = Path(path)
     if not file.exists():
         raise StageError("stage file not found", str(file))
@@ -109,7 +117,8 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
                              str(file)) from exc
         if stage is None:
             raise StageError("cannot open as a USD stage", str(file))
-        return _read(stage, luminaire, time, diagnostics)
+        scene = _read(stage, luminaire, time, diagnostics)
+        return scene, not stage.GetCompositionErrors()
 
 
 def scene_from_stage(stage: Usd.Stage, luminaire: str | None = None, *,

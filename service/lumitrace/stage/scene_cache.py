@@ -1,0 +1,159 @@
+"""A stage's :class:`~lumitrace.scene.Scene`, kept on disk after it is read, so that a
+trace of an unchanged stage does not load USD at all.
+
+Loading USD and composing a stage cost a short run more than its photons (about 0.25 CPU
+seconds: more than the peer's whole run to 2% on a small luminaire). A scene is a pure
+function of the bytes of the files it was read from (its layers, the emitters' IES and
+ray files), of what lumitrace and USD are, and of the request (luminaire, time code). So
+the read scene is kept with the content digest of each of those files, and is taken again
+only where every one of them holds the same bytes (hashed again at each run, not trusted
+by its modification time).
+
+Kept only where that is sound: a stage that composed whole (a missing sublayer or
+reference, only a warning outside the luminaire, is a file whose appearance no digest
+would see) and with no USD search path set (where a new file could change what an asset
+path resolves to); and only where every file was last modified before the read began, by
+more than a file system's time step (a file written while USD read it could pair its new
+bytes with the old scene; the next run keeps it). The entry is a table file
+(:mod:`lumitrace.table_cache`: this user's, in a folder no one else may write, arrays
+mapped), one per stage and request, under the cache folder; ``LUMITRACE_CACHE_DIR=off``
+keeps none.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import time
+from pathlib import Path
+
+from ..method_cache import cache_folder
+from ..scene import Scene
+from ..table_cache import read_table, sources_stamp, write_table
+
+#: Files last modified less than this before a read began are not trusted to be the bytes
+#: USD read (coarse file system clocks, a writer still at work): ns.
+SETTLED_NS = 2_000_000_000
+#: Scenes larger than this (arrays and all, bytes) are not kept: a disk cache is for the
+#: many runs of a luminaire, not a copy of every large stage ever traced.
+MOST_BYTES = 256 * 2**20
+#: Environment variables that change what USD reads: a set search path turns caching off.
+SEARCH_PATH_VARIABLE = "PXR_AR_DEFAULT_SEARCH_PATH"
+_CHUNK = 1 << 20
+
+
+def read_stage(path: str | Path, luminaire: str | None = None, *,
+               time_code: float | None = None) -> Scene:
+    """:func:`lumitrace.stage.reader.read_stage`, taken from the kept scene where the
+    stage and every file it was read from are unchanged; else read (loading USD) and
+    kept where that is sound (see the module's notes)."""
+    entry = _entry_path(path, luminaire, time_code)
+    if entry is not None:
+        scene = _kept_scene(entry)
+        if scene is not None:
+            return scene
+    started = time.time_ns()
+    from . import reader
+
+    scene, whole = reader.read_stage_file(path, luminaire, time=time_code)
+    if entry is not None and whole:
+        _keep(entry, scene, started)
+    return scene
+
+
+def _entry_path(path, luminaire, time_code) -> Path | None:
+    """The entry file for this request, or None where nothing is to be kept."""
+    folder = cache_folder()
+    if folder is None or os.environ.get(SEARCH_PATH_VARIABLE):
+        return None
+    try:
+        real = os.path.realpath(path)
+        if not os.path.isfile(real):
+            return None
+    except (OSError, ValueError):
+        return None
+    request = repr((real, luminaire, None if time_code is None else float(time_code)))
+    key = hashlib.blake2b(request.encode(), digest_size=10).hexdigest()
+    return folder / f"scene-{key}.table"
+
+
+def _kept_scene(entry: Path) -> Scene | None:
+    """The scene kept in ``entry`` where it was kept by this lumitrace and USD and each
+    file it was read from holds the bytes it held then; else None."""
+    found, kept = read_table(entry)
+    if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp():
+        return None
+    for file, digest, light_stamp in kept.get("files", ()):
+        if light_stamp and _stamp_of(file) != light_stamp or file_digest(file) != digest:
+            return None
+    scene = kept.get("scene")
+    return scene if isinstance(scene, Scene) else None
+
+
+def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
+    """Keep ``scene`` in ``entry`` with its files' digests, where that is sound."""
+    # a light's IES or ray file is known by its size and time too (a touched file makes
+    # another light): such a file's stamp must still be the scene's
+    stamps = {}
+    for e in scene.emitters:
+        if e.ies is not None and e.ies.file:
+            stamps[os.path.realpath(e.ies.file)] = e.ies.stamp
+        if e.rays:
+            stamps[os.path.realpath(e.rays)] = e.rays_stamp
+    files = []
+    for file in sorted(scene.input_files()):
+        try:
+            before = os.stat(file)
+            digest = file_digest(file)
+            after = os.stat(file)
+        except OSError:
+            return
+        if (before.st_mtime_ns, before.st_size) != (after.st_mtime_ns, after.st_size) \
+                or after.st_mtime_ns > started_ns - SETTLED_NS or digest is None:
+            return
+        files.append((file, digest, stamps.get(file, "")))
+    if not files:
+        return
+    write_table(entry, {"stamp": validity_stamp(), "files": files, "scene": scene},
+                most_bytes=MOST_BYTES)
+
+
+def _stamp_of(file: str) -> str:
+    """A light file's size and modification time, as :func:`~.lights.file_stamp` has it."""
+    try:
+        st = os.stat(file)
+    except OSError:
+        return ""
+    return f"{st.st_size}:{st.st_mtime_ns}"
+
+
+def file_digest(file: str) -> str | None:
+    """BLAKE2b of the bytes of ``file`` (hex); None where it cannot be read."""
+    h = hashlib.blake2b(digest_size=20)
+    try:
+        with open(file, "rb") as f:
+            while chunk := f.read(_CHUNK):
+                h.update(chunk)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def validity_stamp() -> str:
+    """What a kept scene is valid for: lumitrace's sources, its USD schema's files and
+    the installed USD (its package's files, found without loading it)."""
+    parts = [sources_stamp()]
+    from ..schema import SCHEMA_DIR
+
+    files = [SCHEMA_DIR / "plugInfo.json", SCHEMA_DIR / "generatedSchema.usda"]
+    spec = importlib.util.find_spec("pxr")
+    if spec is not None and spec.submodule_search_locations:
+        usd = Path(next(iter(spec.submodule_search_locations))) / "Usd"
+        files += [usd / "__init__.py", *sorted(usd.glob("_usd*"))]
+    for file in files:
+        try:
+            st = os.stat(file)
+            parts.append(f"{file} {st.st_size} {st.st_mtime_ns}")
+        except OSError:
+            parts.append(f"{file} -")
+    return hashlib.blake2b("\0".join(parts).encode(), digest_size=10).hexdigest()

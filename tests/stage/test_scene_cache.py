@@ -1,0 +1,303 @@
+"""A read stage's scene kept on disk (lumitrace.stage.scene_cache): taken again only while
+every file it was read from holds the same bytes, and then without loading USD."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lumitrace  # noqa: F401  (registers the schema before any stage is composed)
+from lumitrace.photometry.distribution import CGammaGrid
+from lumitrace.photometry.lm63 import format_ies
+from lumitrace.stage import reader, scene_cache
+
+FLUX = 1000.0
+
+ROOT = """#usda 1.0
+(
+    defaultPrim = "Luminaire"
+    metersPerUnit = 0.01
+    upAxis = "Z"
+    subLayers = [@./parts.usda@]
+)
+
+def Xform "Luminaire"
+{
+    def DiskLight "Led" (
+        prepend apiSchemas = ["LumitraceEmitterAPI", "ShapingAPI"]
+    )
+    {
+        float inputs:radius = 2
+        float lumitrace:luminousFlux = FLUX
+        asset inputs:shaping:ies:file = @./led.ies@
+        bool inputs:shaping:ies:normalize = 1
+    }
+
+    def Xform "Cup" (
+        prepend references = @./cup.usda@</Cup>
+    )
+    {
+    }
+}
+"""
+PARTS = """#usda 1.0
+
+over "Luminaire"
+{
+    def Mesh "Lid"
+    {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-9, -9, 20), (9, -9, 20), (9, 9, 20), (-9, 9, 20)]
+    }
+}
+"""
+CUP = """#usda 1.0
+
+def Xform "Cup"
+{
+    def Mesh "Wall"
+    {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-5, -5, -10), (5, -5, -10), (5, 5, -10), (-5, 5, -10)]
+    }
+}
+"""
+
+
+def _ies(path: Path, peak: float = 300.0) -> None:
+    g = np.arange(0.0, 180.5, 5.0)
+    cd = peak * np.maximum(np.cos(np.radians(g)), 0.0)[None, :]
+    path.write_text(format_ies(CGammaGrid(np.array([0.0]), g, cd, "rotational"), FLUX,
+                               0.0, 0.0, 0.0, {}))
+
+
+def _settle(folder: Path, seconds: float = 60.0) -> None:
+    """Every file of ``folder`` last modified ``seconds`` ago (a stage saved before the
+    run, not while it reads)."""
+    when = time.time() - seconds
+    for f in folder.iterdir():
+        os.utime(f, (when, when))
+
+
+@pytest.fixture
+def stage(tmp_path, monkeypatch):
+    """A luminaire of four files: root layer, sublayer, referenced layer, IES profile;
+    the cache in a folder of its own; reads by USD counted."""
+    folder = tmp_path / "lum"
+    folder.mkdir()
+    (folder / "root.usda").write_text(ROOT.replace("FLUX", f"{FLUX:g}"))
+    (folder / "parts.usda").write_text(PARTS)
+    (folder / "cup.usda").write_text(CUP)
+    _ies(folder / "led.ies")
+    _settle(folder)
+    monkeypatch.setenv("LUMITRACE_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(scene_cache.SEARCH_PATH_VARIABLE, raising=False)
+    reads = []
+    real = reader.read_stage_file
+
+    def counted(*args, **kwargs):
+        reads.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(reader, "read_stage_file", counted)
+    return folder / "root.usda", reads
+
+
+def _same_scene(a, b) -> None:
+    assert a.content_hash() == b.content_hash()
+    assert np.array_equal(a.triangles, b.triangles) and a.parts == b.parts
+    assert (a.warnings, a.layer_files, a.time_code, a.info) == \
+        (b.warnings, b.layer_files, b.time_code, b.info)
+    assert [e.ies for e in a.emitters] == [e.ies for e in b.emitters]
+
+
+def test_an_unchanged_stage_is_read_once(stage):
+    path, reads = stage
+    first = scene_cache.read_stage(path)
+    assert len(first.input_files()) == 4  # three layers and the profile
+    for _ in range(2):
+        _same_scene(scene_cache.read_stage(path), first)
+    assert len(reads) == 1
+
+
+@pytest.mark.parametrize("name, old, new", [
+    ("root.usda", "inputs:radius = 2", "inputs:radius = 3"),
+    ("parts.usda", "(9, 9, 20)", "(8, 9, 20)"),
+    ("cup.usda", "(5, 5, -10)", "(5, 4, -10)"),
+])
+def test_a_changed_layer_is_read_again_even_at_the_same_size_and_time(stage, name, old,
+                                                                      new):
+    """Content is what counts: an edit of the same length with the file's time put back
+    (a copy that keeps times, a clock step) is seen."""
+    path, reads = stage
+    before = scene_cache.read_stage(path)
+    file = path.parent / name
+    st = file.stat()
+    text = file.read_text()
+    assert old in text and len(old) == len(new)
+    file.write_text(text.replace(old, new))
+    os.utime(file, ns=(st.st_atime_ns, st.st_mtime_ns))
+    _forget_layers(path.parent)
+    after = scene_cache.read_stage(path)
+    assert len(reads) == 2
+    assert after.content_hash() != before.content_hash()
+    _same_scene(after, reader.read_stage(path))
+
+
+def _forget_layers(folder: Path) -> None:
+    """This process's USD keeps the layers it opened, and takes a file of the same time
+    as unchanged: reload them (a run is a process of its own)."""
+    from pxr import Sdf
+
+    for f in folder.glob("*.usda"):
+        layer = Sdf.Layer.Find(str(f))
+        if layer is not None:
+            layer.Reload(force=True)
+
+
+def test_a_changed_or_touched_profile_makes_another_light(stage):
+    path, reads = stage
+    first = scene_cache.read_stage(path)
+    ies = path.parent / "led.ies"
+    os.utime(ies, (time.time() - 30, time.time() - 30))  # same bytes, another time
+    touched = scene_cache.read_stage(path)
+    assert len(reads) == 2 and touched.emitters[0].ies.stamp != first.emitters[0].ies.stamp
+    _ies(ies, peak=200.0)
+    _settle(path.parent)
+    changed = scene_cache.read_stage(path)
+    assert len(reads) == 3
+    _same_scene(changed, reader.read_stage(path))
+    _same_scene(scene_cache.read_stage(path), changed)
+    assert len(reads) == 4
+
+
+def test_files_written_just_before_the_read_are_not_trusted(stage):
+    """A file modified within SETTLED_NS of the read may have changed while USD read it:
+    the scene is not kept until a run finds it settled."""
+    path, reads = stage
+    (path.parent / "parts.usda").touch()
+    scene_cache.read_stage(path)
+    scene_cache.read_stage(path)
+    assert len(reads) == 2
+    _settle(path.parent)
+    scene_cache.read_stage(path)
+    scene_cache.read_stage(path)
+    assert len(reads) == 3
+
+
+def test_a_stage_that_did_not_compose_whole_is_not_kept(stage):
+    """A missing file is only a warning outside the luminaire (here a sublayer that is a
+    result layer, which a later run writes): no digest would see it appear."""
+    path, reads = stage
+    text = path.read_text().replace("@./parts.usda@", "@./parts.usda@, @./x.lumitrace.usda@")
+    path.write_text(text)
+    _settle(path.parent)
+    scene = scene_cache.read_stage(path)
+    assert any("x.lumitrace.usda" in w for w in scene.warnings)
+    scene_cache.read_stage(path)
+    assert len(reads) == 2
+    (path.parent / "x.lumitrace.usda").write_text("#usda 1.0\n")
+    _settle(path.parent)
+    assert not scene_cache.read_stage(path).warnings == scene.warnings
+    assert len(reads) == 3
+
+
+def test_a_scene_with_warnings_about_its_values_is_kept(stage):
+    """Warnings about what the files hold (here parts with no material) come back with
+    the kept scene."""
+    path, reads = stage
+    first = scene_cache.read_stage(path)
+    assert any("no material bound" in w for w in first.warnings)
+    assert scene_cache.read_stage(path).warnings == first.warnings
+    assert len(reads) == 1
+
+
+def test_each_request_is_kept_apart(stage):
+    path, reads = stage
+    whole = scene_cache.read_stage(path)
+    at_one = scene_cache.read_stage(path, time_code=1.0)
+    assert len(reads) == 2 and at_one.time_code == 1.0 and whole.time_code is None
+    assert scene_cache.read_stage(path, time_code=1.0).time_code == 1.0
+    assert scene_cache.read_stage(path).time_code is None
+    assert len(reads) == 2
+
+
+def test_a_broken_entry_is_read_again(stage, tmp_path):
+    path, reads = stage
+    first = scene_cache.read_stage(path)
+    (entry,) = (tmp_path / "cache").glob("scene-*")
+    for damage in (b"", b"garbage", entry.read_bytes()[:200]):
+        entry.write_bytes(damage)
+        _same_scene(scene_cache.read_stage(path), first)
+    assert len(reads) == 4
+    scene_cache.read_stage(path)
+    assert len(reads) == 4
+
+
+@pytest.mark.parametrize("setting", ["off", "search path"])
+def test_nothing_is_kept_when_told_or_when_a_search_path_could_change_a_read(
+        stage, tmp_path, monkeypatch, setting):
+    path, reads = stage
+    if setting == "off":
+        monkeypatch.setenv("LUMITRACE_CACHE_DIR", "off")
+    else:
+        monkeypatch.setenv(scene_cache.SEARCH_PATH_VARIABLE, str(tmp_path))
+    scene_cache.read_stage(path)
+    scene_cache.read_stage(path)
+    assert len(reads) == 2
+    assert not list((tmp_path / "cache").glob("scene-*"))
+
+
+_PROBE = """
+import json, sys
+from lumitrace.stage.scene_cache import read_stage
+scene = read_stage(sys.argv[1])
+print(json.dumps({"hash": scene.content_hash(), "flux": scene.total_flux,
+                  "usd": sorted(m for m in sys.modules if m.split(".")[0] == "pxr")[:3]}))
+"""
+
+
+def test_a_kept_scene_is_taken_without_loading_usd(stage, tmp_path):
+    """In a fresh interpreter: the first read loads USD, the next one does not, and both
+    give the scene USD reads."""
+    path, _ = stage
+    env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [json.loads(subprocess.run([sys.executable, "-c", _PROBE, str(path)], env=env,
+                                      capture_output=True, text=True, check=True).stdout)
+            for _ in range(2)]
+    assert runs[0]["usd"] and runs[1]["usd"] == []
+    assert runs[0]["hash"] == runs[1]["hash"] == reader.read_stage(path).content_hash()
+
+
+def test_a_trace_of_a_kept_scene_publishes_the_same_bits(stage, tmp_path):
+    """The whole command, a fresh read then a kept one, same seed and photons: the same
+    intensity map to the bit and the same files, USD loaded by the first only."""
+    from lumitrace.publish.exr import read_intensity_exr
+
+    path, _ = stage
+    env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
+    maps, files = [], []
+    for i in range(2):
+        out = tmp_path / f"out{i}"
+        cmd = [sys.executable, "-X", "importtime", "-m", "lumitrace", "trace", str(path),
+               "--photons", "20000", "--seed", "3", "--no-pictures", "--no-sublayer",
+               "--quiet", "--out", str(out)]
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr[-2000:]
+        assert ("| pxr.Usd" in run.stderr) == (i == 0)
+        maps.append(read_intensity_exr(out / "root.intensity.exr")[0])
+        files.append({f.name: [line for line in f.read_text().splitlines()
+                               if "_LUMITRACE_RUN" not in line and " run " not in line]
+                      for f in (out / "root.ies", out / "root.ldt")})
+    assert maps[0].keys() == maps[1].keys()
+    for channel in maps[0]:
+        assert np.array_equal(maps[0][channel], maps[1][channel], equal_nan=True), channel
+    assert files[0] == files[1]
