@@ -13,9 +13,12 @@ Per scene:
 - throughput: ``lumitrace trace`` run as a user runs it (the ``lumitrace`` command in a
   subprocess, ``--photons``, no pictures), its process CPU seconds (median of
   ``--repeats``) and photons per CPU second, and the same of the peer, run interleaved
-  with it (one of each, in turn);
+  with it (one of each, in turn). Each of our runs is made twice: with the stage read by
+  USD (its kept scene dropped first, as after an edit) and with the scene the first
+  kept (the same stage run again: no USD loaded, see ``lumitrace.stage.scene_cache``);
 - the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
-  on the files, the default), whole process, CPU and wall seconds, against the peer's CPU
+  on the files, the default), whole process, CPU and wall seconds (read by USD, then
+  kept, as above), against the peer's CPU
   seconds to E on its grid; and the files' true error at the stop against the closed form;
   beside it the USD floor (Python, numpy and USD loaded, the stage opened: what any USD
   tool pays) in the same run, over the same peer's CPU seconds: the least ratio any
@@ -115,10 +118,24 @@ BUILDERS = {"isotropic": point_source, "lambertian": ms.lambertian_disc,
 
 
 def build(name: str, folder: Path) -> Path:
+    """The scene's stage, saved a minute ago (as a user's stage is saved before a run: a
+    file written in the last seconds is not trusted to keep its read scene)."""
     path = folder / f"{name}.usda"
     stage = BUILDERS[name]()
     path.write_text(stage.GetRootLayer().ExportToString(), encoding="utf-8")
+    when = time.time() - 60.0
+    os.utime(path, (when, when))
     return path
+
+
+def forget_scene(stage: Path) -> None:
+    """Drop the scene kept for ``stage`` (:mod:`lumitrace.stage.scene_cache`): the next run
+    reads the stage with USD, as the first run after an edit does."""
+    from lumitrace.stage.scene_cache import entry_path
+
+    entry = entry_path(stage)
+    if entry is not None:
+        entry.unlink(missing_ok=True)
 
 
 PEER_DIR = HERE / "peer"
@@ -158,12 +175,15 @@ def throughput(stage: Path, name: str, photons: int, repeats: int, out: Path,
     ours = [*LUMITRACE, "trace", str(stage), "--photons",
             str(photons), "--no-pictures", "--quiet", "--no-sublayer", "--out", str(out),
             "--replace-results"]
-    runs, peer_cpu = [], []
+    runs, cold, peer_cpu = [], [], []
     for _ in range(repeats):
         if peer is not None:
             peer_cpu.append(_cpu_of([str(peer), name, str(photons)])[0])
-        runs.append(_cpu_of(ours))
+        forget_scene(stage)
+        cold.append(_cpu_of(ours))  # the stage read with USD (it keeps its scene)
+        runs.append(_cpu_of(ours))  # the kept scene: an unchanged stage run again
     c = float(np.median([r[0] for r in runs]))
+    c_cold = float(np.median([r[0] for r in cold]))
     if peer_cpu:
         p, source = float(np.median(peer_cpu)), "measured in this run"
     else:
@@ -171,6 +191,7 @@ def throughput(stage: Path, name: str, photons: int, repeats: int, out: Path,
     return {"cpu_seconds": c, "wall_seconds": float(np.median([r[1] for r in runs])),
             "photons_per_cpu_second": photons / c, "peer_cpu_seconds": p,
             "peer_photons_per_cpu_second": photons / p, "ratio_to_peer": p / c,
+            "cold_cpu_seconds": c_cold, "cold_ratio_to_peer": p / c_cold,
             "peer": source}
 
 
@@ -369,15 +390,9 @@ def user_view(stage: Path, out: Path, t: dict) -> dict:
         cmd = [*LUMITRACE, "trace", str(stage), "--target-error",
                str(lv), "--no-pictures", "--json", "--no-progress", "--no-sublayer",
                "--out", str(out), "--replace-results"]
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        t0 = time.perf_counter()
-        p = subprocess.run(cmd, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
-        if p.returncode not in (0, 3):
-            raise RuntimeError(f"{' '.join(cmd)} failed: {p.stderr[-2000:]}")
-        summary = json.loads(p.stdout.strip().splitlines()[-1])
+        forget_scene(stage)
+        cold_cpu, cold_wall = _run_summary(cmd)[:2]  # read with USD, as after an edit
+        cpu, wall, summary = _run_summary(cmd)       # the kept scene
         ph = summary["photometry"]
         peer = t["cpu_seconds_to"][f"{lv:g}"]["peer"]
         rows[f"{lv:g}"] = {
@@ -387,8 +402,23 @@ def user_view(stage: Path, out: Path, t: dict) -> dict:
                                                              ["photometry_data"])),
             "map_error_bound": summary["relative_error_bound"], "peer_cpu_seconds": peer,
             "cpu_over_peer": cpu / peer if peer else None, "usd_floor_cpu_seconds": floor,
-            "usd_floor_over_peer": floor / peer if peer else None}
+            "usd_floor_over_peer": floor / peer if peer else None,
+            "cold_cpu_seconds": cold_cpu, "cold_wall_seconds": cold_wall,
+            "cold_cpu_over_peer": cold_cpu / peer if peer else None}
     return rows
+
+
+def _run_summary(cmd: list[str]) -> tuple[float, float, dict]:
+    """CPU and wall seconds of one ``trace --json`` and its summary."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode not in (0, 3):
+        raise RuntimeError(f"{' '.join(cmd)} failed: {p.stderr[-2000:]}")
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return cpu, wall, json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def main(argv=None) -> int:
@@ -446,7 +476,8 @@ def _print_throughput(name: str, t: dict, end: str = "\n") -> None:
     print(f"\n{name}: {t['photons_per_cpu_second'] / 1e6:.2f}M photons per CPU s "
           f"({t['cpu_seconds']:.2f} CPU s, {t['wall_seconds']:.2f} s wall); peer "
           f"{t['peer_photons_per_cpu_second'] / 1e6:.2f}M ({t['peer']}), ratio "
-          f"{t['ratio_to_peer']:.2f}", end=end, flush=True)
+          f"{t['ratio_to_peer']:.2f} (stage read with USD: {t['cold_cpu_seconds']:.2f} CPU s, "
+          f"ratio {t['cold_ratio_to_peer']:.2f})", end=end, flush=True)
 
 
 def _print(name: str, t: dict) -> None:
@@ -463,7 +494,9 @@ def _print(name: str, t: dict) -> None:
     for lv, u in t.get("user_view", {}).items():
         true = "no closed form" if u["files_true_error"] is None else \
             f"{u['files_true_error']:.2%}"
-        ratio = "-" if u["cpu_over_peer"] is None else f"{u['cpu_over_peer']:.2f}"
+        ratio = "-" if u["cpu_over_peer"] is None else \
+            f"{u['cpu_over_peer']:.2f} (read with USD {u['cold_cpu_seconds']:.2f} CPU s: " \
+            f"{u['cold_cpu_over_peer']:.2f})"
         peer = "not reached" if u["peer_cpu_seconds"] is None else \
             f"{u['peer_cpu_seconds']:.2f} CPU s"
         print(f"  trace --target-error {float(lv):.0%}: {u['photons'] / 1e6:.2f}M photons, "

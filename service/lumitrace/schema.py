@@ -372,7 +372,22 @@ def register_schema() -> None:
     if maybe_late:
         _check_registered(stacklevel=3)
     else:
-        _build_in_background(_check_registered)
+        build_registry_soon()
+
+
+_building = False
+
+
+def build_registry_soon() -> None:
+    """Have USD's schema registry (20 ms, which the first stage would build) built on a
+    thread of its own, once, while the caller goes on loading (USD builds it without
+    holding the interpreter); checked there. For a process that registered the schema
+    through the plugin path and has just loaded pxr's Usd."""
+    global _building
+    if _building or not _registered:
+        return
+    _building = True
+    _build_in_background(_check_registered)
 
 
 def _check_registered(stacklevel: int = 1) -> None:

@@ -126,8 +126,20 @@ def test_the_text_is_the_layer_usd_authors(case):
 
 
 def test_floats_are_what_usd_rounds_a_double_to():
-    """A light's float attributes hold USD's own rounding of the double given."""
-    for flux in (1.0 / 3.0, 1e-7, 3.4e38, 123456789.123):
+    """A light's float attributes hold USD's own rounding of the double given, whatever
+    numpy's print options are."""
+    import numpy as np
+
+    before = np.get_printoptions()
+    np.set_printoptions(precision=3)
+    try:
+        _floats_round_as_usd_does()
+    finally:
+        np.set_printoptions(**before)
+
+
+def _floats_round_as_usd_does():
+    for flux in (1.0 / 3.0, 1e-7, 3.4e38, 123456789.123, 1e-45, 392.97513, 0.1):
         light = {"ies": "./a.ies", "flux": flux, "radius": flux, "position": (0, 0, 0)}
         ours = Sdf.Layer.CreateAnonymous(".usda")
         assert ours.ImportFromString(layer_text.result_layer_text(

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 from pathlib import Path
 from typing import Mapping
-
-import numpy as np
 
 from ..schema import EMITTER_API, LUMINAIRE_API, LUMINOUS_FLUX, RESULT_KINDS, RESULT_PREFIX
 from ..stage.usda_scan import skip_token
@@ -24,6 +23,7 @@ from ..stage.usda_scan import skip_token
 REPRESENTATION = "lumitraceRepresentation"
 PHOTOMETRIC_LIGHT = "lumitracePhotometricLight"
 _INDENT = "    "
+_FLOAT32 = struct.Struct("<f")
 
 
 def result_layer_text(prim_path: str, values: Mapping, light: Mapping | None,
@@ -146,8 +146,16 @@ def _double(value: float) -> str:
 
 
 def _float(value: float) -> str:
-    """A single-precision value (rounded as USD rounds a double set on a float)."""
-    return _double(float(str(np.float32(value))))
+    """A single-precision value (rounded to nearest, as USD rounds a double set on a
+    float), in the fewest digits that read back to it."""
+    single = _FLOAT32.unpack(_FLOAT32.pack(value))[0]
+    if not math.isfinite(single):
+        return _double(single)
+    for digits in range(1, 10):
+        text = f"{single:.{digits}g}"
+        if _FLOAT32.unpack(_FLOAT32.pack(float(text)))[0] == single:
+            return _double(float(text))
+    return _double(single)
 
 
 _ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r", "\t": "\\t"}

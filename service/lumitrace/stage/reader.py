@@ -48,9 +48,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux
+from pxr import Usd
 
 from .. import schema
+
+schema.build_registry_soon()  # on a thread of its own while the schema modules load
+from pxr import Sdf, Tf, UsdGeom, UsdLux  # noqa: E402
 from ..errors import StageError
 from ..scene import Emitter, LuminaireInfo, PartFrame, Scene
 from ..scene.groups import group_emitters

@@ -47,7 +47,7 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
     """:func:`lumitrace.stage.reader.read_stage`, taken from the kept scene where the
     stage and every file it was read from are unchanged; else read (loading USD) and
     kept where that is sound (see the module's notes)."""
-    entry = _entry_path(path, luminaire, time_code)
+    entry = entry_path(path, luminaire, time_code)
     if entry is not None:
         scene = _kept_scene(entry)
         if scene is not None:
@@ -61,8 +61,10 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
     return scene
 
 
-def _entry_path(path, luminaire, time_code) -> Path | None:
-    """The entry file for this request, or None where nothing is to be kept."""
+def entry_path(path, luminaire: str | None = None, time_code: float | None = None
+               ) -> Path | None:
+    """The file that keeps the scene of this request (stage, luminaire, time code), or
+    None where nothing is to be kept."""
     folder = cache_folder()
     if folder is None or os.environ.get(SEARCH_PATH_VARIABLE):
         return None
