@@ -10,7 +10,8 @@ A child process is started as a user starts the CLI (``lumitrace trace STAGE --p
 the emission kernel first returns (the first photons exist). Medians of ``--repeats``; the stage is traced from a
 copy, into a temporary folder.
 
-Then the whole process against the floor: the ``lumitrace`` command (without pictures; with
+Then the whole process against the floor: the ``lumitrace`` command (without pictures; the
+same stage run again with its read scene kept, no USD loaded; with
 them, the solid drawn by the renderer it forks, as by default; drawn in its own process,
 ``LUMITRACE_RENDERER=inline``; and by a renderer in an interpreter of its own,
 ``LUMITRACE_RENDERER=process``) and ``python -c "import numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade"``
@@ -129,7 +130,17 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
     env["PYTHONPYCACHEPREFIX"] = str(out.parent / "bytecode")
     trace = [sys.executable, "-c", COMMAND, "trace", str(stage), "--photons", str(photons),
              "--out", str(out)]
+    # the same stage run again, its read scene kept (lumitrace.stage.scene_cache): a copy
+    # of its own saved a minute ago, whose results are not sublayered into it (a result
+    # layer the stage reads changes at every run, and the scene is read again)
+    kept = out.parent / "kept" / stage.name
+    kept.parent.mkdir(exist_ok=True)
+    shutil.copy(stage, kept)
+    os.utime(kept, (time.time() - 60.0, time.time() - 60.0))
     cmds = {"floor": [sys.executable, "-c", FLOOR], "plain": trace + ["--no-pictures"],
+            "kept": [sys.executable, "-c", COMMAND, "trace", str(kept), "--photons",
+                     str(photons), "--out", str(out.parent / "kept_out"), "--no-pictures",
+                     "--no-sublayer"],
             "pictures": trace, "terminal": trace, "inline": trace, "renderer": trace}
     # the solid drawn by the renderer the command forks (the default; at a terminal too,
     # where the command also draws its progress), in the command's own process, and by a
@@ -151,6 +162,8 @@ def against_floor(stage: Path, photons: int, out: Path, repeats: int) -> dict:
                                             zip(rows["floor"], rows["plain"])]) for k in keys}
     summary["plain_minus_floor_mb"] = med([p["peak_mb"] - f["peak_mb"]
                                            for f, p in zip(rows["floor"], rows["plain"])])
+    summary["kept_over_floor"] = {k: med([p[k] / f[k] for f, p in
+                                           zip(rows["floor"], rows["kept"])]) for k in keys}
     for name in ("pictures", "terminal", "inline", "renderer"):
         summary[f"{name}_minus_plain"] = {k: med([q[k] - p[k] for p, q in
                                                   zip(rows["plain"], rows[name])])
@@ -197,6 +210,7 @@ def main(argv=None) -> int:
     w = summary["whole"]
     print("whole processes, in turn (medians; ratios and differences run by run):")
     for name, label in (("floor", "import floor"), ("plain", "--no-pictures"),
+                        ("kept", "scene kept"),
                         ("pictures", "with pictures"), ("terminal", "at a terminal"),
                         ("inline", "drawn in-process"),
                         ("renderer", "a new renderer")):
@@ -206,6 +220,9 @@ def main(argv=None) -> int:
     r = w["plain_over_floor"]
     print(f"  --no-pictures / floor: {r['wall_s']:.2f} wall, {r['cpu_s']:.2f} CPU, "
           f"+{w['plain_minus_floor_mb']:.0f} MB")
+    r = w["kept_over_floor"]
+    print(f"  the same stage again, its scene kept, / floor: {r['wall_s']:.2f} wall, "
+          f"{r['cpu_s']:.2f} CPU, {r['peak_mb']:.2f} of its memory")
     for key, label in (("pictures_minus_plain", "pictures (forked renderer) - none"),
                        ("terminal_minus_plain", "the same at a terminal - none"),
                        ("inline_minus_plain", "pictures drawn in-process - none"),

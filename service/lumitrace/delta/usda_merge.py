@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pxr import Sdf
-from ..stage.usda_scan import layer_of_text, skip_token
+from ..stage.usda_scan import layer_of_text, matching_bracket, skip_token
 
 #: Words that open a nested block statement (a prim, or a variant set) in a prim's body.
 _BLOCKS = ("def", "over", "class", "variantSet")
@@ -32,24 +32,6 @@ class Statement:
     kind: str
     name: str
     body: tuple[int, int] | None = None
-
-
-def _matching(text: str, i: int) -> int:
-    """The index of the bracket closing the one at ``text[i]``."""
-    depth = 0
-    while i < len(text):
-        j = skip_token(text, i)
-        if j != i:
-            i = j
-            continue
-        if text[i] in "([{":
-            depth += 1
-        elif text[i] in ")]}":
-            depth -= 1
-            if depth == 0:
-                return i
-        i += 1
-    raise ValueError("unbalanced brackets")
 
 
 def statements(text: str, start: int, end: int) -> list[Statement]:
@@ -81,10 +63,10 @@ def _block(text: str, i: int, line_start: int, word: str) -> Statement:
         if k != j:
             j = k
         elif text[j] == "(":
-            j = _matching(text, j) + 1
+            j = matching_bracket(text, j) + 1
         else:
             j += 1
-    close = _matching(text, j)
+    close = matching_bracket(text, j)
     head = text[i:j]
     quoted = head.split('"')
     name = quoted[1] if len(quoted) > 2 else ""
@@ -105,7 +87,7 @@ def _property(text: str, i: int, line_start: int, limit: int) -> Statement:
         if text[j] in "([{":
             if first is None and text[j] == "(":
                 first = j
-            j = _matching(text, j) + 1
+            j = matching_bracket(text, j) + 1
             continue
         if text[j] == "=" and first is None:
             first = j
@@ -138,7 +120,7 @@ def _layer_body(text: str) -> tuple[int, int]:
     while i < len(text) and (text[i] in " \t\r\n" or text[i] == "#"):
         i = skip_token(text, i) if text[i] == "#" else i + 1
     if i < len(text) and text[i] == "(":
-        i = _matching(text, i) + 1
+        i = matching_bracket(text, i) + 1
     return i, len(text)
 
 

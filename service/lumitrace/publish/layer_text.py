@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..schema import EMITTER_API, LUMINAIRE_API, LUMINOUS_FLUX, RESULT_KINDS, RESULT_PREFIX
-from ..stage.usda_scan import skip_token
+from ..stage.usda_scan import matching_bracket, skip_token
 
 #: Variant set on the luminaire: "geometry" (its own emitters, the default) or
 #: "photometric" (one UsdLux light shaped by the computed IES file, emitters off).
@@ -209,57 +209,31 @@ def custom_layer_data(layer: Path) -> dict[str, str] | None:
     if match is None:
         return None
     try:
-        end = _closing(text, match.end(), ")")
-        header = text[match.end():end]
+        header = text[match.end():matching_bracket(text, match.end() - 1)]
         at = _statement(header, "customLayerData")
         if at is None:
             return {}
-        i = header.index("{", at) + 1
-        close = _closing(header, i, "}")
-        return _entries(header[i:close])
+        i = header.index("{", at)
+        return _entries(header[i + 1:matching_bracket(header, i)])
     except ValueError:
         return None
 
 
-def _closing(text: str, i: int, bracket: str) -> int:
-    """The index of the ``bracket`` that closes the one opened just before ``i``."""
-    depth = 0
-    while i < len(text):
-        j = skip_token(text, i)
-        if j != i:
-            i = j
-            continue
-        c = text[i]
-        if c in "([{":
-            depth += 1
-        elif c in ")]}":
-            if depth == 0:
-                if c != bracket:
-                    raise ValueError("unbalanced brackets")
-                return i
-            depth -= 1
-        i += 1
-    raise ValueError("unterminated header")
-
-
 def _statement(header: str, name: str) -> int | None:
     """Where the header's statement ``name = `` starts (outside strings and brackets)."""
-    i, depth = 0, 0
+    i = 0
     while i < len(header):
         j = skip_token(header, i)
         if j != i:
             i = j
-            continue
-        c = header[i]
-        if c in "([{":
-            depth += 1
-        elif c in ")]}":
-            depth -= 1
-        elif depth == 0 and header.startswith(name, i) and \
+        elif header[i] in "([{":
+            i = matching_bracket(header, i) + 1
+        elif header.startswith(name, i) and \
                 (i == 0 or not (header[i - 1].isalnum() or header[i - 1] == "_")) and \
                 re.match(r"\s*=", header[i + len(name):]):
             return i
-        i += 1
+        else:
+            i += 1
     return None
 
 

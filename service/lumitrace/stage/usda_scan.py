@@ -34,6 +34,25 @@ def skip_token(text: str, i: int) -> int:
     return i
 
 
+def matching_bracket(text: str, i: int) -> int:
+    """The index of the bracket closing the one at ``text[i]`` (brackets in strings, asset
+    paths and comments left out)."""
+    depth = 0
+    while i < len(text):
+        j = skip_token(text, i)
+        if j != i:
+            i = j
+            continue
+        if text[i] in "([{":
+            depth += 1
+        elif text[i] in ")]}":
+            depth -= 1
+            if depth == 0:
+                return i
+        i += 1
+    raise ValueError("unbalanced brackets")
+
+
 def layer_of_text(text: str):
     """An anonymous Sdf layer holding ``text`` as read by USD, or None where USD does not
     read it (how a text editor checks its edit before writing it)."""
