@@ -230,6 +230,19 @@ def test_each_request_is_kept_apart(stage):
     assert len(reads) == 2
 
 
+def test_a_large_scene_is_not_kept(stage, tmp_path, monkeypatch):
+    """Writing a large scene's entry costs its first run as much as it saves a later one."""
+    path, reads = stage
+    size = scene_cache._array_bytes(scene_cache.read_stage(path))
+    # four triangles: world float64, two int32 indices, and their own float32 in frames
+    assert size == 4 * (9 * 8 + 4 + 4) + 4 * 9 * 4
+    monkeypatch.setattr(scene_cache, "MOST_BYTES", size - 1)
+    (tmp_path / "cache" / scene_cache.entry_path(path).name).unlink()
+    scene_cache.read_stage(path)
+    scene_cache.read_stage(path)
+    assert len(reads) == 3 and not list((tmp_path / "cache").glob("scene-*"))
+
+
 def test_a_broken_entry_is_read_again(stage, tmp_path):
     path, reads = stage
     first = scene_cache.read_stage(path)

@@ -34,9 +34,11 @@ from ..table_cache import read_table, sources_stamp, write_table
 #: Files last modified less than this before a read began are not trusted to be the bytes
 #: USD read (coarse file system clocks, a writer still at work): ns.
 SETTLED_NS = 2_000_000_000
-#: Scenes larger than this (arrays and all, bytes) are not kept: a disk cache is for the
-#: many runs of a luminaire, not a copy of every large stage ever traced.
-MOST_BYTES = 256 * 2**20
+#: Scenes whose arrays are larger than this (bytes) are not kept: writing one costs its
+#: first run about as much as reading it saves a later one (a 1M-triangle scene's 116 MB:
+#: +0.7-1.1 s to its first run, -1.2 s to each later one, on a machine of the test kind),
+#: and the cache is for the many runs of a luminaire, not a copy of every large stage.
+MOST_BYTES = 32 * 2**20
 #: Environment variables that change what USD reads: a set search path turns caching off.
 SEARCH_PATH_VARIABLE = "PXR_AR_DEFAULT_SEARCH_PATH"
 _CHUNK = 1 << 20
@@ -94,6 +96,8 @@ def _kept_scene(entry: Path) -> Scene | None:
 
 def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
     """Keep ``scene`` in ``entry`` with its files' digests, where that is sound."""
+    if _array_bytes(scene) > MOST_BYTES:
+        return
     # a light's IES or ray file is known by its size and time too (a touched file makes
     # another light): such a file's stamp must still be the scene's
     stamps = {}
@@ -118,6 +122,13 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
         return
     write_table(entry, {"stamp": validity_stamp(), "files": files, "scene": scene},
                 most_bytes=MOST_BYTES)
+
+
+def _array_bytes(scene: Scene) -> int:
+    """The bytes of the scene's geometry arrays (what its entry's size is made of)."""
+    frames = sum(f.local.nbytes for f in scene.part_frames if f is not None)
+    return (scene.triangles.nbytes + scene.material_index.nbytes + scene.part_index.nbytes
+            + frames)
 
 
 def _stamp_of(file: str) -> str:
