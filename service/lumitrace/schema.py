@@ -324,6 +324,7 @@ RESULT_KINDS: dict[str, str] = {f.attribute: f.kind for f in RESULT_FIELDS if f.
 RESULT_ATTRIBUTES = {RESULT_PREFIX + k: v for k, v in RESULT_KINDS.items()}
 
 _registered = False
+_building = False  # USD's schema registry built, or being built
 #: The environment variable USD's plugin registry takes plugin folders from.
 PLUGIN_PATH_VARIABLE = "PXR_PLUGINPATH_NAME"
 
@@ -343,7 +344,7 @@ def register_schema() -> None:
     where Usd was (a DCC's interpreter, a script that used pxr first), it is built and
     checked here.
     """
-    global _registered
+    global _registered, _building
     if _registered:
         return
     if not (SCHEMA_DIR / "plugInfo.json").exists():
@@ -370,12 +371,10 @@ def register_schema() -> None:
     Plug.Registry().RegisterPlugins(str(SCHEMA_DIR))
     _registered = True
     if maybe_late:
+        _building = True  # built here: never again on a thread (nor warned twice)
         _check_registered(stacklevel=3)
     else:
         build_registry_soon()
-
-
-_building = False
 
 
 def build_registry_soon() -> None:

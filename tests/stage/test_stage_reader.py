@@ -705,3 +705,4 @@ def test_applied_api_counts_even_when_the_schema_registered_too_late(tmp_path):
                             capture_output=True, text=True, timeout=120, env=env)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "ok"
+    assert "registered after" not in result.stderr  # said once, not again by the reader

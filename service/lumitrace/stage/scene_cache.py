@@ -1,10 +1,11 @@
 """A stage's :class:`~lumitrace.scene.Scene`, kept on disk after it is read, so that a
 trace of an unchanged stage does not load USD at all.
 
-Loading USD and composing a stage cost a short run more than its photons (about 0.25 CPU
-seconds: more than the peer's whole run to 2% on a small luminaire). A scene is a pure
-function of the bytes of the files it was read from (its layers, the emitters' IES and
-ray files), of what lumitrace and USD are, and of the request (luminaire, time code). So
+Loading USD and composing a stage cost a short run more than its photons (about 0.16 CPU
+s of a small luminaire's 0.37 s run to 2%: more than a compiled tracer's whole run). A
+scene is a pure function of the bytes of the files it was read from (its layers, the
+emitters' IES and ray files), of what lumitrace and USD are, and of the request
+(luminaire, time code, USD's plugin path). So
 the read scene is kept with the content digest of each of those files, and is taken again
 only where every one of them holds the same bytes (hashed again at each run, not trusted
 by its modification time).
@@ -29,6 +30,7 @@ from pathlib import Path
 
 from ..method_cache import cache_folder
 from ..scene import Scene
+from ..schema import PLUGIN_PATH_VARIABLE
 from ..table_cache import read_table, sources_stamp, write_table
 
 #: Files last modified less than this before a read began are not trusted to be the bytes
@@ -36,10 +38,11 @@ from ..table_cache import read_table, sources_stamp, write_table
 SETTLED_NS = 2_000_000_000
 #: Scenes whose arrays are larger than this (bytes) are not kept: writing one costs its
 #: first run about as much as reading it saves a later one (a 1M-triangle scene's 116 MB:
-#: +0.7-1.1 s to its first run, -1.2 s to each later one, on a machine of the test kind),
+#: +0.7-1.1 s to its first run, -1.2 s to each later one, measured on a 2-core machine),
 #: and the cache is for the many runs of a luminaire, not a copy of every large stage.
 MOST_BYTES = 32 * 2**20
-#: Environment variables that change what USD reads: a set search path turns caching off.
+#: The environment variable of USD's search paths: where one is set, nothing is kept (the
+#: plugin path, file formats and resolvers, is part of the request).
 SEARCH_PATH_VARIABLE = "PXR_AR_DEFAULT_SEARCH_PATH"
 _CHUNK = 1 << 20
 
@@ -76,7 +79,8 @@ def entry_path(path, luminaire: str | None = None, time_code: float | None = Non
             return None
     except (OSError, ValueError):
         return None
-    request = repr((real, luminaire, None if time_code is None else float(time_code)))
+    request = repr((real, luminaire, None if time_code is None else float(time_code),
+                    os.environ.get(PLUGIN_PATH_VARIABLE, "")))
     key = hashlib.blake2b(request.encode(), digest_size=10).hexdigest()
     return folder / f"scene-{key}.table"
 
@@ -87,9 +91,12 @@ def _kept_scene(entry: Path) -> Scene | None:
     found, kept = read_table(entry)
     if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp():
         return None
-    for file, digest, light_stamp in kept.get("files", ()):
-        if light_stamp and _stamp_of(file) != light_stamp or file_digest(file) != digest:
-            return None
+    try:
+        for file, digest, light_stamp in kept.get("files", ()):
+            if light_stamp and _stamp_of(file) != light_stamp or file_digest(file) != digest:
+                return None
+    except (TypeError, ValueError):  # not an entry of this layout
+        return None
     scene = kept.get("scene")
     return scene if isinstance(scene, Scene) else None
 
