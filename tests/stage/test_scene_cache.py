@@ -243,6 +243,24 @@ def test_a_large_scene_is_not_kept(stage, tmp_path, monkeypatch):
     assert len(reads) == 3 and not list((tmp_path / "cache").glob("scene-*"))
 
 
+def test_the_entries_used_least_recently_go(stage, tmp_path, monkeypatch):
+    """Past MOST_ENTRIES, writing an entry removes the ones used least recently; taking a
+    scene counts as a use."""
+    path, reads = stage
+    monkeypatch.setattr(scene_cache, "MOST_ENTRIES", 2)
+    for code in (1.0, 2.0):
+        scene_cache.read_stage(path, time_code=code)
+    first = scene_cache.entry_path(path, time_code=1.0)
+    os.utime(first, (time.time() - 100, time.time() - 100))
+    scene_cache.read_stage(path, time_code=1.0)  # used again: the newest now
+    assert len(reads) == 2
+    os.utime(scene_cache.entry_path(path, time_code=2.0),
+             (time.time() - 50, time.time() - 50))
+    scene_cache.read_stage(path, time_code=3.0)
+    left = sorted(p.name for p in (tmp_path / "cache").glob("scene-*"))
+    assert left == sorted(scene_cache.entry_path(path, time_code=c).name for c in (1.0, 3.0))
+
+
 def test_a_broken_entry_is_read_again(stage, tmp_path):
     path, reads = stage
     first = scene_cache.read_stage(path)

@@ -17,11 +17,12 @@ path resolves to); and only where every file was last modified before the read b
 more than a file system's time step (a file written while USD read it could pair its new
 bytes with the old scene; the next run keeps it). The entry is a table file
 (:mod:`lumitrace.table_cache`: this user's, in a folder no one else may write, arrays
-mapped), one per stage and request, under the cache folder; ``LUMITRACE_CACHE_DIR=off``
-keeps none.
+mapped), one per stage and request, under the cache folder, the :data:`MOST_ENTRIES` used
+last; ``LUMITRACE_CACHE_DIR=off`` keeps none.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.util
 import os
@@ -41,6 +42,9 @@ SETTLED_NS = 2_000_000_000
 #: +0.7-1.1 s to its first run, -1.2 s to each later one, measured on a 2-core machine),
 #: and the cache is for the many runs of a luminaire, not a copy of every large stage.
 MOST_BYTES = 32 * 2**20
+#: Entries kept at most: writing one more removes those used least recently (a night of
+#: variants leaves no pile of scenes behind).
+MOST_ENTRIES = 256
 #: The environment variable of USD's search paths: where one is set, nothing is kept (the
 #: plugin path, file formats and resolvers, is part of the request).
 SEARCH_PATH_VARIABLE = "PXR_AR_DEFAULT_SEARCH_PATH"
@@ -98,7 +102,11 @@ def _kept_scene(entry: Path) -> Scene | None:
     except (TypeError, ValueError):  # not an entry of this layout
         return None
     scene = kept.get("scene")
-    return scene if isinstance(scene, Scene) else None
+    if not isinstance(scene, Scene):
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(entry)  # used now: the last to go
+    return scene
 
 
 def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
@@ -127,8 +135,21 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
         files.append((file, digest, stamps.get(file, "")))
     if not files:
         return
-    write_table(entry, {"stamp": validity_stamp(), "files": files, "scene": scene},
-                most_bytes=MOST_BYTES)
+    if write_table(entry, {"stamp": validity_stamp(), "files": files, "scene": scene},
+                   most_bytes=MOST_BYTES):
+        _drop_least_used(entry.parent)
+
+
+def _drop_least_used(folder: Path) -> None:
+    """Remove the entries used least recently beyond :data:`MOST_ENTRIES`."""
+    entries = []
+    for path in folder.glob("scene-*.table"):
+        with contextlib.suppress(OSError):
+            entries.append((path.stat().st_mtime_ns, path))
+    entries.sort(reverse=True)
+    for _, path in entries[MOST_ENTRIES:]:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 def _array_bytes(scene: Scene) -> int:
