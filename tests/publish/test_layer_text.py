@@ -212,3 +212,22 @@ def test_writing_and_reading_the_layer_text_loads_no_usd(tmp_path):
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "l.usda")],
                          capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_luminaire_that_is_its_light_keeps_its_stand_in():
+    """Where the luminaire prim is the light itself, nothing under it is switched off in the
+    photometric variant (USD's authoring would deactivate the variant's own prim, stand-in
+    light and all); an emitter outside the luminaire is an error, not a silent spec."""
+    light = {"ies": "./a.ies", "flux": 1.0, "radius": 1.0, "position": (0, 0, 0),
+             "emitters": ["/Led"]}
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    assert layer.ImportFromString(layer_text.result_layer_text("/Led", {}, light, None,
+                                                               None, "d"))
+    stage = Usd.Stage.Open(layer)
+    prim = stage.GetPrimAtPath("/Led")
+    prim.GetVariantSets().SetSelection(REPRESENTATION, "photometric")
+    assert prim.IsActive()
+    assert stage.GetPrimAtPath(f"/Led/{PHOTOMETRIC_LIGHT}").IsActive()
+    with pytest.raises(ValueError, match="not under the luminaire"):
+        layer_text.result_layer_text("/Led", {}, {**light, "emitters": ["/Other"]}, None,
+                                     None, "d")

@@ -98,6 +98,8 @@ def _emitter_tree(paths, prim_path: str) -> list[list[str]]:
     prefix = prim_path.rstrip("/") + "/"
     for path in paths:
         path = str(path)
+        if path == prim_path:  # the luminaire is the light: the stand-in replaces nothing
+            continue
         if not path.startswith(prefix):
             raise ValueError(f"emitter {path} is not under the luminaire {prim_path}")
         node = root
