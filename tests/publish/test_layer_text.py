@@ -176,6 +176,10 @@ def test_custom_data_reads_back_as_usd_reads_it(tmp_path):
     ('(\n    customLayerData = {\n        dictionary "d" = {\n            string "a" = "b"\n'
      '        }\n    }\n)\n', None),
     ('(\n    customLayerData = {\n        string "a" = "\\xe9"\n    }\n)\n', None),
+    # said twice (USD takes the last), or in a version of the format not read here
+    ('(\n    customLayerData = {\n        string "a" = "1"\n    }\n'
+     '    customLayerData = {\n        string "a" = "2"\n    }\n)\n', None),
+    ('(\n    customLayerData = {\n        string "a" = "1";\n    }\n)\n', None),
 ])
 def test_custom_data_is_read_or_left_to_usd(tmp_path, header, expected):
     """What the reader is sure of equals USD's reading; any other form is None (USD is
@@ -186,6 +190,13 @@ def test_custom_data_is_read_or_left_to_usd(tmp_path, header, expected):
     assert got == expected
     if got is not None:
         assert got == _data_by_usd(path)
+
+
+def test_a_header_of_another_version_is_left_to_usd(tmp_path):
+    path = tmp_path / "l.usda"
+    path.write_text('#usda 9.9\n(\n    customLayerData = {\n        string "a" = "1"\n'
+                    '    }\n)\n', encoding="utf-8")
+    assert layer_text.custom_layer_data(path) is None
 
 
 def test_a_layer_that_is_not_text_is_left_to_usd(tmp_path):

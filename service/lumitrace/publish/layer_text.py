@@ -190,7 +190,7 @@ def _asset(path: str) -> str:
 # --------------------------------------------------------------------------------------
 
 _ENTRY = re.compile(r'\s*string\s+(?=["\'])')
-_HEADER = re.compile(r"#usda[^\n]*\n\s*\(")
+_HEADER = re.compile(r"#usda 1\.0[ \t]*\r?\n\s*\(")  # the one version read here
 _OCTAL = re.compile(r"[0-7]{1,3}")
 _HEX = re.compile(r"[0-9a-fA-F]{1,2}")
 _UNESCAPE = {"n": "\n", "t": "\t", "r": "\r", "a": "\a", "b": "\b", "f": "\f", "v": "\v",
@@ -215,15 +215,18 @@ def custom_layer_data(layer: Path) -> dict[str, str] | None:
         at = _statement(header, "customLayerData")
         if at is None:
             return {}
+        if _statement(header, "customLayerData", at + 1) is not None:
+            return None  # said twice: which one counts is USD's to say
         i = header.index("{", at)
         return _entries(header[i + 1:matching_bracket(header, i)])
     except ValueError:
         return None
 
 
-def _statement(header: str, name: str) -> int | None:
-    """Where the header's statement ``name = `` starts (outside strings and brackets)."""
-    i = 0
+def _statement(header: str, name: str, start: int = 0) -> int | None:
+    """Where the header's first statement ``name = `` from ``start`` begins (outside
+    strings and brackets)."""
+    i = start
     while i < len(header):
         j = skip_token(header, i)
         if j != i:
