@@ -158,14 +158,20 @@ def peer_binary(choice: str) -> Path | None:
     return exe
 
 
-def _cpu_of(cmd: list[str]) -> tuple[float, float]:
-    """Process CPU seconds (user + system) and wall seconds of one run of ``cmd``."""
+def _timed(cmd: list[str], **run) -> tuple[float, float, subprocess.CompletedProcess]:
+    """Process CPU seconds (user + system) and wall seconds of one run of ``cmd``
+    (``subprocess.run`` with ``run``), and the finished process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    p = subprocess.run(cmd, **run)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, wall
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, wall, p
+
+
+def _cpu_of(cmd: list[str]) -> tuple[float, float]:
+    """Process CPU seconds and wall seconds of one run of ``cmd``, which must succeed."""
+    return _timed(cmd, check=True, stdout=subprocess.DEVNULL)[:2]
 
 
 def throughput(stage: Path, name: str, photons: int, repeats: int, out: Path,
@@ -410,14 +416,9 @@ def user_view(stage: Path, out: Path, t: dict) -> dict:
 
 def _run_summary(cmd: list[str]) -> tuple[float, float, dict]:
     """CPU and wall seconds of one ``trace --json`` and its summary."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu, wall, p = _timed(cmd, capture_output=True, text=True)
     if p.returncode not in (0, 3):
         raise RuntimeError(f"{' '.join(cmd)} failed: {p.stderr[-2000:]}")
-    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
     return cpu, wall, json.loads(p.stdout.strip().splitlines()[-1])
 
 

@@ -11,28 +11,19 @@ live stage's are never shared.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
+from ..digests import file_digest
 from ..errors import OutputError
 from ..filenames import RESULT_LAYER_SUFFIX, output_names
 from .runs import layer_data
 
 #: customLayerData keys (after ``lumitrace:``) of the ownership record.
 STAGE_KEY, FILES_KEY = "stage", "files"
-
-
-def file_digest(path: str | os.PathLike) -> str:
-    """SHA-256 of a file's bytes, hex."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def stage_reference(stage_path: Path | None, layer_dir: Path) -> str:

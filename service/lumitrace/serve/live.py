@@ -25,7 +25,7 @@ from ..delta.notices import ChangedPaths
 from ..delta.protocol import DeltaError, Problem
 from ..errors import LumitraceError, StageError
 from ..filenames import RESULT_LAYER_SUFFIX, edits_layer_path
-from ..publish.ownership import file_digest as digest_of_file
+from ..digests import readable_digest as file_digest
 from ..publish.sublayer import RootEdit
 from ..scene import Scene
 from ..stage import validate
@@ -55,14 +55,6 @@ class Revision:
     effect: Effect
     source: str  # "start", "delta" or "file"
     layers: tuple[str, ...] = ()  # the layer files whose edit made it
-
-
-def file_digest(path: Path) -> str | None:
-    """sha256 of a file's bytes (None when it cannot be read)."""
-    try:
-        return digest_of_file(path)
-    except OSError:
-        return None
 
 
 def check_profiles(scene: Scene) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from .. import schema
+from ..digests import file_stamp
 from .colour import light_spectrum, ray_file_colour
 from ..errors import StageError
 from ..scene import Emitter, IesShaping
@@ -322,13 +323,6 @@ def body_triangles(kind: str, dims: dict) -> np.ndarray:
     caps = np.concatenate([np.stack([np.tile([-half, 0, 0], (n, 1)), l1, left], 1),
                            np.stack([np.tile([half, 0, 0], (n, 1)), right, r1], 1)])
     return np.concatenate([side, caps])
-
-
-def file_stamp(path: str) -> str:
-    """Size and modification time of a file a light reads (an IES profile, a ray file): a
-    light whose file changed is another light."""
-    st = os.stat(path)
-    return f"{st.st_size}:{st.st_mtime_ns}"
 
 
 def _ray_file(prim: Usd.Prim, time: Usd.TimeCode) -> str | None:

@@ -6,7 +6,7 @@ s of a small luminaire's 0.37 s run to 2%: more than a compiled tracer's whole r
 scene is a pure function of the bytes of the files it was read from (its layers, the
 emitters' IES and ray files), of what lumitrace and USD are, and of the request
 (luminaire, time code, USD's plugin path). So
-the read scene is kept with the content digest of each of those files, and is taken again
+the read scene is kept with the SHA-256 of each of those files, and is taken again
 only where every one of them holds the same bytes (hashed again at each run, not trusted
 by its modification time).
 
@@ -23,12 +23,14 @@ last; ``LUMITRACE_CACHE_DIR=off`` keeps none.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib.util
 import os
 import time
 from pathlib import Path
 
+from ..digests import file_stamp, readable_digest
 from ..method_cache import cache_folder
 from ..scene import Scene
 from ..schema import PLUGIN_PATH_VARIABLE
@@ -48,7 +50,6 @@ MOST_ENTRIES = 256
 #: The environment variable of USD's search paths: where one is set, nothing is kept (the
 #: plugin path, file formats and resolvers, is part of the request).
 SEARCH_PATH_VARIABLE = "PXR_AR_DEFAULT_SEARCH_PATH"
-_CHUNK = 1 << 20
 
 
 def read_stage(path: str | Path, luminaire: str | None = None, *,
@@ -97,7 +98,8 @@ def _kept_scene(entry: Path) -> Scene | None:
         return None
     try:
         for file, digest, light_stamp in kept.get("files", ()):
-            if light_stamp and _stamp_of(file) != light_stamp or file_digest(file) != digest:
+            if light_stamp and _stamp_of(file) != light_stamp \
+                    or readable_digest(file) != digest:
                 return None
     except (TypeError, ValueError):  # not an entry of this layout
         return None
@@ -125,7 +127,7 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
     for file in sorted(scene.input_files()):
         try:
             before = os.stat(file)
-            digest = file_digest(file)
+            digest = readable_digest(file)
             after = os.stat(file)
         except OSError:
             return
@@ -160,26 +162,14 @@ def _array_bytes(scene: Scene) -> int:
 
 
 def _stamp_of(file: str) -> str:
-    """A light file's size and modification time, as :func:`~.lights.file_stamp` has it."""
+    """A light file's stamp as the reader takes it; empty where it cannot be read."""
     try:
-        st = os.stat(file)
+        return file_stamp(file)
     except OSError:
         return ""
-    return f"{st.st_size}:{st.st_mtime_ns}"
 
 
-def file_digest(file: str) -> str | None:
-    """BLAKE2b of the bytes of ``file`` (hex); None where it cannot be read."""
-    h = hashlib.blake2b(digest_size=20)
-    try:
-        with open(file, "rb") as f:
-            while chunk := f.read(_CHUNK):
-                h.update(chunk)
-    except OSError:
-        return None
-    return h.hexdigest()
-
-
+@functools.lru_cache(maxsize=1)
 def validity_stamp() -> str:
     """What a kept scene is valid for: lumitrace's sources, its USD schema's files and
     the installed USD (its package's files, found without loading it)."""
