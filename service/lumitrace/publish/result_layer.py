@@ -69,7 +69,8 @@ def write_result_layer(stage_path: str | os.PathLike, luminaire_path: str | None
     light : mapping, optional
         The IES-shaped UsdLux light standing in for the luminaire, authored in the
         ``photometric`` variant of the ``lumitraceRepresentation`` variant set (see
-        :func:`~lumitrace.publish.layer_text.photometric_variant` for its keys); missing keys raise ``ValueError``.
+        :func:`~lumitrace.publish.layer_text.photometric_variant` for its keys); missing
+        keys raise ``ValueError``.
 
     Returns
     -------
