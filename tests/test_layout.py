@@ -18,6 +18,7 @@ PACKAGE = ROOT / "service" / "lumitrace"
 #: (the tracer fills the film's tally; the writers read the film's maps), never back.
 RANKS = {
     "errors": 0, "atomic": 0, "filenames": 0,
+    "digests": 0,  # a file's SHA-256 and its size-and-time stamp: the standard library only
     # dataclasses' compiled methods kept on disk, and the cache folder: the standard
     # library only (the command loads it before the package); the table cache uses it
     "method_cache": -0.5,
