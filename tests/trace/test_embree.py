@@ -1,9 +1,10 @@
-"""Embree through its C API, a geometry per part (one level, or two: each part its own
-scene, placed by its own transform), against embreex's one geometry: the same triangle at
-the same float32 distance for every ray (two-level: but for the last bits of a distance and
-a grazing ray), an edited part rebuilt alone and a moved one placed anew unbuilt, each
-giving exactly what a fresh build gives, a two-level trace equal to a one-level one photon
-for photon but for a grazing ray's, and embreex serving where the library is not found."""
+"""Embree through its C API, a geometry of quads per part (one level, or two: each part its
+own scene, placed by its own transform), against embreex's one geometry of triangles: the
+same triangle for every ray but one that meets a quad's diagonal, at the same float32
+distance but for its last bits (two-level: and a grazing ray), an edited part rebuilt alone
+and a moved one placed anew unbuilt, each giving exactly what a fresh build gives, a
+two-level trace equal to a one-level one photon for photon but for a grazing ray's, and
+embreex serving where the library is not found."""
 import dataclasses
 from pathlib import Path
 
@@ -37,18 +38,20 @@ def _triangles(ps, scene=None):
 #: Share of rays whose hit a two-level scene may decide otherwise than one level: a ray
 #: that grazes a triangle's edge is caught by one structure and missed by the other.
 EDGE_SHARE = 1e-4
-#: How far (normalised units, the luminaire about 1 across) a two-level distance may lie
-#: from one level's: a ray meets a placed part in the part's own space, in float32.
-DISTANCE_ROUNDING = 1e-5
+#: How far (normalised units, the luminaire about 1 across) a distance may lie from
+#: embreex's: a quad's corners are taken in another order than its triangles' (a few
+#: float32 roundings of coordinates about 1), and a two-level scene meets a placed part in
+#: the part's own space.
+QUAD_ROUNDING, DISTANCE_ROUNDING = 1e-6, 1e-5
 
 
-def _same_hits(a, b, rare=False):
-    """Whether the hits ``a`` and ``b`` (``b`` one-level) agree: every ray exactly, or
-    where ``rare`` (``a`` two-level) all but :data:`EDGE_SHARE` of them, their distances
-    within :data:`DISTANCE_ROUNDING`."""
+def _same_hits(a, b, within=None):
+    """Whether the hits ``a`` and ``b`` agree: every ray exactly, or (``b`` embreex's)
+    all but :data:`EDGE_SHARE` of them on the same triangle, their distances ``within``
+    that many normalised units."""
     hit = b["primID"] >= 0
-    if rare:
-        near = np.abs(a["tfar"].astype(np.float64) - b["tfar"]) <= DISTANCE_ROUNDING
+    if within is not None:
+        near = np.abs(a["tfar"].astype(np.float64) - b["tfar"]) <= within
         same = (a["primID"] == b["primID"]) & (near | ~hit)
         assert (~same).sum() <= EDGE_SHARE * len(same), (~same).sum()
     else:
@@ -56,6 +59,11 @@ def _same_hits(a, b, rare=False):
         assert same.all()
     assert np.isinf(a["tfar"][(a["primID"] < 0)]).all()  # embreex's misses say 1e37
     return int(hit.sum())
+
+
+def _as_embreex(levels):
+    """How close to embreex's a scene's distances are (:func:`_same_hits`' ``within``)."""
+    return DISTANCE_ROUNDING if levels else QUAD_ROUNDING
 
 
 @pytest.fixture(params=["one level", "two levels"])
@@ -74,7 +82,8 @@ def test_a_geometry_per_part_hits_what_embreex_hits(stage, levels):
     assert isinstance(ps.embree, embree.PartScene) and ps.embree.two_level == levels
     o, d = _traced_rays(ps)
     bare = embree_scene(_triangles(ps), (), parts=False)
-    assert _same_hits(ps.intersect(o, d), bare.run(o, d, output=1), levels) > 0.2 * len(o)
+    assert _same_hits(ps.intersect(o, d), bare.run(o, d, output=1),
+                      _as_embreex(levels)) > 0.2 * len(o)
 
 
 def test_an_edited_part_is_rebuilt_alone_and_hits_as_a_fresh_build(levels):
@@ -94,7 +103,7 @@ def test_an_edited_part_is_rebuilt_alone_and_hits_as_a_fresh_build(levels):
     now = updated.intersect(o, d)
     _same_hits(now, fresh.intersect(o, d))  # the same structure: exactly
     _same_hits(now, embree_scene(_triangles(ps, moved), (), parts=False).run(o, d, output=1),
-               levels)
+               _as_embreex(levels))
     assert (now["primID"] != before["primID"]).sum() > 100  # the blade moved in their way
     # unchanged triangles rebuild nothing; a new part layout is not an update
     assert prepare(moved, ps.frame, previous=updated).embree.rebuilt == []
@@ -132,7 +141,7 @@ def test_a_part_moved_by_its_transform_is_placed_anew_not_rebuilt(tmp_path, leve
     now = updated.intersect(o, d)
     _same_hits(now, fresh.intersect(o, d))  # the same structure: exactly
     _same_hits(now, embree_scene(_triangles(ps, moved), (), parts=False).run(o, d, output=1),
-               levels)
+               _as_embreex(levels))
     assert (now["primID"] != before["primID"]).sum() > 100  # the blade moved in their way
     # placed back where it was: the hits of the first build, exactly
     back = prepare(scene, ps.frame, previous=updated)
@@ -159,6 +168,8 @@ def test_two_levels_trace_what_one_level_traces_but_for_grazing_rays(monkeypatch
 
 
 def test_without_the_library_embreex_traces_the_same_photons(monkeypatch):
+    """embreex's triangles trace the photons our quads trace: the same, but for the rare
+    photon whose path a distance's last bits turn elsewhere."""
     scene = read_stage(STAGES / "downlight.usda")
     job = BatchJob(0, 0, 20000, 9, 16)
     ours = trace_batch(prepare(scene), job, records=True)
@@ -167,7 +178,33 @@ def test_without_the_library_embreex_traces_the_same_photons(monkeypatch):
     ps = prepare(scene)
     assert not isinstance(ps.embree, embree.PartScene)
     theirs = trace_batch(ps, job, records=True)
-    assert np.array_equal(ours.counts, theirs.counts)
-    assert (ours.absorbed, ours.cut, ours.segments) == (theirs.absorbed, theirs.cut,
-                                                        theirs.segments)
-    assert np.array_equal(ours.records.cells, theirs.records.cells)
+    other = ((ours.records.texel != theirs.records.texel)
+             | (ours.records.segments != theirs.records.segments)
+             | (ours.records.cells != theirs.records.cells).any(axis=-1)).sum()
+    assert other <= 20 * EDGE_SHARE * job.count, other
+    assert np.abs(ours.counts - theirs.counts).sum() <= 2 * other
+    assert abs(ours.segments - theirs.segments) <= 20 * other
+
+
+def test_quads_hold_every_triangle_once_as_embree_splits_them():
+    """Triangles that follow one another and share an edge are one quad whose two
+    triangles (Embree's (q0, q1, q3) and (q2, q3, q1)) are theirs; the rest stand alone
+    as a quad with its last corner repeated."""
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(8, 3)).astype(np.float32)
+    tri = p[[[0, 1, 2], [2, 1, 3],  # share 1-2: a quad
+             [4, 5, 6],  # shares nothing with the next
+             [0, 1, 7], [1, 7, 0],  # the same corners in another turn: not an edge alone
+             [3, 4, 5], [5, 4, 6], [6, 4, 7]]]  # a run of three: the first two pair
+    corners, held = embree.quads(tri)
+    assert held.tolist() == [[0, 1], [5, 6], [2, 2], [3, 3], [4, 4], [7, 7]]
+    for q, (i, j) in zip(corners, held):
+        first, second = q[[0, 1, 3]], q[[2, 3, 1]]
+        assert _turn_of(first, tri[i])  # the first triangle as given, in its own turn
+        assert {tuple(c) for c in second} == {tuple(c) for c in tri[j]} if i != j \
+            else (q[3] == q[2]).all()
+
+
+def _turn_of(a, b) -> bool:
+    """Whether triangle ``a``'s corners are ``b``'s in the same cyclic turn."""
+    return any((np.roll(b, k, axis=0) == a).all() for k in range(3))

@@ -143,7 +143,7 @@ _PACKET_WORDS = 16 + 24 * _LANES + 16
 _HIT = 16  # the RTCRayHit4's first word
 # its rows: org x y z, tnear, dir x y z, time, tfar, mask, id, flags, Ng x y z, u, v,
 # primID, geomID, instID
-_TFAR, _MASK, _PRIM, _GEOM, _INST = 8, 9, 17, 18, 19
+_TFAR, _MASK, _U, _V, _PRIM, _GEOM, _INST = 8, 9, 15, 16, 17, 18, 19
 
 
 @numba.njit(**_ALWAYS)
@@ -176,15 +176,18 @@ def _cast(lane, f, u, ox, oy, oz, dx, dy, dz):
 @numba.njit(**_ALWAYS)
 def _met(lane, f, u, offsets, order):
     """Ray ``lane``'s closest hit in the packet: its triangle (-1: none) and float32
-    distance (inf: none). The triangle's part is its geometry's ID, or in a two-level scene
-    its instance's."""
+    distance (inf: none). The quad's part is its geometry's ID, or in a two-level scene
+    its instance's; of its two triangles, the second holds the hits whose u + v pass 1
+    (Embree's quad parametrisation)."""
     b = _HIT + lane
     geom = u[b + 4 * _GEOM]
     if geom == 0xFFFFFFFF:
         return np.int64(-1), np.inf
     inst = u[b + 4 * _INST]
     g = geom if inst == 0xFFFFFFFF else inst
-    return np.int64(order[offsets[g] + u[b + 4 * _PRIM]]), np.float64(f[b + 4 * _TFAR])
+    second = np.float64(f[b + 4 * _U]) + np.float64(f[b + 4 * _V]) > 1.0
+    q = offsets[g] + u[b + 4 * _PRIM]
+    return np.int64(order[2 * q + second]), np.float64(f[b + 4 * _TFAR])
 
 
 @numba.njit(**_ALWAYS)
@@ -399,9 +402,10 @@ def _call_void4(typingctx, fn, a, b, c, e):
 @numba.njit(**_JIT)
 def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
     """Embree's closest hit of every float32 ray ``o32``, ``d32`` (N, 3) in ``scene`` (one
-    geometry, or one instance of a scene of it, per part; triangle j of part g is
-    ``order[offsets[g] + j]``): triangle ``prim`` (-1: none) and distance ``tfar`` (inf:
-    none). ``fn``: ``rtcIntersect4``, :data:`_LANES` rays a call."""
+    geometry of quads, or one instance of a scene of it, per part; quad j of part g holds
+    triangles ``order[2 (offsets[g] + j)]`` and ``order[2 (offsets[g] + j) + 1]``):
+    triangle ``prim`` (-1: none) and distance ``tfar`` (inf: none). ``fn``:
+    ``rtcIntersect4``, :data:`_LANES` rays a call."""
     f, u, valid, packet = _packet(np.empty(_PACKET_WORDS, np.uint32))
     n = o32.shape[0]
     for s in range(0, n, _LANES):
