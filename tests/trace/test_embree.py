@@ -197,7 +197,7 @@ def test_quads_hold_every_triangle_once_as_embree_splits_them():
              [0, 1, 7], [1, 7, 0],  # the same corners in another turn: not an edge alone
              [3, 4, 5], [5, 4, 6], [6, 4, 7]]]  # a run of three: the first two pair
     corners, held = embree.quads(tri)
-    assert held.tolist() == [[0, 1], [5, 6], [2, 2], [3, 3], [4, 4], [7, 7]]
+    assert held.tolist() == [[0, 1], [2, 2], [3, 3], [4, 4], [5, 6], [7, 7]]
     for q, (i, j) in zip(corners, held):
         first, second = q[[0, 1, 3]], q[[2, 3, 1]]
         assert _turn_of(first, tri[i])  # the first triangle as given, in its own turn

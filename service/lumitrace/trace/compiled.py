@@ -29,7 +29,7 @@ from . import kernel_sources
 
 #: The kernels the tracer calls, in the order the build exports them.
 ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
-                "push_level")
+                "push_level", "pair_quads")
 #: The sources whose text the compiled code depends on (the kernels' constants included).
 SOURCES = kernel_sources.SOURCES
 MODULE = "kernels_aot"
@@ -157,7 +157,7 @@ def _load() -> tuple[dict, str]:
 
 
 _built, _state = _load()
-start, cull, bounce, emit_photons, scatter_many, intersect, push_level = (
+start, cull, bounce, emit_photons, scatter_many, intersect, push_level, pair_quads = (
     Kernel(n, _built[n]) for n in ENTRY_POINTS)
 # the map's filter (in the film, which comes before the tracer) pushes with the compiled level
 _pullpush.use_compiled_level(push_level)

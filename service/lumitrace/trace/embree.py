@@ -87,39 +87,13 @@ def library() -> ctypes.CDLL | None:
 
 
 def quads(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles (t, 3, 3) float32 as Embree quads: the corners (q, 4, 3) and, for each
-    quad, the triangles it holds (q, 2). Triangle i and i + 1 that share exactly one edge
-    (and neither is paired before) are quad (x, s, y, r): x the corner of i off the edge,
-    s and r its other two in i's own turn, y the corner of i + 1 off it; Embree's two
-    triangles of it, (x, s, r) and (y, r, s), are i and i + 1. Any other triangle is the
-    quad (a, b, c, c), whose second triangle has no area."""
-    t = len(tri)
-    same = (tri[:-1, :, None, :] == tri[1:, None, :, :]).all(axis=3)  # (t-1, 3, 3)
-    shared = (same.sum(axis=(1, 2)) == 2) & (same.any(axis=2).sum(axis=1) == 2) & \
-        (same.any(axis=1).sum(axis=1) == 2)
-    # greedily from the first: in a run of candidates, every other one starts a pair
-    i = np.arange(t - 1)
-    start = np.maximum.accumulate(np.where(shared, -1, i))
-    first = np.flatnonzero(shared & ((i - start) % 2 == 1))
-    second = first + 1
-    alone = np.ones(t, bool)
-    alone[first] = alone[second] = False
-    single = np.flatnonzero(alone)
-    out = np.empty((len(first) + len(single), 4, 3), np.float32)
-    held = np.empty((len(out), 2), np.int64)
-    x = np.argmin(same[first].any(axis=2), axis=1)  # i's corner off the edge
-    y = np.argmin(same[first].any(axis=1), axis=1)  # and i + 1's
-    a = tri[first]
-    rows = np.arange(len(first))
-    out[:len(first), 0] = a[rows, x]
-    out[:len(first), 1] = a[rows, (x + 1) % 3]
-    out[:len(first), 2] = tri[second, y]
-    out[:len(first), 3] = a[rows, (x + 2) % 3]
-    held[:len(first), 0], held[:len(first), 1] = first, second
-    out[len(first):, :3] = tri[single]
-    out[len(first):, 3] = tri[single, 2]
-    held[len(first):, 0] = held[len(first):, 1] = single
-    return out, held
+    """Triangles (t, 3, 3) as Embree quads: the corners (q, 4, 3) float32 and the two
+    triangles each quad holds (q, 2), as :func:`~lumitrace.trace.kernels.pair_quads`
+    pairs them (two that follow one another and share an edge are one quad)."""
+    from .compiled import pair_quads
+
+    tri = np.ascontiguousarray(tri, np.float32)
+    return pair_quads(tri.view(np.uint32), tri)
 
 
 def _parts(part_index, n: int) -> np.ndarray:

@@ -24,10 +24,10 @@ from .binning import (_CHUNK, _acos_fast, _atan2_fast, _gonio_cell_exact, gonio_
 from .emission import cull, emit_photons, start
 from .filtering import push_level
 from .maths import _turn, _uniform_pair
-from .paths import bounce, intersect
+from .paths import bounce, intersect, pair_quads
 from .scattering import scatter_many, scatter_one
 
 __all__ = ["start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
-           "push_level", "texels",
+           "push_level", "pair_quads", "texels",
            "gonio_bins", "scatter_one", "_CHUNK", "_acos_fast", "_atan2_fast",
            "_gonio_cell_exact", "_turn", "_uniform_pair"]

@@ -418,3 +418,47 @@ def intersect(fn, scene, o32, d32, offsets, order, prim, tfar):
         _call_void4(fn, valid, scene, packet, numba.uint64(0))
         for k in range(m):
             prim[s + k], tfar[s + k] = _met(k, f, u, offsets, order)
+
+
+@numba.njit(**_JIT)
+def pair_quads(bits, tri):
+    """Triangles ``tri`` (t, 3, 3) float32 (``bits``: the same as uint32) as Embree quads:
+    their corners (q, 4, 3) and the two triangles each holds (q, 2), in the triangles'
+    order. Triangle i and i + 1 that share exactly one edge (two corners of the same bits)
+    are quad (x, s, y, r), unless i is paired already: x the corner of i off the edge, s
+    and r its others in i's own turn, y the corner of i + 1 off it, so that Embree's two
+    triangles of it, (x, s, r) and (y, r, s), are i and i + 1. Any other triangle is the
+    quad (a, b, c, c), whose second triangle has no area."""
+    t = tri.shape[0]
+    corners = np.empty((t, 4, 3), np.float32)
+    held = np.empty((t, 2), np.int64)
+    q, i = 0, 0
+    while i < t:
+        n, in_a, in_b = 0, 0, 0  # corners shared; which of i's, which of i + 1's
+        if i + 1 < t:
+            for j in range(3):
+                for k in range(3):
+                    if bits[i, j, 0] == bits[i + 1, k, 0] and \
+                            bits[i, j, 1] == bits[i + 1, k, 1] and \
+                            bits[i, j, 2] == bits[i + 1, k, 2]:
+                        n += 1
+                        in_a |= 1 << j
+                        in_b |= 1 << k
+        if n == 2 and in_a in (3, 5, 6) and in_b in (3, 5, 6):
+            x = 0 if in_a == 6 else (1 if in_a == 5 else 2)
+            y = 0 if in_b == 6 else (1 if in_b == 5 else 2)
+            for c in range(3):
+                corners[q, 0, c] = tri[i, x, c]
+                corners[q, 1, c] = tri[i, (x + 1) % 3, c]
+                corners[q, 2, c] = tri[i + 1, y, c]
+                corners[q, 3, c] = tri[i, (x + 2) % 3, c]
+            held[q, 0], held[q, 1] = i, i + 1
+            i += 2
+        else:
+            for c in range(3):
+                corners[q, 0, c], corners[q, 1, c] = tri[i, 0, c], tri[i, 1, c]
+                corners[q, 2, c], corners[q, 3, c] = tri[i, 2, c], tri[i, 2, c]
+            held[q, 0], held[q, 1] = i, i
+            i += 1
+        q += 1
+    return corners[:q], held[:q]
