@@ -2,9 +2,10 @@
 
 A batch is a pure function ``(prepared scene, batch job) -> BatchTally``: photon i's path
 depends on nothing but the scene, the seed and i, so batches can run on any thread or
-machine and an edit can retrace exactly the photons it affects. Each photon is followed
-to its end in one compiled call that releases the GIL and calls Embree ray by ray, so two
-threads tracing two batches keep both cores busy. Where only embreex is at hand (or every
+machine and an edit can retrace exactly the photons it affects. A batch's photons are
+emitted and followed to their ends a chunk at a time, in one compiled call that releases
+the GIL and calls Embree as it goes, so two threads tracing two batches keep both cores
+busy. Where only embreex is at hand (or every
 ray is kept, for the benchmark) a batch advances a bounce at a time, between embreex's
 batched calls; the photons and their tallies are the same either way.
 """
@@ -83,6 +84,11 @@ class _Waves:
         return w
 
 
+#: Photons emitted and followed at a time on whole paths: their start points, directions
+#: and normals (72 bytes a photon) stay in the core's cache from one kernel to the next,
+#: and a thread's buffers stay small whatever the batch (a batch of 2^18 photons touched
+#: 19 MB of them a thread).
+PATH_CHUNK = 1 << 14
 _NO_RECORDS = PhotonRecords.empty(0)
 _NO_XZ = np.zeros((4, 1), np.int64)
 _NO_TP = np.zeros((1, 1))
@@ -128,13 +134,42 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
     exit_dir = np.zeros((n, 3)) if exit_rays else _NO_EXITS
     r = rec if rec is not None else _NO_RECORDS
-    # emitted into the second set of buffers (free until the first bounce)
-    p, d, n_emit = emit(e, key, idx, normals=True,
-                        out=tuple(a.reshape(-1)[:3 * n].reshape(3, n)
-                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[0][:n],),
-                        args=ps.emitter_args[job.emitter])
+    if spectral:  # unit throughput in every band, nothing coloured met yet
+        xz = np.zeros((4, tally.counts.shape[1]), np.int64)
+        tp, tband, escaped_xz = w.spectral(n)
+    else:
+        xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
+
+    def args(s: slice) -> tuple[tuple, tuple]:
+        """The bounce kernel's arguments around the photons' own and the escapes' count,
+        for the photons ``s`` of the batch: float32 rays, scene, tallies, escapes; part
+        hits, goniophotometer, records, exits, offsets."""
+        head = (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp[s], tband[s],
+                xz, escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped)
+        tail = (tally.part_hits, *ps.gonio_args, rec is not None, r.texel[s], r.cell[s],
+                r.exit[s], r.segments[s], r.parts[s], r.cells[s], r.slabs[s], r.x[s], r.z[s],
+                *ps.grid_args, exit_rays, exit_pos[s], exit_dir[s], RAY_EPSILON, RAY_BACKOFF,
+                NEAR_HIT)
+        return head, tail
+
     hit = None if record_rays else ps.hit_args
-    if hit is None:  # moved into the normalised frame as the first wave
+    if hit is not None:  # every path followed to its end, a chunk of photons at a time
+        n_escaped = 0
+        for first in range(0, n, PATH_CHUNK):
+            m = min(PATH_CHUNK, n - first)
+            emitted = _emitted(ps, job, e, key, idx[first:first + m], w, m)
+            if e.ray_bands:  # its ray's band, from its hash
+                tband[first:first + m] = photon_bands(e, emitted[3],
+                                                      ps.emitter_args[job.emitter])
+            head, tail = args(slice(first, first + m))
+            _, n_escaped, cut, absorbed, segments = compiled.bounce(
+                0, job.max_depth, w.prim[:m], w.tfar[:m], *emitted, *emitted, *head,
+                n_escaped, *tail, True, *hit)
+            tally.cut += cut
+            tally.absorbed += absorbed
+            tally.segments += segments
+    else:  # moved into the normalised frame as the first wave
+        p, d, n_emit, base, _ = _emitted(ps, job, e, key, idx, w, n)  # (base: w.base[0])
         compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[0], w.d[0], w.o32,
                        w.d32)
         w.pid[0][:n] = w.rows[:n]
@@ -144,28 +179,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         # emitted photons that cannot meet any geometry escape without Embree
         reach = compiled.cull(n, w.o[0], w.d[0], w.base[0], w.pid[0], w.o32, w.d32,
                               *ps.reach_box) if ps.embree is not None else 0
-    if spectral:  # unit throughput in every band, nothing coloured met yet
-        xz = np.zeros((4, tally.counts.shape[1]), np.int64)
-        tp, tband, escaped_xz = w.spectral(n)
-        if e.ray_bands:  # or its ray's band (from its hash: wherever culling put it)
-            tband[:n] = photon_bands(e, w.base[0][:n], ps.emitter_args[job.emitter])
-    else:
-        xz, tp, tband, escaped_xz = _NO_XZ, _NO_TP, _NO_BAND, _NO_XZ
-    # the bounce kernel's arguments around the photons' own and the escapes' count:
-    # float32 rays, scene, tallies, escapes; part hits, goniophotometer, records, exits,
-    # offsets
-    head = (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp, tband, xz,
-            escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped)
-    tail = (tally.part_hits, *ps.gonio_args, rec is not None, r.texel, r.cell, r.exit,
-            r.segments, r.parts, r.cells, r.slabs, r.x, r.z, *ps.grid_args, exit_rays,
-            exit_pos, exit_dir, RAY_EPSILON, RAY_BACKOFF, NEAR_HIT)
-    if hit is not None:  # every path followed to its end in one compiled call
-        emitted = (p, d, n_emit, w.base[0][:n], w.pid[0])
-        _, n_escaped, tally.cut, tally.absorbed, tally.segments = compiled.bounce(
-            0, job.max_depth, w.prim[:n], w.tfar[:n], *emitted, *emitted, *head, 0, *tail,
-            True, *hit)
-    else:
-        n_escaped = _waves(ps, job, w, tally, n, reach, head, tail)
+        if spectral and e.ray_bands:  # its ray's band (from its hash: wherever culling
+            tband[:n] = photon_bands(e, base, ps.emitter_args[job.emitter])  # put it)
+        n_escaped = _waves(ps, job, w, tally, n, reach, *args(slice(None)))
     if n_escaped:
         tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
     if spectral:
@@ -177,6 +193,18 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         out = ~np.isnan(exit_pos[:, 0])
         tally.exit_rays = (exit_pos[out], exit_dir[out])
     return tally
+
+
+def _emitted(ps: PreparedScene, job: BatchJob, e: Emitter, key, idx: np.ndarray, w: _Waves,
+             m: int) -> tuple:
+    """Photons ``idx`` (``m`` of them) emitted into the second set of buffers (free until
+    the first bounce): their start points, directions, surface normals (3, m; world),
+    hashes (m,), and the rows' buffer, as the bounce kernel takes them."""
+    p, d, n_emit = emit(e, key, idx, normals=True,
+                        out=tuple(a.reshape(-1)[:3 * m].reshape(3, m)
+                                  for a in (w.o[1], w.d[1], w.pol[1])) + (w.base[0][:m],),
+                        args=ps.emitter_args[job.emitter])
+    return p, d, n_emit, w.base[0][:m], w.pid[0]
 
 
 def _state(w: _Waves, s: int, n: int) -> tuple:
