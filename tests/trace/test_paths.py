@@ -1,5 +1,6 @@
 """Whole photon paths in one compiled call against a bounce at a time: a photon draws the
-same numbers either way, so every tally, record and exit ray is the same, bit for bit."""
+same numbers either way, so every tally, record and exit ray is the same, bit for bit; and
+so whatever the chunks a batch's paths are emitted and followed in."""
 from pathlib import Path
 
 import numpy as np
@@ -57,7 +58,24 @@ def test_photons_cut_by_the_depth_limit_are_counted_alike():
     assert t.cut > 100 and t.cut + t.absorbed + t.escaped == t.photons
 
 
-def test_a_ray_file_lights_photons_keep_their_bands_when_culled(tmp_path):
+@pytest.mark.skipif(embree.library() is None, reason="Embree's C API is not found here")
+@pytest.mark.parametrize("stage", ["warm_downlight.usda", "reference/mirror_cup.usda"])
+def test_paths_followed_a_chunk_at_a_time_tally_what_one_chunk_tallies(stage, monkeypatch):
+    """A batch's paths emitted and followed in chunks (of 999 photons, so the lanes' last
+    packets of a chunk are part-filled), with records, exit rays and a spectral throughput:
+    every tally the same as in one chunk, and as a bounce at a time."""
+    from lumitrace.trace import tracer
+
+    ps = prepare(read_stage(STAGES / stage))
+    job = BatchJob(0, 1000, 4000, 3, 16)
+    whole = trace_batch(ps, job, records=True, exit_rays=True)
+    monkeypatch.setattr(tracer, "PATH_CHUNK", 999)
+    chunked = _same_as_waves(ps, job, records=True, exit_rays=True)
+    same_tally(chunked, whole)
+    assert chunked.escaped > 1000
+
+
+def test_a_ray_file_lights_photons_keep_their_bands_when_culled(tmp_path, monkeypatch):
     """Rays with wavelengths over a white floor that only some of them meet: the waves
     reorder the photons the floor cannot catch, whole paths do not; each photon starts
     in its own ray's band either way."""
@@ -88,6 +106,9 @@ def test_a_ray_file_lights_photons_keep_their_bands_when_culled(tmp_path):
     ps = prepare(scene)
     t = _same_as_waves(ps, BatchJob(0, 0, 3000, 2, 8), records=True, exit_rays=True)
     assert 500 < t.part_hits.sum() < 2500  # some meet the floor, some cannot
+    # in chunks, each photon's band drawn from its own hash all the same
+    monkeypatch.setattr("lumitrace.trace.tracer.PATH_CHUNK", 700)
+    same_tally(trace_batch(ps, BatchJob(0, 0, 3000, 2, 8), records=True, exit_rays=True), t)
 
 
 def _lines(start: int, stop: int) -> range:
