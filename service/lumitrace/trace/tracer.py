@@ -5,9 +5,9 @@ depends on nothing but the scene, the seed and i, so batches can run on any thre
 machine and an edit can retrace exactly the photons it affects. A batch's photons are
 emitted and followed to their ends a chunk at a time, in one compiled call that releases
 the GIL and calls Embree as it goes, so two threads tracing two batches keep both cores
-busy. Where only embreex is at hand (or every
-ray is kept, for the benchmark) a batch advances a bounce at a time, between embreex's
-batched calls; the photons and their tallies are the same either way.
+busy. Where only embreex is at hand (or every ray is kept, for the benchmark) a batch
+advances a bounce at a time, between embreex's batched calls; the photons and their
+tallies are the same either way.
 """
 from __future__ import annotations
 
@@ -158,7 +158,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         for first in range(0, n, PATH_CHUNK):
             m = min(PATH_CHUNK, n - first)
             emitted = _emitted(ps, job, e, key, idx[first:first + m], w, m)
-            if e.ray_bands:  # its ray's band, from its hash
+            if spectral and e.ray_bands:  # its ray's band, from its hash
                 tband[first:first + m] = photon_bands(e, emitted[3],
                                                       ps.emitter_args[job.emitter])
             head, tail = args(slice(first, first + m))
