@@ -35,6 +35,7 @@ import functools
 import glob
 import os
 import threading
+from typing import NamedTuple
 
 import numpy as np
 
@@ -96,6 +97,18 @@ def quads(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pair_quads(tri.view(np.uint32), tri)
 
 
+class _Part(NamedTuple):
+    """A part's geometry as Embree holds it: the shared buffers it reads (kept alive),
+    whether the part is placed by a frame of its own, the triangles (t, 3, 3) float32 it was
+    made of (an update compares the new ones) and each quad's two triangles (q, 2)."""
+
+    vertices: np.ndarray
+    index: np.ndarray
+    framed: bool
+    triangles: np.ndarray
+    held: np.ndarray
+
+
 def _parts(part_index, n: int) -> np.ndarray:
     """The part of each of ``n`` triangles (all part 0 when none is given)."""
     return np.asarray(part_index, np.int64) if len(part_index) else np.zeros(n, np.int64)
@@ -129,9 +142,7 @@ class PartScene:
         self._in_order = bool(np.all(self.order == np.arange(len(part))))
         n_parts = int(part.max()) + 1 if len(part) else 0
         self.offsets = np.searchsorted(part[self.order], np.arange(n_parts)).astype(np.int64)
-        #: the geometries' shared buffers, kept alive, the triangles they were made of and
-        #: the triangles of each quad (as :func:`quads`), per part
-        self._buffers: dict[int, tuple] = {}
+        self._buffers: dict[int, _Part] = {}  # each part's geometry
         self._placed: dict[int, np.ndarray] = {}  # two-level: the transforms of framed parts
         self.scene = self._lib.rtcNewScene(_device())
         self._lib.rtcSetSceneFlags(self.scene, _ROBUST)
@@ -165,7 +176,7 @@ class PartScene:
         lib = self._lib
         if frame is not None:
             tri = frame[0]
-        tri = np.array(tri, np.float32)  # kept: an update compares the part's new ones
+        tri = np.array(tri, np.float32)  # a copy: an update compares the part's new ones
         corners, held = quads(tri)
         v = np.zeros((4 * len(corners) + 1, 4), np.float32)  # 16-byte rows, one spare
         v[:-1, :3] = corners.reshape(-1, 3)
@@ -191,7 +202,7 @@ class PartScene:
         else:
             lib.rtcAttachGeometryByID(self.scene, geom, g)
             lib.rtcReleaseGeometry(geom)  # the scene holds it
-        self._buffers[g] = (v, idx, frame is not None, tri, held)
+        self._buffers[g] = _Part(v, idx, frame is not None, tri, held)
 
     def _place(self, g: int, transform: np.ndarray) -> None:
         """Place part ``g``'s own scene in the top scene by ``transform`` (12,) float32,
@@ -212,10 +223,10 @@ class PartScene:
         # each quad's two triangles in the scene's numbering, the parts' quads one after
         # another: part g's quad j holds triangles order[2 (quad_offsets[g] + j) + 0, 1]
         size = np.zeros(len(self.offsets), np.int64)
-        for g, buffers in self._buffers.items():
-            size[g] = len(buffers[4])
+        for g, part in self._buffers.items():
+            size[g] = len(part.held)
         self.quad_offsets = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
-        held = [self.offsets[g] + self._buffers[g][4] for g in sorted(self._buffers)]
+        held = [self.offsets[g] + self._buffers[g].held for g in sorted(self._buffers)]
         self.quad_triangles = self.order[np.concatenate(held).reshape(-1)] if held \
             else np.zeros(0, np.int64)
         with _lock:
@@ -235,10 +246,10 @@ class PartScene:
         frames = self._frames(frames)
         changed, moved = [], []
         for g, tri in self._by_part(triangles):
-            _, _, framed, before, _ = self._buffers[g]
+            part = self._buffers[g]
             frame = frames[g]
             own = tri if frame is None else frame[0]
-            if framed != (frame is not None) or not np.array_equal(before, own):
+            if part.framed != (frame is not None) or not np.array_equal(part.triangles, own):
                 changed.append((g, tri, frame))
             elif frame is not None and not np.array_equal(self._placed[g], frame[1]):
                 moved.append((g, frame[1]))
