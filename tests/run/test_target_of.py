@@ -92,7 +92,7 @@ def test_a_files_target_sizes_its_last_round_to_reach_it():
         while not session.finished():
             jobs = session.next_jobs()
             session.add_round(runner(jobs), estimated=False)
-            rounds.append((session.accumulator.photons, session.files.error,
+            rounds.append((session.accumulator.photons, session.current_files().error,
                            session.to_target))
     photons, error, _ = rounds[-1]
     assert session.reached_target() and error <= target

@@ -220,11 +220,13 @@ class Refinement:
             est = estimate(self.accumulator, self.settings.threshold)  # changed meanwhile
         self._set_estimate(est)
         self.to_target = math.inf
-        if self.settings.target_error is not None:
+        # the first rounds' estimates can be far too low: no projection from them (and
+        # the files are not judged for it: 5-10 ms a round)
+        if self.settings.target_error is not None and \
+                self.accumulator.photons >= self._least_photons():
             checkpoint()
             files = self.current_files()
-            if files is not None and self.accumulator.photons >= self._least_photons():
-                # the first rounds' estimates can be far too low: no projection from them
+            if files is not None:
                 self.to_target = photons_to_target(self.accumulator.photons, files.error,
                                                    self.settings.target_error)
         t_estimate = time.perf_counter() - t0
