@@ -37,10 +37,13 @@ def test_a_cheap_round_never_starts_the_pool(prepared):
     jobs = _jobs(len(prepared.scene.emitters))
     pool = workers._ThreadPool(prepared, 2)
     try:
-        first = list(pool.map(jobs))
-        again = list(pool.map(jobs))
+        first = list(pool(jobs))
+        again = list(pool(jobs))
         assert pool.pool is None  # 9,000 photons a round: a few ms on one thread
         assert pool.seconds_per_photon is not None and pool.seconds_per_photon > 0
+        # so the session makes such a round one job, and splits one worth the pool
+        assert pool.ways(9000) == 1
+        assert pool.ways(int(workers.START_POOL_SECONDS / pool.seconds_per_photon) + 1) == 2
     finally:
         pool.shutdown()
     _same(first, [workers._traced(prepared, j) for j in jobs])
@@ -51,16 +54,16 @@ def test_a_round_worth_it_is_shared_with_the_pool_and_tallies_the_same(prepared,
                                                                         monkeypatch):
     jobs = _jobs(len(prepared.scene.emitters), jobs_each=5)
     inline = workers._ThreadPool(prepared, 1)
-    expected = list(inline.map(jobs))
+    expected = list(inline(jobs))
     monkeypatch.setattr(workers, "START_POOL_SECONDS", 0.0)
     monkeypatch.setattr(workers, "INLINE_SECONDS", 0.0)
     pool = workers._ThreadPool(prepared, 3)
     try:
-        shared = list(pool.map(jobs))  # the first job alone (the rate), the rest shared
+        shared = list(pool(jobs))  # the first job alone (the rate), the rest shared
         assert pool.pool is not None and pool.pool._max_workers == 2
         names = set()
         monkeypatch.setattr(workers, "_traced", _naming(workers._traced, names))
-        again = list(pool.map(jobs))
+        again = list(pool(jobs))
         assert len(names) >= 2  # this thread and at least one of the pool's took jobs
     finally:
         pool.shutdown()
@@ -95,7 +98,7 @@ def test_an_error_in_a_shared_round_is_raised_and_stops_the_round(prepared, monk
     monkeypatch.setattr(workers, "_traced", failing)
     try:
         with pytest.raises(RuntimeError, match="batch failed"):
-            list(pool.map(jobs))
+            list(pool(jobs))
     finally:
         pool.shutdown()
     assert len(taken) <= 4 < len(jobs)  # at most the job each thread had in hand after it

@@ -88,12 +88,13 @@ MIN_SPLIT_PHOTONS = 4096
 
 
 def _round_jobs(done: list[int], targets: list[float], shares: list[float],
-                round_photons: int, settings: TraceSettings) -> list[BatchJob]:
-    """Batch jobs of the next round, batch-sized, or split among the threads where the
-    round is smaller than a batch per thread (a first round on one core of two took twice
-    its time); jobs of at least :data:`MIN_SPLIT_PHOTONS`. The counts are the same for any
-    split."""
-    threads = max(1, int(settings.threads))
+                round_photons: int, settings: TraceSettings,
+                ways: int | None = None) -> list[BatchJob]:
+    """Batch jobs of the next round, batch-sized, or split ``ways`` ways (default: among
+    the threads) where the round is smaller than a batch a way (a first round on one core
+    of two took twice its time); jobs of at least :data:`MIN_SPLIT_PHOTONS`. The counts
+    are the same for any split."""
+    threads = max(1, int(ways or settings.threads))
     batch = min(settings.batch_size, max(MIN_SPLIT_PHOTONS, -(-round_photons // threads)))
     floor = MIN_JOB_PHOTONS if settings.seconds is None and settings.target_error is None \
         else 0
@@ -175,13 +176,17 @@ class Refinement:
         #: :attr:`estimate` was scaled from the last one by a rescale, not made afresh
         self._scaled_estimate = False
 
-    def next_jobs(self, most: int | None = None) -> list[BatchJob]:
+    def next_jobs(self, most: int | None = None,
+                  ways: Callable[[int], int] | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
-        most ``most`` photons when given (a round that must end by a deadline)."""
+        most ``most`` photons when given (a round that must end by a deadline); ``ways``
+        says how many ways a round of so many photons is best split (default: the
+        threads)."""
         size = self.round_photons if math.isinf(self.to_target) else \
             max(MIN_SPLIT_PHOTONS, min(self.round_photons, int(self.to_target)))
         size = size if most is None else max(1, min(size, most))
-        return _round_jobs(self.done, self.targets, self.shares, size, self.settings)
+        return _round_jobs(self.done, self.targets, self.shares, size, self.settings,
+                           ways and ways(size))
 
     def add_round(self, tallies, estimated: bool = True) -> MapEstimate | None:
         """Add a round's tallies; estimate the map and its error, unless not ``estimated``
@@ -419,7 +424,7 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
                 if left <= DEADLINE_SLACK * settings.seconds:
                     break
                 most = int(r.accumulator.photons / max(now - start, 1e-9) * left)
-            jobs = r.next_jobs(most)
+            jobs = r.next_jobs(most, getattr(trace_jobs, "ways", None))
             if not jobs:
                 break
             try:

@@ -110,7 +110,7 @@ def batch_runner(scene: Scene, ps: PreparedScene, mode: str, threads: int,
     elif mode == "threads":
         pool = _ThreadPool(ps, threads)
         try:
-            yield pool.map
+            yield pool
         finally:
             pool.shutdown()
     else:
@@ -143,11 +143,19 @@ class _ThreadPool:
         self.ps, self.threads, self.pool = ps, threads, None
         self.seconds_per_photon: float | None = None  # on one thread, the last measured
 
-    def _inline(self, jobs: list[BatchJob]) -> bool:
+    def ways(self, photons: int) -> int:
+        """How many ways a round of ``photons`` is best split: one where this thread
+        traces it alone (a batch fewer: each costs its goniophotometer tally's count and
+        add, 2 ms), else among the threads."""
+        return self.threads if self._shared_round(photons) else 1
+
+    def _shared_round(self, photons: int) -> bool:
         rate = self.seconds_per_photon
         least = INLINE_SECONDS if self.pool is not None else START_POOL_SECONDS
-        return len(jobs) <= 1 or self.threads == 1 or (
-            rate is not None and rate * sum(j.count for j in jobs) < least)
+        return self.threads > 1 and (rate is None or rate * photons >= least)
+
+    def _inline(self, jobs: list[BatchJob]) -> bool:
+        return len(jobs) <= 1 or not self._shared_round(sum(j.count for j in jobs))
 
     def _timed(self, job: BatchJob) -> BatchTally:
         t0 = time.perf_counter()
@@ -155,7 +163,7 @@ class _ThreadPool:
         self.seconds_per_photon = (time.perf_counter() - t0) / max(job.count, 1)
         return tally
 
-    def map(self, jobs: Iterable[BatchJob]) -> Iterator[BatchTally]:
+    def __call__(self, jobs: Iterable[BatchJob]) -> Iterator[BatchTally]:
         """The jobs' tallies, traced as they are asked for (a caller's clock around the
         iteration times the round)."""
         jobs = list(jobs)
