@@ -37,9 +37,8 @@ def test_a_cheap_round_never_starts_the_pool(prepared):
     jobs = _jobs(len(prepared.scene.emitters))
     pool = workers._ThreadPool(prepared, 2)
     try:
-        first = list(pool(jobs))
-        again = list(pool(jobs))
-        assert pool.pool is None  # 9,000 photons a round: a few ms on one thread
+        first = list(pool(jobs))  # the first job alone gives the rate; the rest is cheap
+        assert pool.pool is None  # 9,000 photons: a few ms on one thread
         assert pool.seconds_per_photon is not None and pool.seconds_per_photon > 0
         # so the session makes such a round one job, and splits one worth the pool
         assert pool.ways(9000) == 1
@@ -47,7 +46,20 @@ def test_a_cheap_round_never_starts_the_pool(prepared):
     finally:
         pool.shutdown()
     _same(first, [workers._traced(prepared, j) for j in jobs])
-    _same(first, again)
+
+
+def test_a_round_is_split_when_the_run_is_worth_the_pool_and_the_round_worth_a_split(
+        prepared):
+    pool = workers._ThreadPool(prepared, 2)
+    assert pool.ways(1000) == 2  # no rate yet: split, its first job traced alone
+    pool.seconds_per_photon = 1e-6
+    assert workers.INLINE_SECONDS < 0.02 < workers.START_POOL_SECONDS
+    assert pool.ways(20_000) == 1  # 20 ms, and nothing known of the run beyond it
+    assert pool.ways(20_000, remaining=10_000) == 1
+    assert pool.ways(20_000, remaining=1_000_000) == 2  # a second's work left: start it
+    assert pool.ways(5_000, remaining=1_000_000) == 1  # a round too small to split
+    assert pool.ways(60_000) == 2
+    assert workers._ThreadPool(prepared, 1).ways(10**9) == 1
 
 
 def test_a_round_worth_it_is_shared_with_the_pool_and_tallies_the_same(prepared,

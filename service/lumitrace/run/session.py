@@ -177,16 +177,18 @@ class Refinement:
         self._scaled_estimate = False
 
     def next_jobs(self, most: int | None = None,
-                  ways: Callable[[int], int] | None = None) -> list[BatchJob]:
+                  ways: Callable[[int, float | None], int] | None = None) -> list[BatchJob]:
         """The batch jobs of the next round (empty when the photon budget is spent), of at
-        most ``most`` photons when given (a round that must end by a deadline); ``ways``
-        says how many ways a round of so many photons is best split (default: the
-        threads)."""
+        most ``most`` photons when given (a round that must end by a deadline, ``most``
+        the photons its time allows); ``ways(photons, photons left to the run or None)``
+        says how many ways to split a round (default: among the threads)."""
         size = self.round_photons if math.isinf(self.to_target) else \
             max(MIN_SPLIT_PHOTONS, min(self.round_photons, int(self.to_target)))
         size = size if most is None else max(1, min(size, most))
+        left = self.budget - self.accumulator.photons if self.budget is not None else \
+            self.to_target if not math.isinf(self.to_target) else most
         return _round_jobs(self.done, self.targets, self.shares, size, self.settings,
-                           ways and ways(size))
+                           ways and ways(size, left))
 
     def add_round(self, tallies, estimated: bool = True) -> MapEstimate | None:
         """Add a round's tallies; estimate the map and its error, unless not ``estimated``

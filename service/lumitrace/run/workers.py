@@ -121,41 +121,42 @@ def _noop(_) -> None:
     return None
 
 
-#: A round whose photons one thread is projected to trace in less than this (s) is traced
-#: in the calling thread while no pool runs: a second thread would save at most half of it
-#: in wall time and costs CPU time to start (concurrent.futures' import, the thread, its
-#: buffers' first pages): on the mirror cup to 2%, a 65,536-photon round of 30 ms split
-#: took 1.05 of the CPU time and no less wall time.
+#: The pool is started once the photons still to trace (the run's, where it knows them,
+#: else the round's) would take one thread at least this long (s): a second thread would
+#: save at most half of it in wall time and costs CPU time to start (concurrent.futures'
+#: import, the thread, its buffers' first pages). On the mirror cup to 2%, a last round of
+#: 65,536 photons (30 ms) split took 1.05 of the CPU time and no less wall time.
 START_POOL_SECONDS = 0.05
-#: The same once the pool runs: a split round then costs one more batch's fixed work.
+#: A round one thread traces in less than this (s) is one job traced here alone: a split
+#: round costs one more batch's fixed work (its goniophotometer tally's count and add).
 INLINE_SECONDS = 0.01
 
 
 class _ThreadPool:
     """Jobs traced on ``threads`` threads of this process (the calling one among them), in
-    job order. A round that one thread traces in less than :data:`START_POOL_SECONDS`
-    (:data:`INLINE_SECONDS` once the pool runs), at the rate of the batches so far, is
-    traced in the calling thread alone, as is any round of one job: a small run never
-    starts the pool. Before any rate is known a round's first job is traced alone to
-    measure it. The tallies are the same either way."""
+    job order. :meth:`ways` tells the session how to split a round: in one job, traced in
+    the calling thread alone, while one thread traces it in less than
+    :data:`INLINE_SECONDS` or while the run's work left is too little to start the pool
+    for (:data:`START_POOL_SECONDS`), at the rate of the batches so far; else among the
+    threads. Before any rate is known a round's first job is traced alone to measure it.
+    The tallies are the same for any split."""
 
     def __init__(self, ps: PreparedScene, threads: int):
         self.ps, self.threads, self.pool = ps, threads, None
         self.seconds_per_photon: float | None = None  # on one thread, the last measured
 
-    def ways(self, photons: int) -> int:
-        """How many ways a round of ``photons`` is best split: one where this thread
-        traces it alone (a batch fewer: each costs its goniophotometer tally's count and
-        add, 2 ms), else among the threads."""
-        return self.threads if self._shared_round(photons) else 1
+    def ways(self, photons: int, remaining: float | None = None) -> int:
+        """How many ways to split a round of ``photons``, the run having about
+        ``remaining`` photons still to trace (None: unknown)."""
+        return self.threads if self._shared(photons, remaining) else 1
 
-    def _shared_round(self, photons: int) -> bool:
+    def _shared(self, photons: int, remaining: float | None = None) -> bool:
         rate = self.seconds_per_photon
-        least = INLINE_SECONDS if self.pool is not None else START_POOL_SECONDS
-        return self.threads > 1 and (rate is None or rate * photons >= least)
-
-    def _inline(self, jobs: list[BatchJob]) -> bool:
-        return len(jobs) <= 1 or not self._shared_round(sum(j.count for j in jobs))
+        if self.threads == 1 or rate is None:
+            return self.threads > 1
+        if self.pool is None and rate * max(photons, remaining or 0) < START_POOL_SECONDS:
+            return False
+        return rate * photons >= INLINE_SECONDS
 
     def _timed(self, job: BatchJob) -> BatchTally:
         t0 = time.perf_counter()
@@ -167,19 +168,21 @@ class _ThreadPool:
         """The jobs' tallies, traced as they are asked for (a caller's clock around the
         iteration times the round)."""
         jobs = list(jobs)
-        if self.seconds_per_photon is None and len(jobs) > 1 and self.threads > 1:
+        alone = len(jobs) <= 1 or self.threads == 1
+        if self.seconds_per_photon is None and not alone:
             yield self._timed(jobs.pop(0))  # a first round: its first job gives the rate
-        if self._inline(jobs):
+            alone = len(jobs) <= 1 or not self._shared(sum(j.count for j in jobs))
+        if alone:
             for job in jobs:
                 yield self._timed(job)
             return
         t0 = time.perf_counter()
-        tallies = self._shared(jobs)
+        tallies = self._together(jobs)
         self.seconds_per_photon = (time.perf_counter() - t0) * min(self.threads, len(jobs)) \
             / max(sum(j.count for j in jobs), 1)
         yield from tallies
 
-    def _shared(self, jobs: list[BatchJob]) -> list[BatchTally]:
+    def _together(self, jobs: list[BatchJob]) -> list[BatchTally]:
         """The jobs traced by this thread and the pool's, each taking the next job left:
         this thread's wave buffers are already warm, and the pool needs one thread less."""
         if self.pool is None:
