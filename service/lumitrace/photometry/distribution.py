@@ -243,14 +243,15 @@ def _measured(scene: Scene, acc: Accumulator) -> Photometry:
     return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)
 
 
-def files_accuracy(acc: Accumulator) -> FilesAccuracy:
-    """The accuracy of the files :func:`photometry_of` would write from these counts: the
-    same grid (gammas, C step, symmetry), without the figures (a few tens of ms: what a
-    session judges its target on, round by round)."""
+def files_accuracy(acc: Accumulator, grid: CGammaGrid | None = None) -> FilesAccuracy:
+    """The accuracy of the files :func:`photometry_of` would write from these counts (or
+    of their ``grid``, written already): the same grid (gammas, C step, symmetry), without
+    the figures (a few tens of ms: what a session judges its target on). None of it where
+    the counts cannot tell their spread (fewer than two photons a light)."""
     if not acc.photons or not acc.spread_known:
         return FilesAccuracy(None, None, None)
-    gammas = default_gammas(beam_half_width(emitter_rings(acc)))
-    grid, _, _ = _files_grid(acc, gammas)
+    if grid is None:
+        grid, _, _ = _files_grid(acc, default_gammas(beam_half_width(emitter_rings(acc))))
     return grid_accuracy(grid, C_STEP)
 
 

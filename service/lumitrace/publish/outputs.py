@@ -20,8 +20,7 @@ from ..filenames import INTENSITY_SUFFIX, LATLONG_SUFFIX, RESULT_LAYER_SUFFIX, s
 from ..photometry import frame
 from ..film.convergence import colour_maps
 from ..photometry.colour import ColourOverAngle, colour_over_angle
-from ..photometry.accuracy import grid_accuracy
-from ..photometry.distribution import C_STEP as PHOTOMETRY_C_STEP, Photometry, photometry_of
+from ..photometry.distribution import Photometry, files_accuracy, photometry_of
 from ..photometry.measured import emitter_rings
 from ..photometry.zonal import zonal_flux
 from ..photometry.tables import application_figures
@@ -73,7 +72,7 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
     the stage has no colour) and its output paths."""
     fig = ph.figures
     if result.judge_files and result.files_accuracy is None:  # judged on the grid written
-        result.files_accuracy = grid_accuracy(ph.grid, PHOTOMETRY_C_STEP)
+        result.files_accuracy = files_accuracy(result.accumulator, ph.grid)
     peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
                                 result.scene.up_axis, frame.luminaire_rotation(result.scene))
     o = ph.opening
