@@ -39,7 +39,7 @@ def test_a_cheap_round_never_starts_the_pool(prepared):
     pool = workers._ThreadPool(prepared, 2)
     try:
         first = list(pool(jobs))  # the first job alone gives the rate; the rest is cheap
-        assert pool.pool is None  # 2,000 photons left: well under a millisecond
+        assert pool.pool is None  # 2,000 photons left: a few milliseconds
         assert pool.seconds_per_photon is not None and pool.seconds_per_photon > 0
     finally:
         pool.shutdown()
