@@ -72,6 +72,11 @@ def test_fewer_photons_than_emitters_is_refused_and_every_emitter_counts(tmp_pat
     assert summary["emitted_lm"] == pytest.approx(400.0)
     assert summary["relative_error"] is None and summary.get("photometry_error") is None
     assert summary["converged"] is False
+    # without a target too: the files written from one photon a light claim no accuracy
+    code, out, err = trace(stage, "--json", photons=400)
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert code == 0 and summary["converged"] is False, err
+    assert summary["judged_error"] is None and summary.get("photometry_error") is None
     code, out, err = trace(stage, "--json", photons=1000)
     assert code == 0, err
     summary = json.loads(out.strip().splitlines()[-1])
