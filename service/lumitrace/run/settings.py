@@ -25,10 +25,11 @@ DEFAULT_RESOLUTION = 64
 DEFAULT_THRESHOLD = 10000.0
 #: Error below which a result counts as converged when no target is given.
 DEFAULT_TARGET_ERROR = 0.02
-#: Photons per batch job: each batch's goniophotometer tally is a dense array of 3.4 MB
-#: to count and add, so larger batches cost less a photon (2^18: 2.4% less CPU than 2^17
-#: over a 10M-photon run of the mirror cup; 2^19 another 0.9%, for 15 MB more and the
-#: threads' last batches less even).
+#: Photons per batch job: a batch has fixed costs (its emission's set-up, its tallies'
+#: arrays), so larger batches cost less a photon (2^18: 2.4% less CPU than 2^17 over a
+#: 10M-photon run of the mirror cup, when each batch also counted a dense goniophotometer
+#: tally of 3.4 MB; 2^19 another 0.9%, for 15 MB more and the threads' last batches less
+#: even).
 DEFAULT_BATCH_SIZE = 1 << 18
 #: Tracing time (s) of a convergence report and of the benchmark when none is given.
 DEFAULT_REPORT_SECONDS = 30.0

@@ -128,7 +128,7 @@ def _noop(_) -> None:
 #: 65,536 photons (30 ms) split took 1.05 of the CPU time and no less wall time.
 START_POOL_SECONDS = 0.05
 #: A round one thread traces in less than this (s) is one job traced here alone: a split
-#: round costs one more batch's fixed work (its goniophotometer tally's count and add).
+#: round costs one more batch's fixed work (its set-up, its tallies' arrays and adds).
 INLINE_SECONDS = 0.01
 
 

@@ -52,6 +52,10 @@ def warm_up() -> None:
     counts = np.random.default_rng(0).poisson(50.0, (6 * 8, 8)).astype(np.int64)
     counts[:4, :4] += 2000
     pull_push(counts * 1e-3, counts, 100.0)
+    # a batch's escapes added to (and taken out of) an emitter's goniophotometer counts
+    cells = np.zeros((2, 4), np.int64)
+    for sign in (1, -1):
+        compiled.add_bins(cells.reshape(-1), np.array([1, 5, 5], np.int64), sign)
 
 
 def _type_spec(t) -> list | str:

@@ -24,12 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..film import pullpush as _pullpush
+from ..film import accumulate as _accumulate, pullpush as _pullpush
 from . import kernel_sources
 
 #: The kernels the tracer calls, in the order the build exports them.
 ENTRY_POINTS = ("start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
-                "push_level", "pair_quads")
+                "push_level", "pair_quads", "add_bins")
 #: The sources whose text the compiled code depends on (the kernels' constants included).
 SOURCES = kernel_sources.SOURCES
 MODULE = "kernels_aot"
@@ -157,10 +157,12 @@ def _load() -> tuple[dict, str]:
 
 
 _built, _state = _load()
-start, cull, bounce, emit_photons, scatter_many, intersect, push_level, pair_quads = (
-    Kernel(n, _built[n]) for n in ENTRY_POINTS)
-# the map's filter (in the film, which comes before the tracer) pushes with the compiled level
+start, cull, bounce, emit_photons, scatter_many, intersect, push_level, pair_quads, \
+    add_bins = (Kernel(n, _built[n]) for n in ENTRY_POINTS)
+# the film (which comes before the tracer) filters with the compiled push level and adds
+# a batch's escapes with the compiled scatter
 _pullpush.use_compiled_level(push_level)
+_accumulate.use_compiled_scatter(add_bins)
 
 
 def backend() -> str:

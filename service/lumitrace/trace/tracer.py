@@ -16,7 +16,7 @@ import threading
 import numpy as np
 
 from ..film import cubemap
-from ..film.accumulate import counts_of
+from ..film.accumulate import EscapeBins, counts_of
 from ..film.goniometer import N_BINS, N_CELLS
 from ..film.tally import BatchTally
 from ..scene import Emitter
@@ -183,7 +183,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             tband[:n] = photon_bands(e, base, ps.emitter_args[job.emitter])  # put it)
         n_escaped = _waves(ps, job, w, tally, n, reach, *args(slice(None)))
     if n_escaped:
-        tally.cells = counts_of(w.escaped[:n_escaped], N_BINS)  # makes its own arrays
+        tally.cells = EscapeBins(N_BINS, w.escaped[:n_escaped].copy())  # its own array
     if spectral:
         tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2],
                                    escaped_xz[:, :n_escaped // 2])

@@ -19,8 +19,8 @@ for any wave size, batch size or thread, so maps stay bit-identical across them.
 """
 from __future__ import annotations
 
-from .binning import (_CHUNK, _acos_fast, _atan2_fast, _gonio_cell_exact, gonio_bins,
-                      texels)
+from .binning import (_CHUNK, _acos_fast, _atan2_fast, _gonio_cell_exact, add_bins,
+                      gonio_bins, texels)
 from .emission import cull, emit_photons, start
 from .filtering import push_level
 from .maths import _turn, _uniform_pair
@@ -28,6 +28,6 @@ from .paths import bounce, intersect, pair_quads
 from .scattering import scatter_many, scatter_one
 
 __all__ = ["start", "cull", "bounce", "emit_photons", "scatter_many", "intersect",
-           "push_level", "pair_quads", "texels",
+           "push_level", "pair_quads", "add_bins", "texels",
            "gonio_bins", "scatter_one", "_CHUNK", "_acos_fast", "_atan2_fast",
            "_gonio_cell_exact", "_turn", "_uniform_pair"]

@@ -329,3 +329,11 @@ def _grid_exit(ox, oy, oz, dx, dy, dz, glo, ghi):
             _far_side(oz, dz, glo[2], ghi[2]))
     t = t if t > 0.0 else 0.0
     return ox + t * dx, oy + t * dy, oz + t * dz
+
+
+@numba.njit(**_JIT)
+def add_bins(flat, bins, sign):
+    """Add ``sign`` to the int64 counts ``flat`` at each of ``bins`` (int64 flat indices,
+    a repeated one added as often): a batch's escapes into the goniophotometer's counts."""
+    for i in range(bins.size):
+        flat[bins[i]] += sign
