@@ -46,7 +46,8 @@ _local = threading.local()
 class _Waves:
     """A thread's wave buffers, reused from batch to batch: freshly mapped temporaries
     cost page faults on every bounce. Two sets of (o, d, pol, hash, row), swapped each
-    bounce, the float32 rays for Embree and its hits, and room for the escapes' bins."""
+    bounce, the float32 rays for Embree and its hits. (The escapes' bins are the batch's
+    own: its tally keeps them.)"""
 
     def __init__(self, n: int):
         self.size = n
@@ -57,7 +58,6 @@ class _Waves:
         self.pid = [np.empty(n, np.int64), np.empty(n, np.int64)]
         self.o32 = np.empty((n, 3), np.float32)
         self.d32 = np.empty((n, 3), np.float32)
-        self.escaped = np.empty(2 * n, np.int64)
         self.prim = np.empty(n, np.int32)  # Embree's hits
         self.tfar = np.empty(n, np.float32)
         self.rows = np.arange(n, dtype=np.int64)
@@ -129,6 +129,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     if n == 0:
         return tally
     w = _Waves.at_least(n)
+    escaped = np.empty(2 * n, np.int64)  # its escapes' bins: the tally's, not copied
     spectral = ps.spectral
     rec = PhotonRecords.empty(n, colour=spectral) if records else None
     exit_pos = np.full((n, 3), np.nan) if exit_rays else _NO_EXITS
@@ -145,7 +146,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         for the photons ``s`` of the batch: float32 rays, scene, tallies, escapes; part
         hits, goniophotometer, records, exits, offsets."""
         head = (w.o32, w.d32, *ps.kernel_args, ps.band_weights[job.emitter], tp[s], tband[s],
-                xz, escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, w.escaped)
+                xz, escaped_xz, tally.counts, job.resolution, _CUBE_LAYOUT, escaped)
         tail = (tally.part_hits, *ps.gonio_args, rec is not None, r.texel[s], r.cell[s],
                 r.exit[s], r.segments[s], r.parts[s], r.cells[s], r.slabs[s], r.x[s], r.z[s],
                 *ps.grid_args, exit_rays, exit_pos[s], exit_dir[s], RAY_EPSILON, RAY_BACKOFF,
@@ -183,9 +184,9 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             tband[:n] = photon_bands(e, base, ps.emitter_args[job.emitter])  # put it)
         n_escaped = _waves(ps, job, w, tally, n, reach, *args(slice(None)))
     if n_escaped:
-        tally.cells = EscapeBins(N_BINS, w.escaped[:n_escaped].copy())  # its own array
+        tally.cells = EscapeBins(N_BINS, escaped[:n_escaped])
     if spectral:
-        tally.xz = _colour_tallies(xz, w.escaped[:n_escaped:2],
+        tally.xz = _colour_tallies(xz, escaped[:n_escaped:2],
                                    escaped_xz[:, :n_escaped // 2])
     if rec is not None:
         tally.records = rec
