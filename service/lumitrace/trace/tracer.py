@@ -121,9 +121,17 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
     """
     e: Emitter = ps.scene.emitters[job.emitter]
     key = rng.stream_key(job.seed, e.key)
-    idx = (np.arange(job.first, job.stop, dtype=np.int64) if photons is None
-           else np.asarray(photons, dtype=np.int64))
-    n = int(idx.size)
+    idx = None if photons is None else np.asarray(photons, dtype=np.int64)
+    n = job.count if idx is None else int(idx.size)
+
+    def photons_at(s: slice) -> np.ndarray:
+        """The indices of the batch's photons ``s`` (a job's range made a chunk at a time:
+        not 2 MB of them a batch)."""
+        if idx is not None:
+            return idx[s]
+        first, stop, _ = s.indices(n)
+        return np.arange(job.first + first, job.first + stop, dtype=np.int64)
+
     tally = BatchTally.empty(job.emitter, job.first, n, job.resolution, record_rays)
     tally.part_hits = _own_lines(len(ps.scene.parts))  # added to at every hit
     if n == 0:
@@ -158,7 +166,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
         n_escaped = 0
         for first in range(0, n, PATH_CHUNK):
             m = min(PATH_CHUNK, n - first)
-            emitted = _emitted(ps, job, e, key, idx[first:first + m], w, m)
+            emitted = _emitted(ps, job, e, key, photons_at(slice(first, first + m)), w, m)
             if spectral and e.ray_bands:  # its ray's band, from its hash
                 tband[first:first + m] = photon_bands(e, emitted[3],
                                                       ps.emitter_args[job.emitter])
@@ -170,7 +178,7 @@ def trace_batch(ps: PreparedScene, job: BatchJob, record_rays: bool = False,
             tally.absorbed += absorbed
             tally.segments += segments
     else:  # moved into the normalised frame as the first wave
-        p, d, n_emit, base, _ = _emitted(ps, job, e, key, idx, w, n)  # (base: w.base[0])
+        p, d, n_emit, base, _ = _emitted(ps, job, e, key, photons_at(slice(None)), w, n)
         compiled.start(p, d, n_emit, ps.center, ps.scale, RAY_EPSILON, w.o[0], w.d[0], w.o32,
                        w.d32)
         w.pid[0][:n] = w.rows[:n]
