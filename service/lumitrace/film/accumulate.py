@@ -91,7 +91,7 @@ class EscapeBins:
     """A batch's goniophotometer counts as its escapes' flat bins (``bin + n * half``, a
     photon's each), as the tracer writes them: added to dense counts where they fall, not
     first counted into a (2, n) array of their own (its count and add took 3-4 ms a batch
-    of 2^18 photons, most of it a fresh 3.4 MB array; the scatter takes about 1)."""
+    of 2^18 photons, most of it a fresh 3.4 MB array; the scatter takes 1-2)."""
 
     __slots__ = ("n", "bins")
 
@@ -142,7 +142,7 @@ def compact(counts, photons: int | None = None):
     ``photons`` that could fill a quarter of the bins stays dense without a look (a scan
     of every bin per batch: 2% of a 10M-photon run without geometry)."""
     if counts is None or isinstance(counts, (SparseCounts, EscapeBins)):
-        return counts  # (escape bins: 16 bytes an escape, as small as its sparse counts)
+        return counts  # (escape bins: at most 16 bytes a photon, dense counts' size or less)
     if photons is not None and 4 * photons >= counts.shape[1]:
         return counts
     return SparseCounts.from_dense(counts) if \
