@@ -329,8 +329,15 @@ def cmd_trace(args) -> int:
     check_interrupted()
     from .publish.outputs import write_outputs
 
+    vouch = None
+    if args.edits is None and not args.no_sublayer:  # the next run keeps its kept scene
+        from .stage.scene_cache import vouch as keep_valid
+
+        def vouch(layer, digest):
+            keep_valid(args.stage, args.luminaire, args.time_code, layer, digest)
     record = write_outputs(result, args.out, sublayer=not args.no_sublayer,
-                           pictures=not args.no_pictures, deliverables=args.deliverables)
+                           pictures=not args.no_pictures, deliverables=args.deliverables,
+                           written_layer=vouch)
     if lost is not None:
         raise lost.written(record["photons"])
     if _RECEIVED:  # a signal a library swallowed while the outputs were written

@@ -332,3 +332,32 @@ def test_a_trace_of_a_kept_scene_publishes_the_same_bits(stage, tmp_path):
     for channel in maps[0]:
         assert np.array_equal(maps[0][channel], maps[1][channel], equal_nan=True), channel
     assert files[0] == files[1]
+
+
+def test_a_sublayered_run_keeps_its_scene_for_the_next_run(stage, tmp_path):
+    """The default command sublayers its result layer into the stage and rewrites it at
+    every run; the run that wrote it vouches for it, so the next run takes the kept scene
+    (USD not loaded), the scene USD reads. A layer changed by anyone else is read again."""
+    path, _ = stage
+    folder = path.parent
+    env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
+
+    def traced() -> bool:
+        """Whether a default trace of the stage loaded USD."""
+        cmd = [sys.executable, "-X", "importtime", "-m", "lumitrace", "trace", str(path),
+               "--photons", "4000", "--no-pictures", "--quiet", "--out", str(folder)]
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr[-2000:]
+        return "| pxr.Usd" in run.stderr
+
+    layer = folder / "root.lumitrace.usda"
+    assert traced() and layer.is_file()  # the first run sublayers its layer: the root changed
+    _settle(folder)
+    assert traced()  # read with the layer, kept, then the layer rewritten and vouched for
+    assert [traced() for _ in range(2)] == [False, False]  # each run vouches for the next
+    kept = scene_cache.read_stage(path)
+    assert os.path.realpath(layer) in kept.input_files()
+    _same_scene(kept, reader.read_stage(path))
+    layer.write_text(layer.read_text() + "\n")  # anyone else's edit, even a blank line
+    _settle(folder)
+    assert traced() and not traced()

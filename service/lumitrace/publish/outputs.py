@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .. import __version__
+from ..digests import file_digest
 from ..errors import Interrupted, OutputError, OutputWarning, warn
 from ..filenames import INTENSITY_SUFFIX, LATLONG_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from ..photometry import frame
@@ -152,7 +153,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                   sublayer: bool = True, pictures: bool = True,
                   extra: dict | None = None, deliverables: bool = False,
                   on_stage: Callable[[Callable[[], None]], None] | None = None,
-                  checkpoint: Callable[[], None] = lambda: None) -> ResultRecord:
+                  checkpoint: Callable[[], None] = lambda: None,
+                  written_layer: Callable[[Path, str], None] | None = None) -> ResultRecord:
     """Write the photometric files, the EXR and the result layer as one transaction (see
     :mod:`lumitrace.publish.transaction`), then sublayer the layer into the stage file
     (unless ``sublayer`` is False, or the stage has no file: see :func:`output_place`);
@@ -167,7 +169,9 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     thread; by default they run here. ``checkpoint`` runs before each picture and the
     deliverables: what it raises abandons the write (the transaction rolled back, the last
     set left whole). Only files lumitrace wrote for this stage are replaced
-    (:mod:`.ownership`)."""
+    (:mod:`.ownership`). ``written_layer(path, sha256)`` is told, under the publishing
+    lock and after the stage's steps, which result layer this run wrote and the digest of
+    the bytes it wrote there (the command keeps its kept scene valid with it)."""
     scene = result.scene
     stage_path, name, paths = planned_outputs(scene, out_dir, name)
     layer_dir = paths["result_layer"].parent
@@ -239,6 +243,7 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                                          {**(extra or {}), "runId": tx.run_id, **owned},
                                          (scene.up_axis, scene.meters_per_unit))
                 write_layer_file(stage_path, staged["result_layer"], text)
+                layer_digest = file_digest(staged["result_layer"])
                 tx.commit(last=paths["result_layer"])
             except Interrupted as exc:
                 exc.published = tx.committed
@@ -254,6 +259,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                         return sublayer_into_root(stage_path, paths["result_layer"])
                 return None
             (on_stage or _here)(stage_steps)
+            if written_layer is not None:
+                written_layer(paths["result_layer"], layer_digest)
     except Interrupted as exc:  # after the commit (the stage's steps, the lock's release)
         exc.published = exc.published or (tx is not None and tx.committed)
         raise

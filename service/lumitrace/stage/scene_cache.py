@@ -15,10 +15,13 @@ reference, only a warning outside the luminaire, is a file whose appearance no d
 would see) and with no USD search path set (where a new file could change what an asset
 path resolves to); and only where every file was last modified before the read began, by
 more than a file system's time step (a file written while USD read it could pair its new
-bytes with the old scene; the next run keeps it). The entry is a table file
-(:mod:`lumitrace.table_cache`: this user's, in a folder no one else may write, arrays
-mapped), one per stage and request, under the cache folder, the :data:`MOST_ENTRIES` used
-last; ``LUMITRACE_CACHE_DIR=off`` keeps none.
+bytes with the old scene; the next run keeps it). One file is the exception: the
+result layer lumitrace sublayers into the stage, rewritten by every run, holds only
+lumitrace's results, which the reader skips; the run that wrote it records its new
+digest in the entry (:func:`vouch`), and its time does not make it unsettled. The entry
+is a table file (:mod:`lumitrace.table_cache`: this user's, in a folder no one else may
+write, arrays mapped), one per stage and request, under the cache folder, the
+:data:`MOST_ENTRIES` used last; ``LUMITRACE_CACHE_DIR=off`` keeps none.
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ import time
 from pathlib import Path
 
 from ..digests import file_stamp, readable_digest
+from ..filenames import RESULT_LAYER_SUFFIX, stage_name
 from ..method_cache import cache_folder
 from ..scene import Scene
 from ..schema import PLUGIN_PATH_VARIABLE
@@ -111,6 +115,42 @@ def _kept_scene(entry: Path) -> Scene | None:
     return scene
 
 
+def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
+          digest: str) -> None:
+    """Keep the kept scene of this request valid after lumitrace itself rewrote its result
+    layer ``layer`` (``digest``: SHA-256 of the bytes it wrote), where that layer is one of
+    the files the scene was read from and every other file is unchanged: the reader skips
+    lumitrace's own results (the stand-in light in its variant, ``lumitrace:result:*``), so
+    the scene read with the new layer is the one kept. A sublayered run's next run then
+    takes the kept scene instead of loading USD again."""
+    entry = entry_path(path, luminaire, time_code)
+    if entry is None:
+        return
+    found, kept = read_table(entry)
+    if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp():
+        return
+    real = os.path.realpath(layer)
+    files = []
+    try:
+        for file, old, light_stamp in kept.get("files", ()):
+            if file == real:
+                old = digest
+            elif light_stamp and _stamp_of(file) != light_stamp \
+                    or readable_digest(file) != old:
+                return  # another file changed: not this run's to vouch for
+            files.append((file, old, light_stamp))
+    except (TypeError, ValueError):
+        return
+    if real in (f for f, _, _ in files) and isinstance(kept.get("scene"), Scene):
+        write_table(entry, {**kept, "files": files}, most_bytes=MOST_BYTES)
+
+
+def _own_layer(file: str, stage: str | None) -> bool:
+    """Whether ``file`` is where lumitrace writes the result layer of ``stage`` (any output
+    folder): its bytes change with every run, its scene does not (see :func:`vouch`)."""
+    return bool(stage) and os.path.basename(file) == stage_name(stage) + RESULT_LAYER_SUFFIX
+
+
 def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
     """Keep ``scene`` in ``entry`` with its files' digests, where that is sound."""
     if _array_bytes(scene) > MOST_BYTES:
@@ -131,8 +171,12 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
             after = os.stat(file)
         except OSError:
             return
+        # (lumitrace's own result layer, which the last run has just written, is read
+        # for no value of the scene: its time does not matter, its bytes are kept)
+        settled = after.st_mtime_ns <= started_ns - SETTLED_NS or \
+            _own_layer(file, scene.stage_path)
         if (before.st_mtime_ns, before.st_size) != (after.st_mtime_ns, after.st_size) \
-                or after.st_mtime_ns > started_ns - SETTLED_NS or digest is None:
+                or not settled or digest is None:
             return
         files.append((file, digest, stamps.get(file, "")))
     if not files:
