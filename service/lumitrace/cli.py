@@ -556,9 +556,11 @@ def refuse_hidden_results(stage: Path) -> None:
     layer sublayered into it, holds result opinions (a stage flattened with its results):
     the new results would compose hidden under them. Reads the root layer alone (no
     composition: a stage with other problems is the reader's to report)."""
-    from pxr import Sdf
+    from .publish.check import may_hold_results, result_opinion_prims
 
-    from .publish.check import result_opinion_prims
+    if not may_hold_results(stage):
+        return
+    from pxr import Sdf
 
     try:
         layer = Sdf.Layer.OpenAsAnonymous(str(stage), metadataOnly=False)

@@ -242,3 +242,40 @@ def test_a_luminaire_that_is_its_light_keeps_its_stand_in():
     with pytest.raises(ValueError, match="not under the luminaire"):
         layer_text.result_layer_text("/Led", {}, {**light, "emitters": ["/Other"]}, None,
                                      None, "d")
+
+
+_SUBLAYERED = [
+    '#usda 1.0\n(\n    subLayers = [\n        @./out/a.lumitrace.usda@,\n        @parts.usda@\n    ]\n)\n',
+    '#usda 1.0\n# a comment\n\n(\n  doc = "(subLayers = [@x@])"\n  subLayers = [@a.usda@, @b c.usda@ ]\n)\n',
+    '#usda 1.0\n(\n    subLayers = []\n)\ndef Xform "X" {}\n',
+    '#usda 1.0\n(\n    doc = "none"\n)\n',
+    '#usda 1.0\ndef Xform "X" {\n}\n',
+    '#usda 1.0\n(\n    subLayers = [@a.usda@ (offset = 2; scale = 1), @b.usda@]\n)\n',
+    '#usda 1.0\n(\n    subLayers = [\n        @a.usda@,  # first\n        @b.usda@\n    ]\n)\n',
+    '#usda 1.0\n(\n    subLayers = [@@@odd@name.usda@@@]\n)\n',
+]
+
+
+@pytest.mark.parametrize("text", _SUBLAYERED)
+def test_sublayers_read_from_text_are_what_usd_reads_or_left_to_it(text):
+    from lumitrace.publish.usda_text import sublayer_entries
+
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    assert layer.ImportFromString(text)
+    entries = sublayer_entries(text)
+    assert entries is None or entries == list(layer.subLayerPaths)
+    plain = _SUBLAYERED.index(text) < 5  # the others carry offsets, comments, @@@ paths
+    assert (entries is not None) == plain
+
+
+def test_a_root_layer_may_hold_results_unless_its_text_never_names_them(tmp_path):
+    from lumitrace.publish.check import may_hold_results
+
+    clean, flattened, crate = (tmp_path / n for n in ("a.usda", "b.usda", "c.usdc"))
+    clean.write_text('#usda 1.0\ndef Xform "Luminaire" {\n    double lumitrace:x = 1\n}\n')
+    flattened.write_text('#usda 1.0\nover "Luminaire" {\n    int64 lumitrace:result:photons'
+                         ' = 5\n}\n')
+    Sdf.Layer.FindOrOpen(str(clean)).Export(str(crate))
+    assert not may_hold_results(clean)
+    assert may_hold_results(flattened) and may_hold_results(crate)
+    assert may_hold_results(tmp_path / "missing.usda")

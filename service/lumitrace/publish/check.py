@@ -30,10 +30,24 @@ def result_opinion_prims(layer) -> list[str]:
             if any(name.startswith(RESULT_PREFIX) for name in spec.properties.keys())]
 
 
+def may_hold_results(layer_path: str | Path) -> bool:
+    """Whether a root layer may hold ``lumitrace:result:*`` opinions: False for ``.usda``
+    text in which the namespace appears nowhere (read without USD), True otherwise (USD
+    must look)."""
+    try:
+        with open(layer_path, "rb") as f:
+            data = f.read()
+    except OSError:
+        return True
+    return not data.startswith(b"#usda") or RESULT_PREFIX.encode() in data
+
+
 def strip_result_opinions(stage_path: str | Path) -> list[str]:
     """Remove the ``lumitrace:result:*`` opinions and the representation variant set that
     flattening a stage with its results left in its root layer, and save it; returns the
     prims cleaned. The stage's own content is not touched."""
+    if not may_hold_results(stage_path):
+        return []
     from pxr import Sdf
 
     layer = Sdf.Layer.FindOrOpen(str(stage_path))

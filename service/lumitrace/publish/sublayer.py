@@ -16,7 +16,7 @@ from ..errors import OutputError, OutputWarning
 from ..atomic import fsync_path
 from ..filenames import RESULT_LAYER_SUFFIX
 from .ownership import belongs_to
-from .usda_text import insert_sublayer_text
+from .usda_text import insert_sublayer_text, sublayer_entries
 from ..stage.pxr_messages import tf_message
 
 
@@ -237,6 +237,10 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> RootEdit:
         except OSError as exc:
             raise OutputError(f"cannot read the stage's root layer: {exc.strerror}",
                               str(stage)) from exc
+        listed = _plain_sublayers(data)  # a run whose layer is in place: no USD loaded
+        if listed is not None and _in_place(listed, stage, layer_path):
+            _sync_open_root(stage, entry, layer_path)
+            return RootEdit(data)
         root = _open_bytes_copy(data, target)
         stale = tuple(p for p in root.subLayerPaths if _other_result_of(p, stage, layer_path))
         present = any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths)
@@ -271,9 +275,30 @@ def reload_if_open(path: Path) -> None:
         layer.Reload(force=True)
 
 
+def _plain_sublayers(data: bytes) -> list[str] | None:
+    """The subLayers of a root layer's bytes where its ``.usda`` text lists them plainly
+    (:func:`~.usda_text.sublayer_entries`); None where USD must read them."""
+    if not data.startswith(b"#usda"):
+        return None
+    try:
+        return sublayer_entries(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        return None
+
+
+def _in_place(entries, stage: Path, layer_path: Path) -> bool:
+    """Whether the subLayers ``entries`` hold the result layer and no other of the
+    stage's: nothing to edit."""
+    return any(_resolves_to(p, stage.parent, layer_path) for p in entries) and \
+        not any(_other_result_of(p, stage, layer_path) for p in entries)
+
+
 def _sync_open_root(stage: Path, entry: str, layer_path: Path) -> None:
     """Bring an open instance of the root layer in line with the file: reload it when it
-    has no unsaved edits, otherwise add the sublayer entry in memory (keeping the edits)."""
+    has no unsaved edits, otherwise add the sublayer entry in memory (keeping the edits).
+    (No layer is open where USD's Sdf is not loaded.)"""
+    if "pxr.Sdf" not in sys.modules:
+        return
     from pxr import Sdf
 
     layer = Sdf.Layer.Find(str(stage))

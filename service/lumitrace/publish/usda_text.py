@@ -36,6 +36,43 @@ def insert_sublayer_text(text: str, entry: str | None, root, remove: tuple[str, 
     return candidate
 
 
+def sublayer_entries(text: str) -> list[str] | None:
+    """The entries of a ``.usda`` text's header ``subLayers``, read without USD; None
+    where the list is not plain asset paths between commas (a layer offset, an ``@@@``
+    path) or the header cannot be scanned: then USD reads it."""
+    start = _header_start(text)
+    if start is None:
+        return []
+    try:
+        _, i = _scan_block(text, start)
+    except ValueError:
+        return None
+    if i is None:
+        return []
+    entries: list[str] = []
+    while True:
+        i += 1
+        while i < len(text) and text[i] in " \t\r\n":
+            i += 1
+        if i >= len(text):
+            return None
+        if text[i] == "]" and not entries:
+            return entries
+        if not text.startswith("@", i) or text.startswith("@@@", i):
+            return None
+        j = skip_token(text, i)
+        if j >= len(text) or text[j - 1] != "@" or j - i < 2:
+            return None
+        entries.append(text[i + 1:j - 1])
+        while j < len(text) and text[j] in " \t\r\n":
+            j += 1
+        if text.startswith("]", j):
+            return entries
+        if not text.startswith(",", j):
+            return None
+        i = j
+
+
 def _remove_entry(text: str, entry: str) -> str | None:
     """``text`` without the ``@entry@`` of its header's ``subLayers`` (and the comma or
     the line that held it); None where it is not found there."""
