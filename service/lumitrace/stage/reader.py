@@ -251,8 +251,8 @@ class _Reader:
             warnings=tuple(self.warnings),
             time_code=scene_time_code(self.time),
             luminaire_to_world=self._luminaire_to_world(root),
-            layer_files=tuple(layer.realPath for layer in self.stage.GetUsedLayers()
-                              if layer.realPath),
+            layer_files=tuple(sorted(layer.realPath for layer in self.stage.GetUsedLayers()
+                                     if layer.realPath)),  # (USD's order is a set's)
             info=self._luminaire_info(root),
         )
 
