@@ -242,11 +242,11 @@ def sublayer_into_root(stage: Path, layer_path: Path) -> RootEdit:
             _sync_open_root(stage, entry, layer_path)
             return RootEdit(data)
         root = _open_bytes_copy(data, target)
-        stale = tuple(p for p in root.subLayerPaths if _other_result_of(p, stage, layer_path))
-        present = any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths)
-        if present and not stale:
+        if _in_place(root.subLayerPaths, stage, layer_path):
             _sync_open_root(stage, entry, layer_path)
             return RootEdit(data)
+        stale = tuple(p for p in root.subLayerPaths if _other_result_of(p, stage, layer_path))
+        present = any(_resolves_to(p, stage.parent, layer_path) for p in root.subLayerPaths)
         if not (os.access(target, os.W_OK) and os.access(target.parent, os.W_OK)):
             _warn(f"{stage}: the root layer is not writable; the result is in "
                   f"{layer_path.name} but is not sublayered into the stage")
@@ -304,10 +304,9 @@ def _sync_open_root(stage: Path, entry: str, layer_path: Path) -> None:
     layer = Sdf.Layer.Find(str(stage))
     if layer is None:
         return
-    stale = [p for p in layer.subLayerPaths if _other_result_of(p, stage, layer_path)]
-    if any(_resolves_to(p, stage.parent, layer_path) for p in layer.subLayerPaths) and \
-            not stale:
+    if _in_place(layer.subLayerPaths, stage, layer_path):
         return
+    stale = [p for p in layer.subLayerPaths if _other_result_of(p, stage, layer_path)]
     if layer.dirty:
         for old in stale:
             layer.subLayerPaths.remove(old)

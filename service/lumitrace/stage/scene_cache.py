@@ -97,22 +97,32 @@ def entry_path(path, luminaire: str | None = None, time_code: float | None = Non
 def _kept_scene(entry: Path) -> Scene | None:
     """The scene kept in ``entry`` where it was kept by this lumitrace and USD and each
     file it was read from holds the bytes it held then; else None."""
-    found, kept = read_table(entry)
-    if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp():
-        return None
-    try:
-        for file, digest, light_stamp in kept.get("files", ()):
-            if light_stamp and _stamp_of(file) != light_stamp \
-                    or readable_digest(file) != digest:
-                return None
-    except (TypeError, ValueError):  # not an entry of this layout
-        return None
-    scene = kept.get("scene")
-    if not isinstance(scene, Scene):
+    kept = _entry(entry)
+    if kept is None or not all(_holds(*f) for f in kept["files"]):
         return None
     with contextlib.suppress(OSError):
         os.utime(entry)  # used now: the last to go
-    return scene
+    return kept["scene"]
+
+
+def _entry(entry: Path) -> dict | None:
+    """The entry kept in ``entry`` where this lumitrace and USD kept it in this layout
+    (a stamp, the files as (path, digest, light stamp), a scene); else None."""
+    found, kept = read_table(entry)
+    if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp() \
+            or not isinstance(kept.get("scene"), Scene):
+        return None
+    try:
+        files = [(str(f), str(d), str(s)) for f, d, s in kept.get("files", ())]
+    except (TypeError, ValueError):  # not an entry of this layout
+        return None
+    return {**kept, "files": files}
+
+
+def _holds(file: str, digest: str, light_stamp: str) -> bool:
+    """Whether ``file`` holds the bytes (and, a light's file, the stamp) it was kept with."""
+    return not (light_stamp and _stamp_of(file) != light_stamp) and \
+        readable_digest(file) == digest
 
 
 def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
@@ -124,25 +134,15 @@ def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
     the scene read with the new layer is the one kept. A sublayered run's next run then
     takes the kept scene instead of loading USD again."""
     entry = entry_path(path, luminaire, time_code)
-    if entry is None:
-        return
-    found, kept = read_table(entry)
-    if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp():
+    kept = None if entry is None else _entry(entry)
+    if kept is None:
         return
     real = os.path.realpath(layer)
-    files = []
-    try:
-        for file, old, light_stamp in kept.get("files", ()):
-            if file == real:
-                old = digest
-            elif light_stamp and _stamp_of(file) != light_stamp \
-                    or readable_digest(file) != old:
-                return  # another file changed: not this run's to vouch for
-            files.append((file, old, light_stamp))
-    except (TypeError, ValueError):
-        return
-    if real in (f for f, _, _ in files) and isinstance(kept.get("scene"), Scene):
-        write_table(entry, {**kept, "files": files}, most_bytes=MOST_BYTES)
+    others = [f for f in kept["files"] if f[0] != real]
+    if len(others) == len(kept["files"]) or not all(_holds(*f) for f in others):
+        return  # not read from it, or another file changed: not this run's to vouch for
+    files = [(f, digest, s) if f == real else (f, d, s) for f, d, s in kept["files"]]
+    write_table(entry, {**kept, "files": files}, most_bytes=MOST_BYTES)
 
 
 def _own_layer(file: str, stage: str | None) -> bool:
