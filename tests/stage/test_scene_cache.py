@@ -337,18 +337,22 @@ def test_a_trace_of_a_kept_scene_publishes_the_same_bits(stage, tmp_path):
 def test_a_sublayered_run_keeps_its_scene_for_the_next_run(stage, tmp_path):
     """The default command sublayers its result layer into the stage and rewrites it at
     every run; the run that wrote it vouches for it, so the next run takes the kept scene
-    (USD not loaded), the scene USD reads. A layer changed by anyone else is read again."""
+    (USD not loaded), the scene USD reads. A layer changed by anyone else is read again,
+    and a scene read with anyone else's bytes there is not vouched for."""
     path, _ = stage
     folder = path.parent
     env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
 
+    emitted = []
+
     def traced() -> bool:
         """Whether a default trace of the stage loaded USD (any of its modules: the check of
-        the root layer's sublayers and result opinions too)."""
+        the root layer's sublayers and result opinions too); its flux in ``emitted``."""
         cmd = [sys.executable, "-X", "importtime", "-m", "lumitrace", "trace", str(path),
-               "--photons", "4000", "--no-pictures", "--quiet", "--out", str(folder)]
+               "--photons", "4000", "--no-pictures", "--json", "--out", str(folder)]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)
         assert run.returncode == 0, run.stderr[-2000:]
+        emitted.append(json.loads(run.stdout.strip().splitlines()[-1])["emitted_lm"])
         return "| pxr" in run.stderr
 
     layer = folder / "root.lumitrace.usda"
@@ -361,4 +365,16 @@ def test_a_sublayered_run_keeps_its_scene_for_the_next_run(stage, tmp_path):
     _same_scene(kept, reader.read_stage(path))
     layer.write_text(layer.read_text() + "\n")  # anyone else's edit, even a blank line
     _settle(folder)
-    assert traced() and not traced()
+    assert traced()  # read again; its scene was read with bytes lumitrace did not write
+    assert traced() and not traced()  # so only the run after it vouches again
+    # anyone else's bytes that change the scene (a second light put in the layer): the
+    # run that writes over them must not vouch for the scene read with them
+    text = layer.read_text()
+    at = text.index("\n{\n", text.index('over "Luminaire"')) + 3
+    layer.write_text(text[:at] + '    def DiskLight "Extra" (\n        prepend apiSchemas = '
+                     '["LumitraceEmitterAPI"]\n    )\n    {\n        float inputs:radius = 2\n'
+                     f'        float lumitrace:luminousFlux = {FLUX:g}\n    }}\n' + text[at:])
+    _settle(folder)
+    assert traced() and traced() and not traced()
+    assert emitted[-3:] == [2 * FLUX, FLUX, FLUX]  # read with the edit; then without it
+    _same_scene(scene_cache.read_stage(path), reader.read_stage(path))

@@ -18,7 +18,9 @@ more than a file system's time step (a file written while USD read it could pair
 bytes with the old scene; the next run keeps it). One file is the exception: the
 result layer lumitrace sublayers into the stage, rewritten by every run, holds only
 lumitrace's results, which the reader skips; the run that wrote it records its new
-digest in the entry (:func:`vouch`), and its time does not make it unsettled. The entry
+digest in the entry where the scene was read with lumitrace's own bytes there
+(:func:`vouch`), and while it holds the bytes lumitrace last wrote its time does not
+make it unsettled. The entry
 is a table file (:mod:`lumitrace.table_cache`: this user's, in a folder no one else may
 write, arrays mapped), one per stage and request, under the cache folder, the
 :data:`MOST_ENTRIES` used last; ``LUMITRACE_CACHE_DIR=off`` keeps none.
@@ -34,8 +36,7 @@ import time
 from pathlib import Path
 
 from ..digests import file_stamp, readable_digest
-from ..filenames import RESULT_LAYER_SUFFIX, stage_name
-from ..method_cache import cache_folder
+from ..method_cache import cache_folder, read_kept, write_kept
 from ..scene import Scene
 from ..schema import PLUGIN_PATH_VARIABLE
 from ..table_cache import read_table, sources_stamp, write_table
@@ -128,27 +129,48 @@ def _holds(file: str, digest: str, light_stamp: str) -> bool:
 def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
           digest: str) -> None:
     """Keep the kept scene of this request valid after lumitrace itself rewrote its result
-    layer ``layer`` (``digest``: SHA-256 of the bytes it wrote), where that layer is one of
-    the files the scene was read from and every other file is unchanged: the reader skips
-    lumitrace's own results (the stand-in light in its variant, ``lumitrace:result:*``), so
-    the scene read with the new layer is the one kept. A sublayered run's next run then
-    takes the kept scene instead of loading USD again."""
+    layer ``layer`` (``digest``: SHA-256 of the bytes it wrote), where the scene was read
+    with the bytes lumitrace wrote there before and every other file is unchanged: the
+    reader skips lumitrace's own results (the stand-in light in its variant,
+    ``lumitrace:result:*``), so the scene read with the new layer is the one kept. A scene
+    read with anyone else's bytes there is not vouched for (they may have added to it). A
+    sublayered run's next run then takes the kept scene instead of loading USD again."""
+    real = os.path.realpath(layer)
+    before = _last_written(real)
+    _note_written(real, digest)
     entry = entry_path(path, luminaire, time_code)
     kept = None if entry is None else _entry(entry)
-    if kept is None:
+    if kept is None or before is None:
         return
-    real = os.path.realpath(layer)
     others = [f for f in kept["files"] if f[0] != real]
-    if len(others) == len(kept["files"]) or not all(_holds(*f) for f in others):
-        return  # not read from it, or another file changed: not this run's to vouch for
+    if (real, before) not in [f[:2] for f in kept["files"]] or \
+            not all(_holds(*f) for f in others):
+        return  # read with other bytes there, or another file changed
     files = [(f, digest, s) if f == real else (f, d, s) for f, d, s in kept["files"]]
     write_table(entry, {**kept, "files": files}, most_bytes=MOST_BYTES)
 
 
-def _own_layer(file: str, stage: str | None) -> bool:
-    """Whether ``file`` is where lumitrace writes the result layer of ``stage`` (any output
-    folder): its bytes change with every run, its scene does not (see :func:`vouch`)."""
-    return bool(stage) and os.path.basename(file) == stage_name(stage) + RESULT_LAYER_SUFFIX
+def _written_path(layer: str) -> Path | None:
+    """Where the digest of what lumitrace last wrote to the result layer ``layer`` (a real
+    path) is kept (None: nothing is kept)."""
+    folder = cache_folder()
+    if folder is None:
+        return None
+    key = hashlib.blake2b(layer.encode(), digest_size=10).hexdigest()
+    return folder / f"written-{key}.digest"
+
+
+def _note_written(layer: str, digest: str) -> None:
+    path = _written_path(layer)
+    if path is not None:
+        write_kept(path, digest.encode())
+
+
+def _last_written(layer: str) -> str | None:
+    """The digest of the bytes lumitrace last wrote to the result layer ``layer``."""
+    path = _written_path(layer)
+    data = None if path is None else read_kept(path)
+    return None if data is None else data.decode("ascii", "replace")
 
 
 def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
@@ -171,10 +193,10 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
             after = os.stat(file)
         except OSError:
             return
-        # (lumitrace's own result layer, which the last run has just written, is read
-        # for no value of the scene: its time does not matter, its bytes are kept)
+        # (a result layer holding the bytes lumitrace last wrote there is read for no
+        # value of the scene: its time does not matter, the last run has just written it)
         settled = after.st_mtime_ns <= started_ns - SETTLED_NS or \
-            _own_layer(file, scene.stage_path)
+            digest == _last_written(file)
         if (before.st_mtime_ns, before.st_size) != (after.st_mtime_ns, after.st_size) \
                 or not settled or digest is None:
             return
