@@ -1,9 +1,10 @@
-"""Shared fixtures: ``tests/helpers`` and the stress cases of ``tools/`` on sys.path, and
-OpenEXR's own ImfEnvmap as an oracle."""
+"""Shared fixtures: ``tests/helpers`` and the stress cases of ``tools/`` on sys.path, a
+cache folder of the session's own, and OpenEXR's own ImfEnvmap as an oracle."""
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,23 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tools"))  # the stress case library
 INSTALL_HINT = "apt-get install -y libopenexr-dev pkg-config g++"
+
+
+def pytest_configure(config):
+    """What the tests' runs keep (scenes, tables, compiled methods) goes to a folder of
+    the session's own, removed at its end, not to the user's cache folder; the workers
+    and every subprocess inherit it. A folder given in ``LUMITRACE_CACHE_DIR`` is used
+    as it is."""
+    if hasattr(config, "workerinput") or os.environ.get("LUMITRACE_CACHE_DIR"):
+        return
+    folder = tempfile.mkdtemp(prefix="lumitrace-tests-")  # this user's alone (0700)
+    os.environ["LUMITRACE_CACHE_DIR"] = config.lumitrace_cache = folder
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "lumitrace_cache", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

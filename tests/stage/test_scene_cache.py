@@ -259,6 +259,26 @@ def test_the_entries_used_least_recently_go(stage, tmp_path, monkeypatch):
     scene_cache.read_stage(path, time_code=3.0)
     left = sorted(p.name for p in (tmp_path / "cache").glob("scene-*"))
     assert left == sorted(scene_cache.entry_path(path, time_code=c).name for c in (1.0, 3.0))
+    # what was vouched for a removed entry goes with it; of the digests of result layers
+    # lumitrace wrote, those written least recently beyond as many go too
+    cache = tmp_path / "cache"
+    gone = scene_cache.entry_path(path, time_code=1.0).with_suffix(".vouched")
+    kept = scene_cache.entry_path(path, time_code=3.0).with_suffix(".vouched")
+    for k, layer in enumerate("abc"):
+        scene_cache._note_written(str(tmp_path / f"{layer}.lumitrace.usda"), "d" * 64)
+        when = time.time() - 30 + k
+        os.utime(scene_cache._written_path(str(tmp_path / f"{layer}.lumitrace.usda")),
+                 (when, when))
+    gone.write_text("x"), kept.write_text("x")
+    for code, age in ((1.0, 100), (3.0, 10)):
+        os.utime(scene_cache.entry_path(path, time_code=code), (time.time() - age,) * 2)
+    scene_cache.read_stage(path, time_code=4.0)
+    assert sorted(p.name for p in cache.glob("scene-*.table")) == sorted(
+        scene_cache.entry_path(path, time_code=c).name for c in (3.0, 4.0))
+    assert kept.is_file() and not gone.exists()
+    assert sorted(p.name for p in cache.glob("written-*")) == sorted(
+        scene_cache._written_path(str(tmp_path / f"{layer}.lumitrace.usda")).name
+        for layer in "bc")
 
 
 def test_a_broken_entry_is_read_again(stage, tmp_path):
@@ -359,7 +379,11 @@ def test_a_sublayered_run_keeps_its_scene_for_the_next_run(stage, tmp_path):
     assert traced() and layer.is_file()  # the first run sublayers its layer: the root changed
     _settle(folder)
     assert traced()  # read with the layer, kept, then the layer rewritten and vouched for
+    (entry,) = (tmp_path / "cache").glob("scene-*.table")
+    written = entry.stat().st_ino
     assert [traced() for _ in range(2)] == [False, False]  # each run vouches for the next
+    # beside the entry, which is not written again (its arrays can be 32 MB)
+    assert entry.stat().st_ino == written and entry.with_suffix(".vouched").is_file()
     kept = scene_cache.read_stage(path)
     assert os.path.realpath(layer) in kept.input_files()
     _same_scene(kept, reader.read_stage(path))

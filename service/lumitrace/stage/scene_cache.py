@@ -18,7 +18,7 @@ more than a file system's time step (a file written while USD read it could pair
 bytes with the old scene; the next run keeps it). One file is the exception: the
 result layer lumitrace sublayers into the stage, rewritten by every run, holds only
 lumitrace's results, which the reader skips; the run that wrote it records its new
-digest in the entry where the scene was read with lumitrace's own bytes there
+digest beside the entry where the scene was read with lumitrace's own bytes there
 (:func:`vouch`), and while it holds the bytes lumitrace last wrote its time does not
 make it unsettled. The entry
 is a table file (:mod:`lumitrace.table_cache`: this user's, in a folder no one else may
@@ -108,7 +108,9 @@ def _kept_scene(entry: Path) -> Scene | None:
 
 def _entry(entry: Path) -> dict | None:
     """The entry kept in ``entry`` where this lumitrace and USD kept it in this layout
-    (a stamp, the files as (path, digest, light stamp), a scene); else None."""
+    (a stamp, the files as (path, digest, light stamp), a scene; the files as read
+    ``as_read``, and as they stand ``files``: a result layer at the digest vouched for
+    it); else None."""
     found, kept = read_table(entry)
     if not found or not isinstance(kept, dict) or kept.get("stamp") != validity_stamp() \
             or not isinstance(kept.get("scene"), Scene):
@@ -117,7 +119,11 @@ def _entry(entry: Path) -> dict | None:
         files = [(str(f), str(d), str(s)) for f, d, s in kept.get("files", ())]
     except (TypeError, ValueError):  # not an entry of this layout
         return None
-    return {**kept, "files": files}
+    as_read, vouched = files, _vouched(entry)
+    if vouched is not None:  # the result layer as lumitrace last rewrote it
+        files = [(f, vouched[2], s) if (f, d) == vouched[:2] else (f, d, s)
+                 for f, d, s in files]
+    return {**kept, "files": files, "as_read": as_read}
 
 
 def _holds(file: str, digest: str, light_stamp: str) -> bool:
@@ -134,20 +140,36 @@ def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
     reader skips lumitrace's own results (the stand-in light in its variant,
     ``lumitrace:result:*``), so the scene read with the new layer is the one kept. A scene
     read with anyone else's bytes there is not vouched for (they may have added to it). A
-    sublayered run's next run then takes the kept scene instead of loading USD again."""
+    sublayered run's next run then takes the kept scene instead of loading USD again.
+
+    The entry itself is not rewritten (its arrays are up to :data:`MOST_BYTES`): a small
+    file beside it says which digest now stands for the layer's digest in it."""
     real = os.path.realpath(layer)
     before = _last_written(real)
     _note_written(real, digest)
     entry = entry_path(path, luminaire, time_code)
-    kept = None if entry is None else _entry(entry)
-    if kept is None or before is None:
+    kept = None if entry is None or before is None else _entry(entry)
+    if kept is None:
         return
     others = [f for f in kept["files"] if f[0] != real]
     if (real, before) not in [f[:2] for f in kept["files"]] or \
             not all(_holds(*f) for f in others):
         return  # read with other bytes there, or another file changed
-    files = [(f, digest, s) if f == real else (f, d, s) for f, d, s in kept["files"]]
-    write_table(entry, {**kept, "files": files}, most_bytes=MOST_BYTES)
+    read_with = next(d for f, d, _ in kept["as_read"] if f == real)
+    write_kept(_vouch_path(entry), "\n".join((real, read_with, digest)).encode())
+
+
+def _vouch_path(entry: Path) -> Path:
+    """The small file beside ``entry`` that says which bytes of its result layer stand
+    for those it was read with: the layer's path, its digest in the entry, the new one."""
+    return entry.with_suffix(".vouched")
+
+
+def _vouched(entry: Path) -> tuple[str, str, str] | None:
+    """The (layer, digest in the entry, digest that stands for it) vouched for ``entry``."""
+    data = read_kept(_vouch_path(entry))
+    lines = [] if data is None else data.decode("utf-8", "replace").split("\n")
+    return tuple(lines) if len(lines) == 3 else None
 
 
 def _written_path(layer: str) -> Path | None:
@@ -205,19 +227,28 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
         return
     if write_table(entry, {"stamp": validity_stamp(), "files": files, "scene": scene},
                    most_bytes=MOST_BYTES):
+        with contextlib.suppress(OSError):  # vouched for the entry before
+            _vouch_path(entry).unlink()
         _drop_least_used(entry.parent)
 
 
 def _drop_least_used(folder: Path) -> None:
-    """Remove the entries used least recently beyond :data:`MOST_ENTRIES`."""
-    entries = []
-    for path in folder.glob("scene-*.table"):
-        with contextlib.suppress(OSError):
-            entries.append((path.stat().st_mtime_ns, path))
-    entries.sort(reverse=True)
-    for _, path in entries[MOST_ENTRIES:]:
-        with contextlib.suppress(OSError):
-            path.unlink()
+    """Remove the entries used least recently beyond :data:`MOST_ENTRIES`, what was
+    vouched for them, and the digests of result layers written least recently beyond
+    as many."""
+    for pattern in ("scene-*.table", "written-*.digest"):
+        kept = []
+        for path in folder.glob(pattern):
+            with contextlib.suppress(OSError):
+                kept.append((path.stat().st_mtime_ns, path))
+        kept.sort(reverse=True)
+        for _, path in kept[MOST_ENTRIES:]:
+            with contextlib.suppress(OSError):
+                path.unlink()
+    for path in folder.glob("scene-*.vouched"):
+        if not path.with_suffix(".table").exists():
+            with contextlib.suppress(OSError):
+                path.unlink()
 
 
 def _array_bytes(scene: Scene) -> int:
