@@ -208,3 +208,21 @@ def test_quads_hold_every_triangle_once_as_embree_splits_them():
 def _turn_of(a, b) -> bool:
     """Whether triangle ``a``'s corners are ``b``'s in the same cyclic turn."""
     return any((np.roll(b, k, axis=0) == a).all() for k in range(3))
+
+
+@pytest.mark.parametrize("name", ["downlight.usda", "louvre.usda"])
+def test_the_reach_box_is_the_normalised_triangles_box_widened(name):
+    """The box a ray must meet to be cast is the box of the traced (normalised) triangles,
+    to the bit, widened by the margin: taken from the world bounds, not a normalised copy."""
+    from lumitrace.scene import point_bounds
+    from lumitrace.trace.prepared import REACH_MARGIN, normalised
+
+    ps = prepare(read_stage(STAGES / name))
+    tri = normalised(ps.scene, ps.center, ps.scale).reshape(-1, 3)
+    margin = REACH_MARGIN * max(1.0, float(np.abs(tri).max()))
+    lo, hi = ps.reach_box
+    assert np.array_equal(lo, tri.min(axis=0) - margin)
+    assert np.array_equal(hi, tri.max(axis=0) + margin)
+    pts = np.random.default_rng(3).normal(size=(1001, 3)) * [1.0, 1e-3, 1e3]
+    assert all(np.array_equal(a, b) for a, b in
+               zip(point_bounds(pts), (pts.min(axis=0), pts.max(axis=0))))

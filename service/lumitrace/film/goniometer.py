@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.model import point_bounds
+
 #: Width of a C cell (deg) and of a gamma cell (deg).
 C_STEP = 1.25
 GAMMA_STEP = 0.25
@@ -82,8 +84,8 @@ class Goniometer:
         q = np.asarray(points, np.float64).reshape(-1, 3) @ a.T
         if not len(q):
             q = np.zeros((1, 3))
-        return cls(tuple(map(tuple, a.tolist())), tuple(map(float, q.min(axis=0))),
-                   tuple(map(float, q.max(axis=0))))
+        lo, hi = point_bounds(q)
+        return cls(tuple(map(tuple, a.tolist())), tuple(map(float, lo)), tuple(map(float, hi)))
 
     @classmethod
     def of(cls, scene) -> "Goniometer":

@@ -15,7 +15,7 @@ from typing import Mapping
 import numpy as np
 
 from ..atomic import atomic_path
-from ..scene import Scene
+from ..scene import Scene, point_bounds
 from . import frame
 from .grid import CGammaGrid
 
@@ -50,7 +50,7 @@ def solid_points(grid: CGammaGrid, scene: Scene) -> tuple:
     d = frame.directions(cc, gg, scene.up_axis, frame.luminaire_rotation(scene))
     tri = np.asarray(scene.triangles)
     if tri.size:
-        lo, hi = tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)
+        lo, hi = point_bounds(tri)
         center, size = 0.5 * (lo + hi), float((hi - lo).max())
     else:
         center, size = np.zeros(3), 0.1

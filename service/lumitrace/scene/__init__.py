@@ -5,8 +5,8 @@ with the rules of emission shape (one-sided lights, the UsdLux shaping window) k
 """
 from .model import (ABSORBER, DIELECTRIC, DIFFUSE, EMITTER_KINDS, GLOSSY, MIRROR,
                     SCATTERING_MODELS, TRANSLUCENT, Emitter, IesShaping, LightGroup,
-                    LuminaireInfo, Material, PartFrame, Scene)
+                    LuminaireInfo, Material, PartFrame, Scene, point_bounds)
 
 __all__ = ["ABSORBER", "DIELECTRIC", "DIFFUSE", "EMITTER_KINDS", "GLOSSY", "MIRROR",
            "SCATTERING_MODELS", "TRANSLUCENT", "Emitter", "IesShaping", "LightGroup",
-           "LuminaireInfo", "Material", "PartFrame", "Scene"]
+           "LuminaireInfo", "Material", "PartFrame", "Scene", "point_bounds"]

@@ -15,7 +15,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import LumitraceError
-from ..scene import DIELECTRIC, Scene
+from ..scene import DIELECTRIC, Scene, point_bounds
 from ..film import goniometer as gonio
 from ..film.goniometer import Goniometer
 from .vectors import cross, dot
@@ -47,8 +47,7 @@ class TracingFrame:
     @classmethod
     def of(cls, scene: Scene) -> "TracingFrame":
         """The frame centred on ``scene``'s bounds, largest half-extent 1."""
-        pts = scene.bound_points()
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        lo, hi = point_bounds(scene.bound_points())
         center = 0.5 * (lo + hi)
         scale = float(0.5 * (hi - lo).max())
         if not scale > 0.0:  # a lone point light: any scale will do
@@ -167,9 +166,11 @@ class PreparedScene:
     def reach_box(self) -> tuple[np.ndarray, np.ndarray]:
         """The bounds (normalised) of the triangles, widened well beyond float32 rounding:
         a ray that misses this box meets no triangle."""
-        tri = normalised(self.scene, self.center, self.scale).reshape(-1, 3)
-        margin = REACH_MARGIN * max(1.0, float(np.abs(tri).max()))
-        return tri.min(axis=0) - margin, tri.max(axis=0) + margin
+        # the world bounds normalised are the normalised triangles' bounds, to the bit
+        lo, hi = ((b - self.center) / self.scale
+                  for b in point_bounds(np.asarray(self.scene.triangles, np.float64)))
+        margin = REACH_MARGIN * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max()))
+        return lo - margin, hi + margin
 
     @cached_property
     def gonio_args(self) -> tuple:
