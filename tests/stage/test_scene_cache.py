@@ -402,3 +402,27 @@ def test_a_sublayered_run_keeps_its_scene_for_the_next_run(stage, tmp_path):
     assert traced() and traced() and not traced()
     assert emitted[-3:] == [2 * FLUX, FLUX, FLUX]  # read with the edit; then without it
     _same_scene(scene_cache.read_stage(path), reader.read_stage(path))
+def test_default_runs_at_the_same_moment_leave_a_kept_scene_that_is_the_stage(stage,
+                                                                             tmp_path):
+    """Three default (sublayered) runs of one stage started together, twice: each ends
+    well, each traces the stage's flux, and the scene kept and vouched for after them is
+    the one USD reads (they publish in turn; each vouches only for what it read)."""
+    path, _ = stage
+    folder = path.parent
+    env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
+    cmd = [sys.executable, "-m", "lumitrace", "trace", str(path), "--photons", "4000",
+           "--no-pictures", "--json", "--no-progress", "--out", str(folder)]
+    assert subprocess.run(cmd, env=env, capture_output=True).returncode == 0
+    _settle(folder)
+    for _ in range(2):
+        runs = [subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True) for _ in range(3)]
+        for run in runs:
+            out, err = run.communicate(timeout=300)
+            assert run.returncode == 0, err[-2000:]
+            assert json.loads(out.strip().splitlines()[-1])["emitted_lm"] == FLUX
+    kept = scene_cache._kept_scene(next((tmp_path / "cache").glob("scene-*.table")))
+    assert kept is not None
+    _same_scene(kept, reader.read_stage(path))
+
+
