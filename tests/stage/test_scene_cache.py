@@ -426,3 +426,28 @@ def test_default_runs_at_the_same_moment_leave_a_kept_scene_that_is_the_stage(st
     _same_scene(kept, reader.read_stage(path))
 
 
+
+
+def test_a_file_hashed_once_in_a_process_is_read_again_after_any_write(tmp_path,
+                                                                        monkeypatch):
+    """A run hashes its files when it takes a scene and again when it vouches: the second
+    time a settled file with the same stat is not read again, and any write since (even of
+    the same size with its modification time put back) makes it read again."""
+    monkeypatch.setattr(scene_cache, "SETTLED_NS", 20_000_000)  # 20 ms, not 2 s
+    monkeypatch.setattr(scene_cache, "_taken", {})
+    reads = []
+    real = scene_cache.readable_digest
+    monkeypatch.setattr(scene_cache, "readable_digest",
+                        lambda f: reads.append(f) or real(f))
+    layer = tmp_path / "root.usda"
+    layer.write_text("#usda 1.0\n(doc = \"a\")\n")
+    fresh = scene_cache._digest(str(layer))
+    assert scene_cache._digest(str(layer)) == fresh and len(reads) == 2  # too fresh to keep
+    time.sleep(0.05)
+    assert scene_cache._digest(str(layer)) == fresh and len(reads) == 3
+    assert scene_cache._digest(str(layer)) == fresh and len(reads) == 3  # settled: kept
+    st = layer.stat()
+    layer.write_text("#usda 1.0\n(doc = \"b\")\n")  # same size, its time put back
+    os.utime(layer, ns=(st.st_atime_ns, st.st_mtime_ns))
+    edited = scene_cache._digest(str(layer))
+    assert edited != fresh and edited == real(str(layer)) and len(reads) == 4

@@ -8,7 +8,8 @@ emitters' IES and ray files), of what lumitrace and USD are, and of the request
 (luminaire, time code, USD's plugin path). So
 the read scene is kept with the SHA-256 of each of those files, and is taken again
 only where every one of them holds the same bytes (hashed again at each run, not trusted
-by its modification time).
+by its modification time; within a run, a file hashed when the scene was taken is not read
+again to vouch for it while its stat, change time included, is what it was and settled).
 
 Kept only where that is sound: a stage that composed whole (a missing sublayer or
 reference, only a warning outside the luminaire, is a file whose appearance no digest
@@ -129,7 +130,33 @@ def _entry(entry: Path) -> dict | None:
 def _holds(file: str, digest: str, light_stamp: str) -> bool:
     """Whether ``file`` holds the bytes (and, a light's file, the stamp) it was kept with."""
     return not (light_stamp and _stamp_of(file) != light_stamp) and \
-        readable_digest(file) == digest
+        _digest(file) == digest
+
+
+#: The digests this process took, by file: (the file's device, inode, size, modification
+#: and change times then, its SHA-256), kept only where those times were settled then.
+_taken: dict[str, tuple[tuple, str]] = {}
+
+
+def _digest(file: str) -> str | None:
+    """SHA-256 of ``file``'s bytes (None: unreadable). A run checks its files when it
+    takes a scene and again when it vouches for it: the second time a file whose stat is
+    the one it had when this process hashed it, then settled (modified and changed more
+    than :data:`SETTLED_NS` before), is not read again. Any write since would have moved
+    its change time, which no one can set back."""
+    try:
+        st = os.stat(file)
+    except OSError:
+        return None
+    stat = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    known = _taken.get(file)
+    if known is not None and known[0] == stat:
+        return known[1]
+    hashed_at = time.time_ns()
+    digest = readable_digest(file)
+    if digest is not None and max(st.st_mtime_ns, st.st_ctime_ns) <= hashed_at - SETTLED_NS:
+        _taken[file] = (stat, digest)
+    return digest
 
 
 def vouch(path, luminaire: str | None, time_code: float | None, layer: Path,
@@ -211,7 +238,7 @@ def _keep(entry: Path, scene: Scene, started_ns: int) -> None:
     for file in sorted(scene.input_files()):
         try:
             before = os.stat(file)
-            digest = readable_digest(file)
+            digest = _digest(file)
             after = os.stat(file)
         except OSError:
             return
