@@ -204,22 +204,26 @@ def local_fit(cells: HalfCells, centre: np.ndarray, radius_deg: float
     if spread <= 0 or total * total < MIN_FIT_PHOTONS * spread:
         return None  # too few photons in reach for six parameters
     omega = _cell_omegas()[near]
+    # the monomials 1, x, y, x^2, y^2, xy of the gnomonic-like tangent coordinates (deg),
+    # one row each: the normal equations below are then two small matrix products
     u, v = _tangent_basis(centre)
-    d = _cell_directions()[near]
-    x, y = np.degrees(d @ u), np.degrees(d @ v)  # gnomonic-like tangent coordinates (deg)
-    X = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y], axis=1)
-    cd = flux / omega
-    sig2 = var / omega ** 2
-    W = omega / omega.sum()
-    A = X.T @ (W[:, None] * X)
+    X = np.empty((6, near.size))
+    X[0] = 1.0
+    np.matmul(np.stack([u, v]), _cell_directions()[near].T, out=X[1:3])
+    X[1:3] *= 180.0 / math.pi
+    np.multiply(X[1], X[1], out=X[3])
+    np.multiply(X[2], X[2], out=X[4])
+    np.multiply(X[1], X[2], out=X[5])
+    # weights are the cells' solid angles (the fit is of cd = flux / omega over the cap):
+    # A = X W X^T, the moment X W cd = X flux, the sandwich's middle X W^2 Sigma X^T =
+    # X var X^T (the weights' common scale cancels)
+    A, B = (X * omega) @ X.T, (X * var) @ X.T
     try:
         Ainv = np.linalg.inv(A)
     except np.linalg.LinAlgError:
         return None
-    beta = Ainv @ (X.T @ (W * cd))
-    # the sandwich: Cov(beta) = A^-1 X^T W Sigma W X A^-1, Sigma the cells' variances
-    B = X.T @ ((W * W * sig2)[:, None] * X)
-    cov = Ainv @ B @ Ainv
+    beta = Ainv @ (X @ flux)
+    cov = Ainv @ B @ Ainv  # Cov(beta), the least-squares sandwich
     value, error = float(beta[0]), math.sqrt(max(float(cov[0, 0]), 0.0))
     # stationary point of b1 x + b2 y + b3 x^2 + b4 y^2 + b5 x y, where it is a maximum
     H = np.array([[2 * beta[3], beta[5]], [beta[5], 2 * beta[4]]])
