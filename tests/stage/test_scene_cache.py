@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -451,3 +452,66 @@ def test_a_file_hashed_once_in_a_process_is_read_again_after_any_write(tmp_path,
     os.utime(layer, ns=(st.st_atime_ns, st.st_mtime_ns))
     edited = scene_cache._digest(str(layer))
     assert edited != fresh and edited == real(str(layer)) and len(reads) == 4
+
+
+#: A default trace killed (SIGKILL, which no handler sees) at a chosen moment of keeping
+#: its kept scene valid: ``vouch`` as it is called (the result layer written, nothing
+#: noted), ``note`` after the layer's new digest is noted, before the vouch is written.
+_KILLED_AT = """
+import os, signal, sys
+from lumitrace.stage import scene_cache
+
+moment = sys.argv.pop(1)
+if moment == "vouch":
+    scene_cache.vouch = lambda *a, **k: os.kill(os.getpid(), signal.SIGKILL)
+else:
+    real = scene_cache.write_kept
+
+    def write_kept(path, data):
+        if str(path).endswith(".vouched"):
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(path, data)
+
+    scene_cache.write_kept = write_kept
+from lumitrace.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("moment", ["vouch", "note"])
+def test_a_run_killed_while_vouching_leaves_nothing_that_is_taken_wrongly(stage, tmp_path,
+                                                                          moment):
+    """A default run killed after rewriting its result layer, before its vouch is written
+    (a vouch of the run before it on disk): the next run reads the stage with USD, traces
+    its flux and ends well; the run after that takes the kept scene again; the scene kept
+    is the one USD reads, and the result layer is whole."""
+    path, _ = stage
+    folder = path.parent
+    env = {**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")}
+    args = ["trace", str(path), "--photons", "4000", "--no-pictures", "--json",
+            "--no-progress", "--out", str(folder)]
+    cmd = [sys.executable, "-X", "importtime", "-m", "lumitrace", *args]
+
+    def traced() -> bool:
+        """Whether a default trace loaded USD; it ends well with the stage's flux."""
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr[-2000:]
+        assert json.loads(run.stdout.strip().splitlines()[-1])["emitted_lm"] == FLUX
+        return "| pxr" in run.stderr
+
+    assert traced()
+    _settle(folder)
+    assert traced() and not traced()  # vouched for: a vouch file stands beside the entry
+    (entry,) = (tmp_path / "cache").glob("scene-*.table")
+    assert entry.with_suffix(".vouched").is_file()
+    layer = folder / "root.lumitrace.usda"
+    before = layer.read_bytes()
+    killed = subprocess.run([sys.executable, "-c", _KILLED_AT, moment, *args], env=env,
+                            capture_output=True, text=True)
+    assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
+    assert layer.read_bytes() != before  # killed after the layer was rewritten
+    assert traced()  # the layer holds bytes nothing vouched for: read with USD
+    assert not traced()  # and that run vouched again
+    _same_scene(scene_cache.read_stage(path), reader.read_stage(path))
+    from pxr import Sdf
+    assert Sdf.Layer.FindOrOpen(str(layer)) is not None  # whole: it parses
