@@ -169,3 +169,60 @@ def test_many_small_emitters_are_not_split_into_tiny_jobs():
     timed = _round_jobs([0] * n, [10_000] * n, shares, 8192,
                         TraceSettings(photons=n * 10_000, seconds=5.0, seed=1))
     assert all(j.count == 41 for j in timed)  # ceil(8192 / 200)
+
+
+def test_a_round_ends_in_smaller_jobs_that_hold_the_same_photons():
+    """A round of whole batches on two threads ends in jobs of half and then a quarter of a
+    batch, each size once per thread, so the threads end it within a small job of each
+    other; the jobs hold the round's photons, each once, in order. A round too small to
+    cut, one thread, and a scene of many small jobs are left as they were."""
+    from lumitrace.run.session import TAPER_PHOTONS, TraceSettings, _round_jobs
+
+    batch = 262_144
+    settings = TraceSettings(photons=10_000_000, seed=1, threads=2, batch_size=batch)
+    jobs = _round_jobs([5], [10_000_000], [1.0], 4 * batch, settings)
+    assert [j.count for j in jobs] == [batch, batch, batch // 2, batch // 2, batch // 2,
+                                       batch // 4, batch // 4]
+    assert [j.first for j in jobs] == [5 + sum(j.count for j in jobs[:i])
+                                       for i in range(len(jobs))]
+    assert jobs[-1].first + jobs[-1].count == 5 + 4 * batch
+    assert all(j.count >= TAPER_PHOTONS for j in jobs)
+    one = TraceSettings(photons=10_000_000, seed=1, threads=1, batch_size=batch)
+    assert [j.count for j in _round_jobs([0], [1e7], [1.0], 4 * batch, one)] == [batch] * 4
+    small = _round_jobs([0], [1e7], [1.0], 2 * TAPER_PHOTONS, settings)
+    assert [j.count for j in small] == [TAPER_PHOTONS] * 2
+    n = 200
+    many = _round_jobs([0] * n, [10_000] * n, [1.0 / n] * n, 8192, settings)
+    assert len(many) == n
+
+
+def _dense_cells(acc) -> np.ndarray:
+    """The goniophotometer's counts of every emitter, dense."""
+    rows = []
+    for _, _, values, idx in acc.emitter_cells():
+        dense = np.zeros(max(values.size, 1 + int(idx.max()) if idx is not None and idx.size
+                             else 0), np.int64)
+        if idx is None:
+            dense[:values.size] = values
+        else:
+            dense[idx] = values
+        rows.append(dense)
+    return np.concatenate(rows)
+
+
+def test_the_map_does_not_depend_on_how_rounds_are_cut(downlight):
+    """The same photons traced in whole batches and in tapered rounds, on two threads:
+    the same counts to the bit."""
+    from lumitrace.run import session
+    from lumitrace.run.session import TraceSettings, run
+
+    settings = TraceSettings(photons=300_000, seed=4, resolution=16, threads=2,
+                             batch_size=65_536, workers="threads")
+    tapered = run(downlight, settings).accumulator
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(session, "_tapered", lambda jobs, threads, batch: jobs)
+        whole = run(downlight, settings).accumulator
+    assert np.array_equal(tapered.counts(), whole.counts())
+    assert np.array_equal(_dense_cells(tapered), _dense_cells(whole))
+    assert [t.absorbed for t in tapered.emitters] == [t.absorbed for t in whole.emitters]
+    assert tapered.photons == whole.photons == 300_000

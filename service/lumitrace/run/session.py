@@ -87,6 +87,33 @@ MIN_JOB_PHOTONS = 256
 MIN_SPLIT_PHOTONS = 4096
 
 
+#: A round's last jobs are cut to halves and then quarters of a batch, each size once per
+#: thread, down to no less than this many photons: the threads take the next job left, so
+#: they end a round within a small job of each other (whole batches to the end left one
+#: thread waiting for up to a batch at every round).
+TAPER_PHOTONS = 32768
+
+
+def _tapered(jobs: list[BatchJob], threads: int, batch: int) -> list[BatchJob]:
+    """``jobs`` with their last photons cut into smaller jobs (see :data:`TAPER_PHOTONS`),
+    in the same order; the photons and so the counts are the same."""
+    sizes = [size for size in (batch // 4, batch // 2) if size >= TAPER_PHOTONS
+             for _ in range(threads)]  # from the round's end
+    if len(jobs) < 2 or not sizes:
+        return jobs
+    jobs, tail = list(jobs), []
+    while jobs and sizes:
+        job = jobs.pop()
+        stop = job.first + job.count
+        while sizes and stop > job.first:
+            cut = min(sizes.pop(0), stop - job.first)
+            tail.append(replace(job, first=stop - cut, count=cut))
+            stop -= cut
+        if stop > job.first:
+            tail.append(replace(job, count=stop - job.first))
+    return jobs + tail[::-1]
+
+
 def _round_jobs(done: list[int], targets: list[float], shares: list[float],
                 round_photons: int, settings: TraceSettings,
                 ways: int | None = None) -> list[BatchJob]:
@@ -108,7 +135,7 @@ def _round_jobs(done: list[int], targets: list[float], shares: list[float],
                                  settings.max_depth))
             start += c
             want -= c
-    return jobs
+    return _tapered(jobs, threads, batch) if threads > 1 else jobs
 
 
 def photons_to_target(photons: int, error: float, target: float,
