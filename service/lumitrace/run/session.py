@@ -119,8 +119,9 @@ def _round_jobs(done: list[int], targets: list[float], shares: list[float],
                 ways: int | None = None) -> list[BatchJob]:
     """Batch jobs of the next round, batch-sized, or split ``ways`` ways (default: among
     the threads) where the round is smaller than a batch a way (a first round on one core
-    of two took twice its time); jobs of at least :data:`MIN_SPLIT_PHOTONS`. The counts
-    are the same for any split."""
+    of two took twice its time); jobs of at least :data:`MIN_SPLIT_PHOTONS`, the last ones
+    smaller on more than one thread (:func:`_tapered`). The counts are the same for any
+    split."""
     threads = max(1, int(ways or settings.threads))
     batch = min(settings.batch_size, max(MIN_SPLIT_PHOTONS, -(-round_photons // threads)))
     floor = MIN_JOB_PHOTONS if settings.seconds is None and settings.target_error is None \
