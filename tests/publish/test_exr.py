@@ -1,6 +1,7 @@
 """The intensity map EXR: round trips, OpenImageIO compatibility, atomic failure."""
 from __future__ import annotations
 
+import errno
 import json
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from lumitrace.film import cubemap as cm
-from lumitrace.publish import exr
+from lumitrace.publish import exr, exr_writer
 from lumitrace.errors import LumitraceError, OutputError
 
 RES = 8
@@ -165,15 +166,21 @@ def test_failure_inside_the_writer_leaves_the_existing_file_untouched(tmp_path, 
     exr.write_intensity_exr(path, make_channels(), METADATA)
     before = path.read_bytes()
 
-    class Broken:
-        def __init__(self, header, channels):
-            pass
+    class HalfWritten:  # the file system fills up half way through the file
+        def __init__(self, name, mode):
+            self.f = open(name, mode)
 
-        def write(self, filename):
-            Path(filename).write_bytes(b"half an EXR")
-            raise RuntimeError("disk full")
+        def __enter__(self):
+            return self
 
-    monkeypatch.setattr(exr.OpenEXR, "File", Broken)
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def write(self, data):
+            self.f.write(data[:len(data) // 2])
+            raise OSError(errno.ENOSPC, "disk full")
+
+    monkeypatch.setattr(exr_writer, "open", HalfWritten, raising=False)
     with pytest.raises(OutputError, match="disk full"):
         exr.write_intensity_exr(path, make_channels(seed=2), METADATA)
     assert path.read_bytes() == before

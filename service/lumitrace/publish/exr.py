@@ -1,8 +1,9 @@
 """The intensity map EXR: OpenEXR cube maps with lumitrace metadata.
 
-``NAME.intensity.exr`` is a single-part scanline OpenEXR image in ImfEnvmap's cube map
-layout (see :mod:`lumitrace.film.cubemap`): ``res`` wide, ``6 * res`` tall, header attribute
-``envmap`` = ``ENVMAP_CUBE``. Channels:
+``NAME.intensity.exr`` is a single-part scanline OpenEXR image (written by
+:mod:`.exr_writer`, read by OpenEXR's own reader) in ImfEnvmap's cube map layout (see
+:mod:`lumitrace.film.cubemap`): ``res`` wide, ``6 * res`` tall, header attribute ``envmap``
+= ``ENVMAP_CUBE``. Channels:
 
 ``Y``
     filtered luminous intensity, cd;
@@ -31,11 +32,10 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import OpenEXR
 
 from ..film import cubemap
-from ..atomic import atomic_path
 from ..errors import LumitraceError, OutputError
+from .exr_writer import ENVMAP_CUBE, ENVMAP_LATLONG, write_scanline_exr
 
 #: Header attribute holding the metadata as a JSON object.
 METADATA_ATTRIBUTE = "lumitrace"
@@ -162,13 +162,13 @@ def _readable_attributes(metadata: Mapping[str, Any]) -> dict[str, str]:
     return attrs
 
 
-def _write(path, header: dict, channels: dict[str, np.ndarray]) -> None:
+def _write(path, strings: dict[str, str], channels: dict[str, np.ndarray],
+           envmap: int) -> None:
     try:
-        with atomic_path(path) as tmp:
-            OpenEXR.File(header, channels).write(str(tmp))
+        write_scanline_exr(path, channels, strings, envmap)
     except OutputError:
         raise
-    except Exception as exc:  # OpenEXR raises plain RuntimeError/OSError
+    except OSError as exc:
         raise OutputError(f"cannot write the OpenEXR file: {exc}", where=str(path)) from exc
 
 
@@ -203,15 +203,12 @@ def write_intensity_exr(path: str | os.PathLike, channels: Mapping[str, np.ndarr
                               f"got {shape}", where=str(path))
 
     data = _prepare_channels(path, channels, cube_shape)
-    header = {
-        "compression": OpenEXR.ZIP_COMPRESSION,
-        "type": OpenEXR.scanlineimage,
-        "envmap": OpenEXR.ENVMAP_CUBE,
+    strings = {
         "comments": _COMMENTS,
         **_readable_attributes(metadata if isinstance(metadata, Mapping) else {}),
         METADATA_ATTRIBUTE: metadata_json(metadata, path),
     }
-    _write(path, header, data)
+    _write(path, strings, data, ENVMAP_CUBE)
 
 
 def read_intensity_exr(path: str | os.PathLike
@@ -237,6 +234,8 @@ def read_intensity_exr(path: str | os.PathLike
     where = str(path)
     if not Path(path).is_file():
         raise LumitraceError("intensity map not found", where=where)
+    import OpenEXR  # read by OpenEXR's own reader
+
     try:
         exr = OpenEXR.File(str(path), separate_channels=True)
         header = dict(exr.header())
@@ -244,7 +243,7 @@ def read_intensity_exr(path: str | os.PathLike
     except Exception as exc:
         raise LumitraceError(f"not a readable OpenEXR file ({exc})", where=where) from exc
     envmap = header.get("envmap")
-    if envmap != OpenEXR.ENVMAP_CUBE:
+    if envmap != ENVMAP_CUBE:
         raise LumitraceError(f"not a cube map: header attribute envmap is {envmap!r}, "
                              "expected CUBE", where=where)
     channels: dict[str, np.ndarray] = {}
@@ -339,16 +338,13 @@ def write_latlong_exr(path: str | os.PathLike, channels, metadata: Mapping[str, 
                           where=str(path)) from exc
     data = _prepare_channels(path, latlong, None)
     metadata = dict(metadata or {})
-    header = {
-        "compression": OpenEXR.ZIP_COMPRESSION,
-        "type": OpenEXR.scanlineimage,
-        "envmap": OpenEXR.ENVMAP_LATLONG,
+    strings = {
         "comments": "lumitrace far-field luminous intensity, lat-long copy of the cube map "
                     "(ImfEnvmap LatLongMap layout, bilinear resampling).",
         **_readable_attributes(metadata),
         METADATA_ATTRIBUTE: metadata_json(metadata, path),
     }
-    _write(path, header, data)
+    _write(path, strings, data, ENVMAP_LATLONG)
 
 
 __all__ = ["METADATA_ATTRIBUTE", "CHANNEL_UNITS", "write_intensity_exr", "read_intensity_exr",
@@ -358,6 +354,8 @@ __all__ = ["METADATA_ATTRIBUTE", "CHANNEL_UNITS", "write_intensity_exr", "read_i
 def read_exr_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
     """The ``lumitrace`` JSON metadata of an EXR file from its header alone (no pixels);
     None when the file is missing, unreadable or carries none."""
+    import OpenEXR
+
     try:
         header = OpenEXR.File(str(path), header_only=True).header()
         meta = json.loads(header.get(METADATA_ATTRIBUTE) or "null")

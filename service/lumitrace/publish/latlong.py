@@ -1,5 +1,5 @@
 """The intensity map as a lat-long environment texture: what renderers (a UsdLux DomeLight)
-and compositors read, a tiled, mip-mapped EXR (:mod:`.exr_tiled`).
+and compositors read, a tiled, mip-mapped EXR (:mod:`.exr_writer`).
 
 OpenEXR's latitude-longitude layout: x is longitude, from +pi at the left edge to -pi at the
 right, y latitude, +pi/2 at the top; longitude 0 on the equator looks along +Z, pi/2 along
@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import OutputError
 from ..film.cubemap import bilinear_taps, sample_map
-from .exr_tiled import ENVMAP_LATLONG, write_tiled_exr
+from .exr_writer import ENVMAP_LATLONG, write_tiled_exr
 from ..table_cache import kept_table
 
 #: Tile size (pixels) of the texture.

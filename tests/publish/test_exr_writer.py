@@ -1,5 +1,5 @@
-"""The tiled, mip-mapped EXR writer, read back by OpenImageIO and OpenEXR (independent
-readers of the format): every level's pixels exactly, tiles, attributes."""
+"""The scanline and the tiled, mip-mapped EXR writers, read back by OpenImageIO and OpenEXR
+(independent readers of the format): every level's pixels exactly, tiles, attributes."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,8 @@ import OpenEXR
 import OpenImageIO as oiio
 import pytest
 
-from lumitrace.publish.exr_tiled import ENVMAP_LATLONG, mip_levels, write_tiled_exr
+from lumitrace.publish.exr_writer import (ENVMAP_CUBE, ENVMAP_LATLONG, mip_levels,
+                                         write_scanline_exr, write_tiled_exr)
 
 
 def _levels(path):
@@ -75,3 +76,41 @@ def test_a_latlong_environment_matches_openimageio_texture_maker(tmp_path):
     assert s.get_string_attribute("textureformat") == "LatLong Environment"
     assert s.get_string_attribute("wrapmodes") == "periodic,clamp"
     assert s.get_string_attribute("ImageDescription") == "test"
+
+
+@pytest.mark.parametrize("shape", [(384, 64), (17, 3), (16, 5), (1, 1)])
+def test_a_scanline_image_reads_back_exactly(tmp_path, shape):
+    """Blocks of 16 lines, the last one short; noise stored raw, smooth rows deflated."""
+    rng = np.random.default_rng(11)
+    noise = rng.random(shape).astype(np.float32)
+    smooth = np.add.outer(np.arange(shape[0]), 0.5 * np.arange(shape[1]))
+    counts = rng.integers(0, 2**24, shape)
+    path = tmp_path / "s.exr"
+    long = "lumitrace:" + "a_name_longer_than_thirty_one_bytes"
+    write_scanline_exr(path, {"raw.Y": noise, "Y": smooth, "count": counts},
+                       {"comments": "three channels", long: "kept"}, envmap=ENVMAP_CUBE)
+    f = OpenEXR.File(str(path), separate_channels=True)
+    got = f.channels()
+    assert sorted(got) == ["Y", "count", "raw.Y"]
+    assert np.array_equal(got["raw.Y"].pixels, noise)
+    assert np.array_equal(got["Y"].pixels, smooth.astype(np.float32))
+    assert np.array_equal(got["count"].pixels, counts.astype(np.float32))
+    h = f.header()
+    assert h["envmap"] == OpenEXR.ENVMAP_CUBE and h["compression"] == OpenEXR.ZIP_COMPRESSION
+    assert h["comments"] == "three channels" and h[long] == "kept"
+    inp = oiio.ImageInput.open(str(path))
+    s = inp.spec()
+    assert (s.height, s.width, s.tile_width) == (*shape, 0)
+    assert s.channelnames == ("Y", "count", "raw.Y")
+    assert np.array_equal(inp.read_image("float")[..., 2], noise)
+
+
+def test_a_scanline_image_with_short_names_sets_no_long_name_flag(tmp_path):
+    """The version's long-name flag only where a name needs it (readers before OpenEXR 1.7
+    refuse a file with it)."""
+    path = tmp_path / "s.exr"
+    write_scanline_exr(path, {"Y": np.ones((6, 1))}, {"x" * 31: "31 bytes"})
+    assert int.from_bytes(path.read_bytes()[4:8], "little") == 2
+    write_scanline_exr(path, {"Y": np.ones((6, 1))}, {"x" * 32: "32 bytes"})
+    assert int.from_bytes(path.read_bytes()[4:8], "little") == 2 | 0x400
+    assert OpenEXR.File(str(path)).header()["x" * 32] == "32 bytes"
