@@ -19,8 +19,9 @@ Per scene:
 - the user's view: the real ``lumitrace trace --target-error E`` at E = 2% and 1% (judged
   on the files, the default), whole process, CPU and wall seconds (read by USD, then
   kept, as above), against the peer's CPU
-  seconds to E on its grid (medians of ``--repeats`` runs); and the files' true error at
-  the stop against the closed form;
+  seconds to E on its grid (medians of ``--repeats`` runs), and against the peer's whole
+  process to E (its photons to E, run beside ours in each repeat: the median of the
+  repeats' ratios); and the files' true error at the stop against the closed form;
   beside it the USD floor (Python, numpy and USD loaded, the stage opened: what any USD
   tool pays) in the same run, over the same peer's CPU seconds: the least ratio any
   tool that reads the stage with USD can show;
@@ -386,39 +387,53 @@ USD_FLOOR = ("import sys, numpy; from pxr import Usd, UsdGeom, UsdLux, UsdShade;
              "Usd.Stage.Open(sys.argv[1])")
 
 
-def user_view(stage: Path, out: Path, t: dict, repeats: int = 3) -> dict:
+def user_view(stage: Path, out: Path, t: dict, repeats: int = 3,
+              peer: Path | None = None, name: str | None = None) -> dict:
     """The real ``lumitrace trace --target-error E`` (files judged, the default), whole
     process, at each level: CPU and wall seconds (medians of ``repeats``, each a run read
     by USD then one of the kept scene: a run of a few tenths of a second varies by a
     tenth), photons, the files' stated and true error at the stop; against the peer's
     CPU seconds to E on its grid, and the USD floor's (:data:`USD_FLOOR`, run just
-    before each) against it: below the floor no USD tool goes."""
+    before each) against it: below the floor no USD tool goes. With the ``peer``'s
+    executable, the peer's whole process to E (the photons its grid needs) runs beside
+    ours in each repeat, and each repeat's ratio is taken: the machine's drift between
+    repeats then moves both alike."""
     rows = {}
     for lv in LEVELS:
         cmd = [*LUMITRACE, "trace", str(stage), "--target-error",
                str(lv), "--no-pictures", "--json", "--no-progress", "--no-sublayer",
                "--out", str(out), "--replace-results"]
-        runs = []
+        to_e = t[f"raw_{lv:g}"]["photons"]
+        runs, paired = [], []
         for _ in range(repeats):
             floor = _cpu_of([sys.executable, "-c", USD_FLOOR, str(stage)])[0]
             forget_scene(stage)
             cold = _run_summary(cmd)[:2]  # read with USD, as after an edit
             runs.append((floor, *cold, *_run_summary(cmd)))  # then the kept scene
+            if peer is not None and to_e:
+                paired.append(_cpu_of([str(peer), name, str(round(to_e))])[0])
         floor, cold_cpu, cold_wall, cpu, wall = (float(np.median([r[k] for r in runs]))
                                                  for k in range(5))
         summary = runs[-1][5]  # the same seed: every run traces the same photons
         ph = summary["photometry"]
-        peer = t["cpu_seconds_to"][f"{lv:g}"]["peer"]
+        peer_cpu = t["cpu_seconds_to"][f"{lv:g}"]["peer"]
         rows[f"{lv:g}"] = {
             "cpu_seconds": cpu, "wall_seconds": wall, "photons": summary["photons"],
             "files_error": ph["photometry_error"], "files_worst": ph["photometry_worst_error"],
             "files_true_error": files_true_error(stage, Path(summary["outputs"]
                                                              ["photometry_data"])),
-            "map_error_bound": summary["relative_error_bound"], "peer_cpu_seconds": peer,
-            "cpu_over_peer": cpu / peer if peer else None, "usd_floor_cpu_seconds": floor,
-            "usd_floor_over_peer": floor / peer if peer else None,
+            "map_error_bound": summary["relative_error_bound"],
+            "peer_cpu_seconds": peer_cpu,
+            "cpu_over_peer": cpu / peer_cpu if peer_cpu else None,
+            "usd_floor_cpu_seconds": floor,
+            "usd_floor_over_peer": floor / peer_cpu if peer_cpu else None,
             "cold_cpu_seconds": cold_cpu, "cold_wall_seconds": cold_wall,
-            "cold_cpu_over_peer": cold_cpu / peer if peer else None}
+            "cold_cpu_over_peer": cold_cpu / peer_cpu if peer_cpu else None,
+            "peer_process_photons": to_e if paired else None,
+            "peer_process_cpu_seconds": float(np.median(paired)) if paired else None,
+            "cpu_over_peer_process": float(np.median([r[3] / p for r, p in
+                                                      zip(runs, paired)]))
+            if paired else None}
     return rows
 
 
@@ -467,7 +482,7 @@ def main(argv=None) -> int:
             t["cpu_seconds_to"] = time_to_levels(t)
             if not args.no_user_view:
                 t["user_view"] = user_view(stage, folder / f"user_{name}", t,
-                                           args.repeats)
+                                           args.repeats, peer, name)
             rows[name] = t
             if not args.json:
                 _print(name, t)
@@ -516,6 +531,11 @@ def _print(name: str, t: dict) -> None:
               f"floor {u['usd_floor_cpu_seconds']:.2f} CPU s"
               + ("" if u["usd_floor_over_peer"] is None else
                  f", {u['usd_floor_over_peer']:.2f} of the peer's"))
+        if u.get("cpu_over_peer_process") is not None:
+            print(f"    the peer's whole process to {float(lv):.0%} "
+                  f"({u['peer_process_photons'] / 1e6:.2f}M photons) beside ours: "
+                  f"{u['peer_process_cpu_seconds']:.2f} CPU s; ours over it, the median of "
+                  f"the repeats' ratios: {u['cpu_over_peer_process']:.2f}")
     sys.stdout.flush()
 
 
