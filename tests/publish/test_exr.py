@@ -229,3 +229,27 @@ def test_latlong_copy(tmp_path):
     assert OpenEXR.File(str(single)).channels()["Y"].pixels.shape == (5, 10)
     with pytest.raises(OutputError):
         exr.write_latlong_exr(single, np.zeros((7, 2)))
+
+
+@pytest.mark.parametrize("name", ["a\0b", "x" * 256, "\ud800"])
+def test_a_channel_name_the_format_cannot_hold_is_refused_and_nothing_is_lost(tmp_path, name):
+    path = tmp_path / "lamp.intensity.exr"
+    exr.write_intensity_exr(path, make_channels(), METADATA)
+    before = path.read_bytes()
+    channels = make_channels(seed=2)
+    channels[name] = channels.pop("Y")
+    with pytest.raises(OutputError, match="OpenEXR name") as err:
+        exr.write_intensity_exr(path, channels, METADATA)
+    assert err.value.where == str(path)
+    assert path.read_bytes() == before
+    assert files_in(tmp_path) == ["lamp.intensity.exr"]
+
+
+def test_a_metadata_key_too_long_for_a_name_stays_in_the_json_alone(tmp_path):
+    path = tmp_path / "lamp.intensity.exr"
+    key = "k" * 250  # "lumitrace:" + key: 260 bytes, over OpenEXR's 255
+    exr.write_intensity_exr(path, make_channels(), {**METADATA, key: 1.5, "short": 2})
+    _, meta, header = exr.read_intensity_exr(path)
+    assert meta[key] == 1.5 and meta["short"] == 2
+    assert header["lumitrace:short"] == "2"
+    assert not any(k.endswith(key) for k in header)

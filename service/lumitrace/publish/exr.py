@@ -35,7 +35,7 @@ import numpy as np
 
 from ..film import cubemap
 from ..errors import LumitraceError, OutputError
-from .exr_writer import ENVMAP_CUBE, ENVMAP_LATLONG, write_scanline_exr
+from .exr_writer import ENVMAP_CUBE, ENVMAP_LATLONG, holds_name, write_scanline_exr
 
 #: Header attribute holding the metadata as a JSON object.
 METADATA_ATTRIBUTE = "lumitrace"
@@ -153,11 +153,14 @@ def _prepare_channels(path, channels: Mapping[str, Any],
 
 
 def _readable_attributes(metadata: Mapping[str, Any]) -> dict[str, str]:
+    """String copies of the scalar entries, where an OpenEXR attribute's name can hold the
+    key (the JSON attribute holds every entry)."""
     attrs = {}
     for key, value in metadata.items():
         if isinstance(value, (np.generic,)):
             value = value.item()
-        if isinstance(value, (str, bool, int, float)) and isinstance(key, str):
+        if isinstance(value, (str, bool, int, float)) and isinstance(key, str) \
+                and holds_name(READABLE_PREFIX + key):
             attrs[READABLE_PREFIX + key] = value if isinstance(value, str) else json.dumps(value)
     return attrs
 
@@ -168,7 +171,7 @@ def _write(path, strings: dict[str, str], channels: dict[str, np.ndarray],
         write_scanline_exr(path, channels, strings, envmap)
     except OutputError:
         raise
-    except OSError as exc:
+    except (OSError, ValueError) as exc:  # the file system; a name the format cannot hold
         raise OutputError(f"cannot write the OpenEXR file: {exc}", where=str(path)) from exc
 
 

@@ -23,6 +23,7 @@ _MAGIC = 20000630
 _TILED = 0x200  # version flag: a single-part tiled file
 _LONG_NAMES = 0x400  # version flag: an attribute's or a channel's name over 31 bytes
 _SHORT_NAME = 31
+_LONGEST_NAME = 255  # with the long-name flag
 _FLOAT = 2  # pixel type
 _ZIP = 3  # compression: zlib, 16 lines (a tile is one block)
 _ZIP_LINES = 16  # scanlines in a ZIP block
@@ -51,10 +52,25 @@ def _attribute(name: str, kind: str, value: bytes) -> bytes:
     return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
 
 
+def holds_name(name: str) -> bool:
+    """Whether an OpenEXR file can name a channel or an attribute ``name``."""
+    try:
+        size = len(name.encode())
+    except UnicodeEncodeError:
+        return False
+    return 0 < size <= _LONGEST_NAME and "\0" not in name
+
+
 def _header(names: list[str], width: int, height: int, strings: dict[str, str],
             envmap: int | None, tile: int | None = None) -> bytes:
     """The magic number, version and attributes of a single-part file of FLOAT channels
-    ``names`` (sorted), scanline or (``tile``) tiled and mip-mapped."""
+    ``names`` (sorted), scanline or (``tile``) tiled and mip-mapped. ValueError for a name
+    the format cannot hold."""
+    for n in [*names, *strings]:
+        if not holds_name(n):
+            raise ValueError(f"an OpenEXR name must be 1 to {_LONGEST_NAME} bytes of "
+                             f"UTF-8, without NUL: {n!r}")
+    sizes = [len(n.encode()) for n in [*names, *strings]]
     chlist = b"".join(n.encode() + b"\0" + struct.pack("<iB3xii", _FLOAT, 0, 1, 1)
                       for n in names) + b"\0"
     window = struct.pack("<4i", 0, 0, width - 1, height - 1)
@@ -72,8 +88,8 @@ def _header(names: list[str], width: int, height: int, strings: dict[str, str],
     if envmap is not None:
         attrs.append(_attribute("envmap", "envmap", bytes([envmap])))
     attrs += [_attribute(k, "string", v.encode()) for k, v in sorted(strings.items())]
-    long = max(len(n.encode()) for n in [*names, *strings]) > _SHORT_NAME
-    flags = (_TILED if tile is not None else 0) | (_LONG_NAMES if long else 0)
+    flags = (_TILED if tile is not None else 0) | (_LONG_NAMES if max(sizes) > _SHORT_NAME
+                                                    else 0)
     return struct.pack("<ii", _MAGIC, 2 | flags) + b"".join(attrs) + b"\0"
 
 
