@@ -33,6 +33,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "deliverables_cost.py": ("--photons", "20000", "--repeats", "1", "--no-pictures"),
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
                               "--reference-photons", "20000", "--thresholds", "1"),
+    "files_error_seeds.py": ("--seeds", "2", "--photons", "20000", "--scenes", "lambertian"),
     "generate_schema.py": ("--check",),
     "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
                          "--resolution", "8", "--threads", "1"),
