@@ -26,6 +26,7 @@ def main() -> int:
     # inherit it). A value the user set wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     _start_renderer(sys.argv)
+    gc.disable()  # from here until the command line is loaded (see _load_cli)
     method_cache = _load_early("method_cache")
     if method_cache is not None:
         method_cache.install()

@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
+from .loading import collector_paused
 from .pyplot import short_setter_docs
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
@@ -265,9 +266,13 @@ _QUIET = False
 def cmd_trace(args) -> int:
     global _QUIET
     _QUIET = bool(args.quiet)
-    from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
-    from .run.settings import TraceSettings, default_threads
-    from .stage.scene_cache import read_stage
+    with collector_paused():  # the command's modules, at once
+        from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
+        from .publish.outputs import claim_planned_outputs, write_outputs
+        from .run.session import run
+        from .run.settings import TraceSettings, default_threads
+        from .stage.scene_cache import read_stage
+        from .trace.compiled import note
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
@@ -299,17 +304,12 @@ def cmd_trace(args) -> int:
                 print(f"warning: {args.stage}: removed the stale lumitrace:result:* opinions "
                       f"on {prim} from its root layer", file=sys.stderr)
         refuse_hidden_results(args.stage)
-    from .publish.outputs import claim_planned_outputs
-
     claim_planned_outputs(scene, args.out)
     if args.frame is not None:
         args.frame.check_fits(scene)
     for w in () if args.quiet else scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     check_interrupted()
-    from .run.session import run
-    from .trace.compiled import note
-
     if note() and not args.quiet:
         print(f"note: {note()}", file=sys.stderr)
 
@@ -327,8 +327,6 @@ def cmd_trace(args) -> int:
         if bar is not None:
             bar.close()
     check_interrupted()
-    from .publish.outputs import write_outputs
-
     vouch = None
     if args.edits is None and not args.no_sublayer:  # the next run keeps its kept scene
         from .stage.scene_cache import vouch as keep_valid
