@@ -25,11 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from side_by_side import build, files_cell_means
+from side_by_side import build, grid_true_error
 
 from lumitrace.photometry.accuracy import grid_accuracy
 from lumitrace.photometry.distribution import C_STEP, photometry_of
-from lumitrace.photometry.measured import cell_solid_angle_grid
 from lumitrace.report.references import read_expectation
 from lumitrace.run.session import TraceSettings, run
 from lumitrace.stage.reader import read_stage
@@ -45,14 +44,9 @@ def seed_errors(stage: Path, seeds: int, photons: int, target: float | None) -> 
             TraceSettings(photons=photons, seed=seed)
         acc = run(scene, settings).accumulator
         grid = photometry_of(scene, acc).grid
-        full = grid.full()
-        ref = files_cell_means(expectation, scene.up_axis, full.c, full.gamma, grid.pole_caps)
-        omega = cell_solid_angle_grid(full.gamma, C_STEP)
-        true = math.sqrt(float((omega * (full.candela - ref) ** 2).sum())
-                         / float((omega * ref ** 2).sum()))
-        known = full.sigma > 0
-        z2 = float(np.mean(((full.candela - ref)[known] / full.sigma[known]) ** 2))
-        rows.append((acc.photons, grid_accuracy(grid, C_STEP).rms, true, z2))
+        true, z = grid_true_error(expectation, scene.up_axis, grid)
+        rows.append((acc.photons, grid_accuracy(grid, C_STEP).rms, true,
+                     float(np.nanmean(z ** 2))))
     a = np.array(rows)
     return {"seeds": seeds, "photons_median": float(np.median(a[:, 0])),
             "stated_mean": float(a[:, 1].mean()), "true_mean": float(a[:, 2].mean()),

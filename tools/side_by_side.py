@@ -373,12 +373,21 @@ def files_true_error(stage: Path, photometry_json: Path) -> float | None:
     doc = json.loads(photometry_json.read_text())
     grid = CGammaGrid(np.array(doc["c"]), np.array(doc["gamma"]), np.array(doc["candela"]),
                       doc["symmetry"], np.array(doc["sigma"]), tuple(doc["poleCaps_deg"]))
+    return grid_true_error(expectation, read_stage(stage).up_axis, grid)[0]
+
+
+def grid_true_error(expectation: dict, up_axis: str, grid) -> tuple[float, np.ndarray]:
+    """A published grid's true relative RMS error over the sphere against the closed
+    form's cell means, and each value's error over its standard error (NaN where it states
+    none)."""
     full = grid.full()
-    ref = files_cell_means(expectation, read_stage(stage).up_axis, full.c, full.gamma,
-                           grid.pole_caps)
+    ref = files_cell_means(expectation, up_axis, full.c, full.gamma, grid.pole_caps)
     omega = cell_solid_angle_grid(full.gamma, float(full.c[1] - full.c[0]))
-    return math.sqrt(float((omega * (full.candela - ref) ** 2).sum())
+    true = math.sqrt(float((omega * (full.candela - ref) ** 2).sum())
                      / float((omega * ref ** 2).sum()))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(full.sigma > 0, (full.candela - ref) / full.sigma, np.nan)
+    return true, z
 
 
 #: The least any USD tool pays to read a stage: Python with numpy and USD's schemas
