@@ -184,6 +184,61 @@ def test_a_save_landing_between_the_compare_and_the_swap_is_kept(dl, monkeypatch
     assert "@./dl.lumitrace.usda@" in text
 
 
+def _outputs(stage: Path) -> dict[str, bytes]:
+    """The bytes of every output of the stage's last run (the stage itself left out)."""
+    return {p.name: p.read_bytes() for p in stage.parent.iterdir()
+            if p.is_file() and p.name.startswith("dl.") and p.name != stage.name}
+
+
+@pytest.mark.parametrize("committed", [True, False])
+def test_a_run_beside_another_runs_commit_waits_for_it_and_a_foreign_edit_is_refused(
+        dl, committed):
+    """Another run of the stage holds the publishing lock and has replaced the map but not
+    yet its record: a run starting then waits for the lock rather than refusing (the
+    commit ends in a whole set, which it then takes over); where the holder leaves the map
+    changed (an edit, not a commit), it is refused as before, nothing replaced."""
+    import threading
+    import time
+
+    from lumitrace.publish.transaction import locked
+
+    assert trace(dl)[0] == 0
+    first = _outputs(dl)
+    assert trace(dl)[0] == 0
+    exr = dl.with_name("dl.intensity.exr")
+    assert exr.read_bytes() != first[exr.name]
+    held, release = threading.Event(), threading.Event()
+
+    def commit():
+        with locked([dl.parent], "dl"):
+            exr.write_bytes(first[exr.name])  # the map replaced, the record not yet
+            held.set()
+            release.wait(30)
+            if committed:  # the commit's end: the whole earlier set, record and all
+                for name, data in first.items():
+                    dl.with_name(name).write_bytes(data)
+
+    holder = threading.Thread(target=commit)
+    holder.start()
+    assert held.wait(30)
+    run = subprocess.Popen([sys.executable, "-m", "lumitrace", "trace", str(dl), "--photons",
+                            "40000", "--resolution", "16", "--no-progress", "--threads", "1",
+                            "--no-pictures"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    time.sleep(3.0)  # the run reads the stage and finds the map changed meanwhile
+    assert run.poll() is None  # waiting for the lock, not refused
+    release.set()
+    holder.join()
+    left = _outputs(dl)
+    _, err = run.communicate(timeout=300)
+    if committed:
+        assert run.returncode == 0, err
+        assert exr.read_bytes() != first[exr.name]  # its own map now
+    else:
+        assert run.returncode == 2 and "changed since lumitrace wrote it" in error_line(err)
+        assert _outputs(dl) == left  # nothing replaced
+
+
 # -- 5. moved and copied folders ---------------------------------------------------------
 
 def test_a_moved_folder_retraces_in_place_and_a_copy_as_its_own_stage(tmp_path):

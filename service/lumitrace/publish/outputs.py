@@ -141,11 +141,23 @@ def planned_outputs(scene, out_dir: str | os.PathLike | None, name: str | None =
 
 
 def claim_planned_outputs(scene, out_dir: str | os.PathLike | None,
-                          name: str | None = None) -> None:
+                          name: str | None = None, wait: float = DEFAULT_LOCK_WAIT) -> None:
     """Refuse, before any tracing, a run whose outputs would replace a file lumitrace did
-    not write for this stage or one the stage reads (see :mod:`.ownership`)."""
-    stage_path, _, paths = planned_outputs(scene, out_dir, name)
-    claim_outputs(stage_path, paths, scene.input_files())
+    not write for this stage or one the stage reads (see :mod:`.ownership`). A refusal is
+    checked again under the publishing lock, after an interrupted commit is finished, as
+    the write checks: another run of the stage may be committing, its files and their
+    record replaced one after another, and only the lock's holder may do that."""
+    stage_path, name, paths = planned_outputs(scene, out_dir, name)
+    try:
+        claim_outputs(stage_path, paths, scene.input_files())
+    except OutputError:
+        folders = [paths["result_layer"].parent]
+        if not folders[0].is_dir():
+            raise
+        with locked(folders, name, wait):
+            for note in recover(folders, name, [p.name for p in paths.values()]):
+                warn(note, OutputWarning)
+            claim_outputs(stage_path, paths, scene.input_files())
 
 
 def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
