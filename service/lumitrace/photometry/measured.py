@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -83,6 +84,11 @@ def planes_kept(symmetry: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     if symmetry == "C90-C270":
         rep = np.where((i >= n // 4) & (i <= 3 * n // 4), i, (n // 2 - i) % n)
         return rep, np.arange(n // 4, 3 * n // 4 + 1)
+    if symmetry == "octant":  # quadrant, and C alike with 90 - C: planes 0 .. 45 deg
+        if n % 8:
+            raise ValueError(f"{n} planes do not fold into octants")
+        quad = np.where(c0 <= n // 4, c0, n // 2 - c0)
+        return np.where(quad <= n // 8, quad, n // 4 - quad), np.arange(n // 8 + 1)
     raise ValueError(f"unknown symmetry {symmetry!r}")
 
 
@@ -291,40 +297,126 @@ def cell_solid_angle_grid(gammas: np.ndarray, c_step: float) -> np.ndarray:
     return _blocks(float(c_step), tuple(map(float, gammas)))[3]
 
 
+def departure(base: CGammaGrid, reduced: CGammaGrid, c_step: float, margin: float = 3.0
+              ) -> tuple[float, float, float]:
+    """The distribution's relative RMS departure from ``reduced``'s symmetry, estimated
+    from ``base`` (a grid of a weaker symmetry, all planes where it is "none"), the photon
+    noise taken out: sqrt(sum dOmega ((I - I_sym)^2 - noise) / sum dOmega I^2) over the
+    base's cells (the poles, which are directions, left out), with ``margin`` standard
+    deviations of that sum taken off and added: (estimate, lower bound, upper bound). A
+    base of a symmetry the scene is known to have averages its mirror images first, which
+    leaves less noise to take out."""
+    n = int(round(360.0 / c_step))
+    rep_b, kept_b = planes_kept(base.symmetry, n)
+    folded = np.bincount(rep_b, minlength=n)[kept_b]  # planes averaged into each base plane
+    omega = cell_solid_angle_grid(base.gamma, c_step)[kept_b] * folded[:, None]
+    i, s = base.candela[:len(kept_b)], base.sigma[:len(kept_b)]
+    rep_s, kept_s = planes_kept(reduced.symmetry, n)
+    slot = np.full(n, -1, np.int64)
+    slot[kept_s] = np.arange(len(kept_s))
+    group = slot[rep_s[kept_b]]  # the reduced plane each base plane is averaged into
+    mean = reduced.candela[group]
+    group_omega = np.zeros((len(kept_s), omega.shape[1]))
+    np.add.at(group_omega, group, omega)
+    group_omega = np.maximum(group_omega[group], 1e-300)
+    var_mean = np.zeros((len(kept_s), omega.shape[1]))
+    np.add.at(var_mean, group, (omega * s) ** 2)
+    var_mean = var_mean[group] / group_omega ** 2
+    noise = s ** 2 * (1.0 - 2.0 * omega / group_omega) + var_mean
+    inner = slice(1, -1)  # the poles are one direction: the same in every plane
+    num = float((omega * ((i - mean) ** 2 - noise))[:, inner].sum())
+    spread = margin * float(np.sqrt(2.0 * ((omega * noise)[:, inner] ** 2).sum()))
+    den = float((omega * i ** 2).sum())
+    if den <= 0:
+        return 0.0, 0.0, 0.0
+    return tuple(math.sqrt(max(x, 0.0) / den) for x in (num, num - spread, num + spread))
+
+
 def asymmetry(full: CGammaGrid, reduced: CGammaGrid, c_step: float,
               margin: float = 0.0) -> float:
     """Estimated true relative RMS departure of the distribution from ``reduced``'s
-    symmetry, the photon noise taken out: sqrt(max(0, sum dOmega ((I - I_sym)^2 -
-    noise)) / sum dOmega I^2), ``full`` being the grid without symmetry. ``margin``
-    standard deviations of that sum are taken off first: a lower confidence bound."""
+    symmetry (:func:`departure` from ``full``); ``margin`` standard deviations of the sum
+    taken off first: a lower confidence bound."""
+    return departure(full, reduced, c_step, margin)[1]
+
+
+#: What each symmetry maps onto itself under: reflections across the C0-C180 plane ("y")
+#: and the C90-C270 plane ("x"), and every rotation about the vertical axis ("r").
+GENERATORS = {"none": frozenset(), "C0-C180": frozenset("y"), "C90-C270": frozenset("x"),
+              "quadrant": frozenset("xy"), "octant": frozenset("xy4"),
+              "rotational": frozenset("xy4r")}
+#: How a symmetry was chosen: declared on the stage, shown by the geometry, shown by the
+#: counts (the upper bound of the departure within the tolerance), or none shown.
+SOURCES = ("declared", "geometry", "measured", "none")
+
+
+@dataclass(frozen=True)
+class SymmetryChoice:
+    """The symmetry the files are averaged over and why (:data:`SOURCES`); ``settled``:
+    no stronger symmetry could still be shown by more photons (each one's departure is
+    shown above the tolerance by its lower bound); ``departures``: per symmetry tried,
+    (estimate, lower, upper bound) of the relative RMS departure; ``known``: the symmetry
+    declared or shown by the geometry that the counts started from."""
+
+    name: str
+    source: str
+    settled: bool
+    departures: dict
+    known: str = "none"
+    #: a declared symmetry the counts show a departure from (its lower bound above the
+    #: tolerance)
+    contradicted: bool = False
+
+    @property
+    def files(self) -> str:
+        """The symmetry the files are written with (an octant as its quadrant)."""
+        return "quadrant" if self.name == "octant" else self.name
+
+    def describe(self) -> str:
+        """One line: the symmetry and why, as the files' headers and the summary say it."""
+        why = {"declared": "declared on the stage", "geometry": "shown by the geometry",
+               "measured": "shown by the photon counts", "none": "none shown"}[self.source]
+        extra = " and the 90 deg rotation" if self.name == "octant" else ""
+        return f"{self.files}{extra} ({why})"
+
+
+def symmetric_grid(acc: Accumulator, gammas: np.ndarray, c_step: float, tolerance: float,
+                   known: str = "none", declared: bool = False
+                   ) -> tuple[CGammaGrid, tuple[CGammaGrid, CGammaGrid], SymmetryChoice]:
+    """The files' grid, averaged on the counts over the symmetry chosen so: a ``declared``
+    one as declared; else the ``known`` one (shown by the geometry), or a stronger one
+    where the counts show it: the upper bound (3 sigma) of the departure from it, measured
+    from the known one's grid, within ``tolerance`` (relative RMS). Never a symmetry from
+    a lack of evidence. Returns the grid, the same grid from each half of the photons, and
+    the choice. An octant (a square luminaire) is written as its quadrant."""
+    stronger = [name for name in CANDIDATES if GENERATORS[known] < GENERATORS[name]]
+    grids = measure_all(acc, gammas, c_step, tuple(dict.fromkeys(("none", known, *stronger))))
+    bounds = {name: departure(grids[known, None], grids[name, None], c_step)
+              for name in stronger}
+    if declared:
+        against = departure(grids["none", None], grids[known, None], c_step) \
+            if known != "none" else (0.0, 0.0, 0.0)
+        choice = SymmetryChoice(known, "declared", True, bounds, known,
+                                contradicted=against[1] > tolerance)
+    else:
+        shown = [name for name in stronger if bounds[name][2] <= tolerance]
+        name = shown[0] if shown else known
+        source = "measured" if shown else ("geometry" if known != "none" else "none")
+        # still open: a symmetry not implied by the chosen one whose bounds straddle
+        open_ = [other for other in stronger if not GENERATORS[other] <= GENERATORS[name]
+                 and bounds[other][1] <= tolerance]
+        choice = SymmetryChoice(name, source, not open_, bounds, known)
+    picked = [grids[choice.name, h] for h in HALVES]
+    if choice.name == "octant":
+        picked = [_quadrant_of_octant(g, c_step) for g in picked]
+    return picked[0], (picked[1], picked[2]), choice
+
+
+def _quadrant_of_octant(grid: CGammaGrid, c_step: float) -> CGammaGrid:
+    """An octant's grid (planes 0 .. 45 deg) on a quadrant's planes (0 .. 90 deg), each
+    plane C > 45 deg the plane 90 - C."""
     n = int(round(360.0 / c_step))
-    omega = cell_solid_angle_grid(full.gamma, c_step)
-    i, s = full.candela[:n], full.sigma[:n]
-    mean = _unfolded(reduced, reduced.candela, n)
-    rep, _ = planes_kept(reduced.symmetry, n)
-    # omega of each cell's group: the sum over the planes folded into the same kept plane
-    group_omega = np.zeros_like(omega)
-    np.add.at(group_omega, rep, omega)
-    group_omega = group_omega[rep]
-    var_mean = np.zeros_like(omega)
-    np.add.at(var_mean, rep, (omega * s) ** 2)
-    var_mean = var_mean[rep] / np.maximum(group_omega, 1e-300) ** 2
-    noise = s ** 2 * (1.0 - 2.0 * omega / np.maximum(group_omega, 1e-300)) + var_mean
-    num = float((omega * ((i - mean) ** 2 - noise)).sum())
-    num -= margin * float(np.sqrt(2.0 * ((omega * noise) ** 2).sum()))
-    den = float((omega * i ** 2).sum())
-    return float(np.sqrt(max(num, 0.0) / den)) if den > 0 else 0.0
-
-
-def symmetric_grid(acc: Accumulator, gammas: np.ndarray, c_step: float, tolerance: float
-                   ) -> tuple[CGammaGrid, tuple[CGammaGrid, CGammaGrid], dict[str, float]]:
-    """The grid of the strongest symmetry the counts do not show a departure from larger
-    than ``tolerance`` (relative RMS; :func:`asymmetry` at a 3 sigma lower bound), averaged
-    on the counts; the full grid when there is none. Returns it, the same grid from each
-    half of the photons, and every candidate's estimated departure."""
-    grids = measure_all(acc, gammas, c_step)
-    full = grids["none", None]
-    departures = {name: asymmetry(full, grids[name, None], c_step) for name in CANDIDATES}
-    chosen = next((name for name in CANDIDATES
-                   if asymmetry(full, grids[name, None], c_step, 3.0) <= tolerance), "none")
-    return grids[chosen, None], (grids[chosen, 0], grids[chosen, 1]), departures
+    k = np.arange(n // 4 + 1)
+    src = np.where(k <= n // 8, k, n // 4 - k)
+    return replace(grid, c=k * c_step, candela=grid.candela[src],
+                   sigma=None if grid.sigma is None else grid.sigma[src], symmetry="quadrant")

@@ -45,8 +45,12 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
         "runId": run_id,
         "units": {"c": "deg", "gamma": "deg", "candela": "cd", "sigma": "cd"},
         "symmetry": g.symmetry,
+        "symmetrySource": ph.symmetry.source,
+        "symmetrySettled": ph.symmetry.settled,
+        "symmetryAveraged": ph.symmetry.name,
         "poleCaps_deg": None if g.pole_caps is None else list(g.pole_caps),
-        "symmetryDepartures": ph.departures,
+        "symmetryDepartures": {name: {"estimate": b[0], "lower": b[1], "upper": b[2]}
+                               for name, b in ph.symmetry.departures.items()},
         "c": g.c.tolist(), "gamma": g.gamma.tolist(),
         "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
         "figures": {k: defined(v) for k, v in ph.figures.as_dict().items()},
@@ -80,7 +84,7 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
                                "from photon counts, relative RMS standard error "
                                f"{'n/a' if err is None else f'{err:.2%}'} (per value in "
                                f"{paths['photometry_data'].name}); "
-                               f"symmetry {grid.symmetry}",
+                               f"symmetry {ph.symmetry.describe()}",
                 "_LUMITRACE_RUN": run_id}
     if cct_K is not None:
         keywords["_CCT"] = f"{cct_K:.0f} K"
@@ -103,7 +107,7 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
               fig.downward_flux_fraction, fig.light_output_ratio,
               company=info.manufacturer or "lumitrace",
-              report=f"lumitrace {name} run {run_id}".strip(),
+              report=f"lumitrace {name} run {run_id}; symmetry {ph.symmetry.source}",
               number=info.catalogue_number, file_name=paths["ldt"].name,
               lamp_type=info.lamp or "lumitrace emitters",
               colour="" if cct_K is None else f"{cct_K:.0f} K",

@@ -254,7 +254,49 @@ class _Reader:
             layer_files=tuple(sorted(layer.realPath for layer in self.stage.GetUsedLayers()
                                      if layer.realPath)),  # (USD's order is a set's)
             info=self._luminaire_info(root),
+            declared_symmetry=self._declared_symmetry(root),
+            declared_opening=self._declared_opening(root),
         )
+
+    def _authored(self, prim: Usd.Prim, name: str):
+        """An attribute's authored value at the reading time, or None."""
+        attr = prim.GetAttribute(name)
+        return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+
+    def _declared_symmetry(self, root: Usd.Prim) -> str:
+        """The symmetry declared on the luminaire prim ("" where none is: auto)."""
+        value = self._authored(root, schema.SYMMETRY)
+        if value is None:
+            return ""
+        value = validate.check_token(value, schema.SYMMETRY_TOKENS, str(root.GetPath()),
+                                     schema.SYMMETRY)
+        return "" if value == "auto" else value
+
+    def _declared_opening(self, root: Usd.Prim) -> tuple:
+        """A declared luminous opening: (shape, (length, width, height) in m), or ()."""
+        where = str(root.GetPath())
+        shape = self._authored(root, schema.OPENING_SHAPE)
+        size = self._authored(root, schema.OPENING_SIZE)
+        if shape is not None:
+            shape = validate.check_token(shape, schema.OPENING_SHAPES, where,
+                                         schema.OPENING_SHAPE)
+        if shape in (None, "measured"):
+            return ()
+        if size is None:
+            raise StageError(f"{schema.OPENING_SHAPE} is {shape!r}: author its size "
+                             "(length, width, height in stage units)", where,
+                             schema.OPENING_SIZE)
+        values = validate.check_array(size, where, schema.OPENING_SIZE)
+        if values.shape != (3,) or not np.all(np.isfinite(values)) or np.any(values < 0) \
+                or np.any(values[:2] <= 0):
+            raise StageError("must be (length, width, height), length and width above 0 "
+                             f"and height at least 0, got {tuple(values.tolist())}", where,
+                             schema.OPENING_SIZE)
+        if shape == "round" and values[0] != values[1]:
+            raise StageError("a round opening has one diameter: length and width must be "
+                             f"equal, got {values[0]:g} and {values[1]:g}", where,
+                             schema.OPENING_SIZE)
+        return shape, tuple(float(v) * self.meters_per_unit for v in values)
 
     def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
         """The luminaire's own data (manufacturer, names, lamp, power, colour rendering),
