@@ -249,6 +249,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "nadir (negative toward C180): more than two where the profile has a shoulder"),
     _f("beam_crossings_c90_c270", "list", "deg", group="photometry",
        doc="every crossing of the beam's 50% level in the C90-C270 plane"),
+    _f("spread_notes", "table", "", group="photometry",
+       doc="why a beam or field angle is undefined, by its key (absent: all defined)"),
     _f("cie_flux_code", "string", "", "cieFluxCode", group="photometry",
        doc="CIE flux code N1 N2 N3 N4 N5"),
     _f("cie_flux_code_values", "list", "%", group="photometry",

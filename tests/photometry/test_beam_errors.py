@@ -48,7 +48,7 @@ def test_stated_errors_match_the_spread_of_symmetric_grids(monkeypatch):
         top = Peak(PEAK + 0.5 * rng.standard_normal(), 0.5, 0.0, 0.0)
         spreads = plane_spreads(grid, (grid, grid), rng, top, planes=(0.0,))
         for f in (0.5, 0.1):
-            angle, err, _ = spreads[0.0, f]
+            angle, err, _, _ = spreads[0.0, f]
             angles[f].append(angle)
             errors[f].append(err)
     for f, want in ((0.5, 120.0), (0.1, 2.0 * np.degrees(np.arccos(0.1)))):
