@@ -274,7 +274,18 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "parts, materials and emitters map onto themselves), measured (the counts' "
            "departure from it within 1% RMS at its upper bound) or none (none shown)"),
     _f("luminous_opening", "vector", "m", group="photometry",
-       doc="luminous length (C0), width (C90) and height of the opening"),
+       doc="luminous length (C0), width (C90) and height of the opening (0 where none is "
+           "meaningful)"),
+    _f("luminous_opening_error", "vector", "m", group="photometry",
+       doc="standard errors of the luminous length, width and height (0: declared)"),
+    _f("luminous_opening_shape", "string", "", group="photometry",
+       doc="round (an ellipse, a circle where length equals width) or rectangular"),
+    _f("luminous_opening_source", "string", "", group="photometry",
+       doc="measured (from where the photons leave the luminaire), declared "
+           "(lumitrace:luminousOpening) or none (no opening is meaningful: the luminance and "
+           "UGR tables are not applicable)"),
+    _f("luminous_opening_note", "string", "", group="photometry",
+       doc="what the opening was measured from, or why none is meaningful"),
     _f("colour_data", "asset", attribute="colourData", group="outputs",
        doc="colour over angle: X, Y, Z, u'v', CCT and Duv per C-gamma cell (JSON)"),
     _f("colour_diagram", "asset", attribute="colourDiagram", group="outputs",

@@ -5,17 +5,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import math
-
 import numpy as np
 
 from ..film.accumulate import Accumulator
-from ..film.goniometer import (EXIT_SIDE, FACE_AXES, FACES, GAMMA_EDGES, N_CELLS, N_EXIT,
-                               N_GAMMA, cell_solid_angles)
+from ..film.goniometer import GAMMA_EDGES, N_GAMMA, cell_solid_angles
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
 from .accuracy import FilesAccuracy, grid_accuracy
 from .measured import SymmetryChoice, emitter_rings, symmetric_grid
+from .opening import LuminousOpening, luminous_opening, opening_of_exits  # noqa: F401
 from .quantities import PhotometricFigures, figures, scaled_figures
 
 #: A symmetry the geometry does not show is used where the counts show the departure from
@@ -24,136 +22,6 @@ from .quantities import PhotometricFigures, figures, scaled_figures
 SYMMETRY_TOLERANCE = 0.01
 #: C step (deg) of the published grid.
 C_STEP = 5.0
-#: Share of the exiting flux left out at each end of the opening's extent (its edges are
-#: where all but this much of the light has left).
-OPENING_TAIL = 0.001
-#: Below this share of the escaping flux, the sides of the box have no luminous height.
-SIDE_SHARE = 0.01
-
-
-@dataclass(frozen=True)
-class LuminousOpening:
-    """Luminous dimensions (m) in the photometric frame, along C0, along C90 and vertical,
-    and the opening's centre (m, photometric-frame coordinates): measured from where
-    escaping photons cross the luminaire's bounding box."""
-
-    length: float
-    width: float
-    height: float
-    centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    #: the opening is round (a circle where length equals width, else an ellipse): the
-    #: light leaves its face within the ellipse inscribed in the extents
-    round: bool = False
-    #: the luminaire's own extents (m) along C0, C90 and vertical (its bounding box)
-    box: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @property
-    def area(self) -> float:
-        """The luminous area (m^2) of the flat opening: an ellipse's or a rectangle's."""
-        return (math.pi / 4.0 if self.round else 1.0) * self.length * self.width
-
-
-def _extent(marginal: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
-    """(start, end) between which all but :data:`OPENING_TAIL` of a binned distribution
-    (``marginal`` over ``lo`` .. ``hi``) lies at each end, linear within bins."""
-    total = float(marginal.sum())
-    if total <= 0 or hi <= lo:
-        return lo, hi
-    cum = np.concatenate([[0.0], np.cumsum(marginal)]) / total
-    edges = np.linspace(lo, hi, len(marginal) + 1)
-    return (float(np.interp(OPENING_TAIL, cum, edges)),
-            float(np.interp(1.0 - OPENING_TAIL, cum, edges)))
-
-
-#: A flat opening is round when at most this share of the light leaving its face leaves
-#: through bins wholly outside the ellipse inscribed in its extents (a square opening sends
-#: about a fifth of its light through the corners; the bins' size blurs a circle's edge).
-ROUND_OPENING_OUTSIDE = 0.02
-
-
-def luminous_opening(acc: Accumulator) -> LuminousOpening:
-    """The luminous opening from the goniophotometer's exit bins: length and width are the
-    extents (along C0, C90) of the crossings of the box's bottom face (its top face for a
-    luminaire that sends more light up), the height the vertical extent of the crossings
-    of its sides, 0 where they carry less than :data:`SIDE_SHARE` of the flux (LM-63's flat
-    opening)."""
-    g = acc.goniometer
-    flux = np.zeros(N_EXIT)
-    for w, _, values, idx in acc.emitter_cells():
-        if idx is None:
-            flux += w * values[N_CELLS:]
-        else:
-            keep = idx >= N_CELLS
-            flux[idx[keep] - N_CELLS] += w * values[keep]
-    return opening_of_faces(flux.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE), g.lo, g.hi)
-
-
-def opening_of_exits(positions: np.ndarray, flux: np.ndarray, lo, hi) -> LuminousOpening:
-    """The luminous opening of exit rays (``positions`` (N, 3) on the box ``lo``, ``hi``,
-    m in the photometric frame, ``flux`` lm each), binned on the box's faces as the
-    goniophotometer bins them and measured by the same rule as :func:`luminous_opening`."""
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    p = np.asarray(positions, np.float64)
-    # distance to each face's plane, in FACES' order: bottom, top, -C0, +C0, -C90, +C90
-    gap = np.abs(np.stack([p[:, 2] - lo[2], p[:, 2] - hi[2], p[:, 0] - lo[0],
-                           p[:, 0] - hi[0], p[:, 1] - lo[1], p[:, 1] - hi[1]], axis=1))
-    face = np.argmin(gap, axis=1)
-    axes = np.array(FACE_AXES)[face]
-    span = np.maximum(hi - lo, 1e-12)
-    rel = (p - lo) / span
-    rows = np.arange(len(p))
-    col = np.clip((rel[rows, axes[:, 0]] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
-    row = np.clip((rel[rows, axes[:, 1]] * EXIT_SIDE).astype(np.int64), 0, EXIT_SIDE - 1)
-    binned = np.bincount((face * EXIT_SIDE + row) * EXIT_SIDE + col,
-                         np.asarray(flux, np.float64), N_EXIT)
-    return opening_of_faces(binned.reshape(len(FACES), EXIT_SIDE, EXIT_SIDE), lo, hi)
-
-
-def opening_of_faces(flux: np.ndarray, lo, hi) -> LuminousOpening:
-    """The luminous opening from the exit flux per face bin (``flux`` (faces, rows, cols) in
-    :data:`~lumitrace.film.goniometer.FACES`' order) of the box ``lo``, ``hi`` (m)."""
-    lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
-    box = tuple(float(x) for x in hi - lo)
-    total = float(flux.sum())
-    if total <= 0:
-        return LuminousOpening(*(hi - lo), tuple(0.5 * (lo + hi)), box=box)
-    face = 0 if flux[0].sum() >= flux[1].sum() else 1
-    level = lo[2] if face == 0 else hi[2]
-    f = flux[face]  # rows along C90, columns along C0
-    if f.sum() < SIDE_SHARE * total:  # next to nothing leaves through top or bottom
-        a0, b0, a1, b1 = lo[0], hi[0], lo[1], hi[1]
-    else:
-        a0, b0 = _extent(f.sum(axis=0), lo[0], hi[0])
-        a1, b1 = _extent(f.sum(axis=1), lo[1], hi[1])
-    sides = flux[2:]
-    height = 0.0
-    if sides.sum() >= SIDE_SHARE * total:
-        a2, b2 = _extent(sides.sum(axis=(0, 2)), lo[2], hi[2])
-        height = b2 - a2
-    round_ = f.sum() >= SIDE_SHARE * total and \
-        _outside_ellipse(f, (a0, b0, a1, b1), lo, hi) <= ROUND_OPENING_OUTSIDE
-    return LuminousOpening(b0 - a0, b1 - a1, height, (0.5 * (a0 + b0), 0.5 * (a1 + b1), level),
-                           round=bool(round_), box=box)
-
-
-def _outside_ellipse(face: np.ndarray, extents, lo, hi) -> float:
-    """Share of a face's exit flux (bins: rows along C90, columns along C0) whose bin lies
-    wholly outside the ellipse inscribed in ``extents`` (a0, b0, a1, b1)."""
-    a0, b0, a1, b1 = extents
-    n = face.shape[0]
-    e0, e1 = np.linspace(lo[0], hi[0], n + 1), np.linspace(lo[1], hi[1], n + 1)
-    c0, r0 = 0.5 * (a0 + b0), 0.5 * (b0 - a0)
-    c1, r1 = 0.5 * (a1 + b1), 0.5 * (b1 - a1)
-    if r0 <= 0 or r1 <= 0:
-        return 1.0
-    # the bin's point nearest the ellipse's centre
-    near0 = np.clip(c0, e0[:-1], e0[1:])
-    near1 = np.clip(c1, e1[:-1], e1[1:])
-    outside = ((near1[:, None] - c1) / r1) ** 2 + ((near0[None, :] - c0) / r0) ** 2 > 1.0
-    total = float(face.sum())
-    return float(face[outside].sum()) / total if total > 0 else 1.0
-
-
 @dataclass(frozen=True)
 class Photometry:
     """The photometric description of a result: the published C-gamma grid (reduced to the
@@ -200,24 +68,29 @@ def beam_half_width(rings: list[tuple[float, float, np.ndarray]]) -> float | Non
     return float(0.5 * (k + below[0])) if below.size else None
 
 
-def photometry_of(scene: Scene, acc: Accumulator) -> Photometry:
+def photometry_of(scene: Scene, acc: Accumulator, seed: int = 0) -> Photometry:
     """Measure the photometry of a session's counts: a grid of C every :data:`C_STEP` deg
     and gamma every 2.5 deg (0.5 deg within three half-widths of a beam narrower than 15
     deg half-width, see :func:`~lumitrace.photometry.grid.default_gammas`). The same
     counts with every light's flux times one factor (a flux-only edit) give the last
     photometry scaled: intensities, fluxes and their errors by the factor, every ratio,
-    angle and relative error as it was."""
+    angle and relative error as it was. The luminous opening is the stage's declared one,
+    or measured from the exits of the run's first photons with ``seed`` (its seed)
+    (:func:`~lumitrace.photometry.opening.luminous_opening`)."""
     last = _LAST[0] if _LAST else None
-    if last is not None and last[0] == _light_key(acc):
+    # the same counts: the same photons through the same parts, hence the same opening
+    # (declared the same way)
+    if last is not None and last[0] == _light_key(acc) and last[3] == scene.declared_opening:
         k = _common_factor(last[1], [t.flux for t in acc.emitters])
         if k is not None:
             return _scaled(last[2], k, scene.total_flux)
-    ph = _measured(scene, acc)
-    _LAST[:] = [(_light_key(acc), [t.flux for t in acc.emitters], ph)]
+    ph = _measured(scene, acc, seed)
+    _LAST[:] = [(_light_key(acc), [t.flux for t in acc.emitters], ph, scene.declared_opening)]
     return ph
 
 
-#: The last photometry measured: (counts and lights' colours, lights' fluxes, photometry).
+#: The last photometry measured: (counts and lights' colours, lights' fluxes, photometry,
+#: the opening the scene declared).
 _LAST: list[tuple] = []
 
 
@@ -241,12 +114,13 @@ def _scaled(ph: Photometry, k: float, lamp_flux: float) -> Photometry:
     return replace(ph, grid=grid, figures=figures, lamp_flux=lamp_flux)
 
 
-def _measured(scene: Scene, acc: Accumulator) -> Photometry:
+def _measured(scene: Scene, acc: Accumulator, seed: int = 0) -> Photometry:
     rings = emitter_rings(acc)
     half_width = beam_half_width(rings)
     grid, halves, choice = _files_grid(scene, acc, default_gammas(half_width))
     fig = figures(acc, grid, halves, C_STEP, rings, half_width)
-    return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, choice)
+    return Photometry(grid, fig, luminous_opening(scene, acc.photons, seed),
+                      scene.total_flux, choice)
 
 
 def known_symmetry(scene: Scene) -> tuple[str, bool]:

@@ -5,12 +5,13 @@ the limits of EN 12464-1 for work at display screens stated against it.
 The projected area seen from (C, gamma) is the flat face's area times |cos gamma| plus the
 sides' (height times the opening's extent across the view) times sin gamma, the model of
 the EULUMDAT luminous dimensions: length along C0, width along C90, a round opening an
-ellipse inscribed in them. The area is taken as exact (the opening is measured from where
-the photons leave the luminaire); the errors are the intensities' photon noise.
+ellipse inscribed in them. The errors are the intensities' photon noise and the measured
+opening's (its dimensions' standard errors), added in quadrature; a declared opening is
+exact.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,6 +38,19 @@ def projected_area(opening, c_deg, gamma_deg) -> np.ndarray:
     else:  # the faces normal to C0 (width wide) and to C90 (length wide)
         across = width * np.abs(np.cos(c)) + length * np.abs(np.sin(c))
     return opening.area * np.abs(np.cos(g)) + height * across * np.sin(g)
+
+
+def projected_area_error(opening, c_deg, gamma_deg) -> np.ndarray:
+    """Standard error (m^2) of :func:`projected_area` from the opening's dimensions'
+    standard errors (``opening.error``: length, width, height), each independent."""
+    base = projected_area(opening, c_deg, gamma_deg)
+    errors = getattr(opening, "error", (0.0, 0.0, 0.0))
+    var = np.zeros_like(base)
+    for name, e in zip(("length", "width", "height"), errors):
+        if e:
+            moved = replace(opening, **{name: getattr(opening, name) + e})
+            var = var + (projected_area(moved, c_deg, gamma_deg) - base) ** 2
+    return np.sqrt(var)
 
 
 def taps(grid: CGammaGrid, c_deg, gamma_deg) -> tuple[np.ndarray, np.ndarray]:
@@ -115,15 +129,20 @@ def luminance_table(grid: CGammaGrid, opening, c=TABLE_C, gamma=TABLE_GAMMA
     cc, gg = np.meshgrid(np.asarray(c, np.float64), np.asarray(gamma, np.float64),
                          indexing="ij")
     area = projected_area(opening, cc, gg)
+    area_rel = projected_area_error(opening, cc, gg)
     with np.errstate(divide="ignore", invalid="ignore"):
+        area_rel = area_rel / area
         lum = sample(grid, cc, gg).reshape(cc.shape) / area
-        sig = sample(grid, cc, gg, sigma=True).reshape(cc.shape) / area
+        sig = np.hypot(sample(grid, cc, gg, sigma=True).reshape(cc.shape) / area,
+                       lum * area_rel)
     full = grid.full()
     keep = (full.gamma >= SCREEN_GAMMA[0] - 1e-9) & (full.gamma <= SCREEN_GAMMA[1] + 1e-9)
     fc, fg = np.meshgrid(full.c, full.gamma[keep], indexing="ij")
     with np.errstate(divide="ignore", invalid="ignore"):
-        screen = full.candela[:, keep] / projected_area(opening, fc, fg)
-        screen_sig = full.sigma[:, keep] / projected_area(opening, fc, fg)
+        screen_area = projected_area(opening, fc, fg)
+        screen = full.candela[:, keep] / screen_area
+        screen_sig = np.hypot(full.sigma[:, keep] / screen_area, screen * projected_area_error(
+            opening, fc, fg) / screen_area)
     screen = np.where(np.isfinite(screen), screen, 0.0)
     k = np.unravel_index(int(np.argmax(screen)), screen.shape)
     return LuminanceTable(cc[:, 0], gg[0], lum, sig, float(screen[k]), float(screen_sig[k]),

@@ -14,10 +14,12 @@ from .ugr import ugr_table
 def application_figures(ph, acc: Accumulator) -> dict:
     """The record's UGR, luminance, BUG and illuminance fields of a
     :class:`~lumitrace.photometry.distribution.Photometry` and its counts; the UGR and
-    luminance fields are None where the opening has no area or no light leaves."""
+    luminance fields are None (not applicable) where no opening is meaningful
+    (:attr:`~lumitrace.photometry.opening.LuminousOpening.meaningful`) or no light
+    leaves."""
     out = {**bug_rating(acc).as_dict(), "cone_diagram": cone_diagram(ph.grid, ph.figures),
            "isolux": isolux(ph.grid)}
-    if (ph.opening.area > 0 or ph.opening.height > 0) and ph.figures.luminous_flux > 0:
+    if ph.opening.meaningful and ph.figures.luminous_flux > 0:
         out.update(ugr_table(ph.grid, ph.opening).as_dict())
         out.update(luminance_table(ph.grid, ph.opening).as_dict())
     return out

@@ -21,13 +21,14 @@ the walls, the upward flux on the ceiling. Errors: the grid's standard errors pr
 to first order (each value the grid holds independent, its mirror images and the poles'
 shared values moving together): UGR is a smooth function of the grid, and at the errors a
 result carries its second-order terms are far below the first (a bootstrap of 400
-redraws agrees, ``tests/photometry/test_ugr.py``). UGR does not depend on H; H = 2 m.
+redraws agrees, ``tests/photometry/test_ugr.py``); a measured opening's errors are added
+in quadrature. UGR does not depend on H; H = 2 m.
 """
 from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -233,8 +234,15 @@ def ugr_table(grid: CGammaGrid, opening) -> UgrTable:
     from the grid's."""
     model = _model(grid, opening)
     full = grid.full()
-    cross, end = model.evaluate(full.candela.reshape(1, -1))
+    values = full.candela.reshape(1, -1)
+    cross, end = model.evaluate(values)
     err = _propagated(grid, *model.gradient(full.candela.ravel()))
+    # the measured opening's own errors (each dimension's), added in quadrature
+    for name, e in zip(("length", "width", "height"), getattr(opening, "error", ())):
+        if e:
+            moved = _model(grid, replace(opening, **{name: getattr(opening, name) + e}))
+            c2, e2 = moved.evaluate(values)
+            err = np.sqrt(err ** 2 + np.stack([c2[0] - cross[0], e2[0] - end[0]], axis=1) ** 2)
     bad = ~np.isfinite(np.stack([cross[0], end[0]], axis=1)) | ~np.isfinite(err)
     err = np.where(bad, np.nan, err)
     return UgrTable(cross[0], end[0], err[:, 0], err[:, 1])

@@ -108,15 +108,33 @@ def main_figures(record: Mapping, info) -> Section:
             pm(v, e) for v, e in zip(values[:3], (errors or [None] * 5)[:3])))])
     rows.append([Cell("Downward flux fraction"),
                  figure(r, "downward_flux_fraction", "%", 100.0)])
-    opening = r.get("luminous_opening")
-    if opening:
-        rows.append([Cell("Luminous opening (mm)"),
-                     Cell(" x ".join(f"{1000 * x:.1f}" for x in opening))])
+    rows.append([Cell("Luminous opening (mm)"), opening_cell(r)])
     why = {"declared": "declared", "geometry": "by the geometry",
            "measured": "shown by the counts"}.get(r.get("symmetry_source") or "", "")
     rows.append([Cell("Symmetry of the files"),
                  Cell(f"{r.get('symmetry') or '-'}{f' ({why})' if why else ''}")])
     return Section("Photometric figures (± one standard error)", ("", ""), rows)
+
+
+def opening_cell(record: Mapping) -> Cell:
+    """The luminous opening: length x width x height (mm) with errors, its shape and
+    where it comes from; "none" and why where no opening is meaningful."""
+    opening = record.get("luminous_opening")
+    source = record.get("luminous_opening_source") or "measured"
+    if source == "none" or not opening:
+        return Cell("none (light leaves from everywhere: declare "
+                    "lumitrace:luminousOpening)", "luminous_opening_source", source)
+    errors = record.get("luminous_opening_error") or (None, None, None)
+    parts = [pm(v, e if source == "measured" and e else None, "", 1000.0)
+             for v, e in zip(opening, errors)]
+    shape = record.get("luminous_opening_shape") or ""
+    return Cell(f"{' x '.join(parts)} ({shape}, {source})", "luminous_opening_source", source)
+
+
+def not_applicable(title: str, record: Mapping) -> Section:
+    """A table the record cannot have: why."""
+    return Section(title, ("",), [[Cell("not applicable")]],
+                   record.get("luminous_opening_note") or "no luminous opening")
 
 
 def zonal_section(record: Mapping) -> Section | None:
@@ -142,7 +160,8 @@ def ugr_section(record: Mapping) -> Section | None:
     """The CIE UGR table (crosswise / endwise per room and reflectance set)."""
     t = record.get("ugr_table")
     if not t:
-        return None
+        return not_applicable("UGR table", record) \
+            if record.get("luminous_opening_source") == "none" else None
     refl = list(t["reflectances"])
     rows = []
     for i, room in enumerate(t["rooms_h"]):
@@ -166,7 +185,8 @@ def luminance_section(record: Mapping) -> Section | None:
     """The luminance table (cd/m2 by C plane and gamma) and the screen-work limits."""
     t = record.get("luminance_table")
     if not t:
-        return None
+        return not_applicable("Luminance (cd/m²)", record) \
+            if record.get("luminous_opening_source") == "none" else None
     planes = [k for k, c in enumerate(t["c_deg"]) if float(c) % 45.0 == 0.0 and c < 360]
     rows = []
     for j, g in enumerate(t["gamma_deg"]):

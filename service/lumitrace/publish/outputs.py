@@ -78,11 +78,10 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
         result.files_accuracy = files_accuracy(result.scene, result.accumulator, ph)
     peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
                                 result.scene.up_axis, frame.luminaire_rotation(result.scene))
-    o = ph.opening
     return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
                          "symmetry_source": ph.symmetry.source,
                          "peak_direction": tuple(float(x) for x in peak_dir),
-                         "luminous_opening": (o.length, o.width, o.height),
+                         **ph.opening.as_dict(),
                          **application_figures(ph, result.accumulator),
                          "zonal_flux": zonal_flux(emitter_rings(result.accumulator)),
                          **(col.as_dict() if col is not None else {}),
@@ -200,7 +199,10 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
              "installed (install lumitrace[plot])", OutputWarning)
         deliverables = False
     est = result.estimate
-    ph = photometry_of(scene, result.accumulator)
+    ph = photometry_of(scene, result.accumulator, result.settings.seed)
+    if not ph.opening.meaningful:
+        warn(f"{scene.luminaire_path}: {ph.opening.note}: the luminance and UGR tables are "
+             "not applicable, and the files state no luminous area", OutputWarning)
     if ph.symmetry.contradicted:
         warn(f"{scene.luminaire_path}.{LUMINAIRE_SYMMETRY}: declared {ph.symmetry.name}, but "
              "the photon counts show a departure from it of more than "

@@ -55,7 +55,9 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
         "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
         "figures": {k: defined(v) for k, v in ph.figures.as_dict().items()},
         "luminousOpening": {"length_m": ph.opening.length, "width_m": ph.opening.width,
-                            "height_m": ph.opening.height},
+                            "height_m": ph.opening.height,
+                            "error_m": list(ph.opening.error), "shape": ph.opening.shape,
+                            "source": ph.opening.source, "note": ph.opening.note},
     }
     return json.dumps(doc, indent=1) + "\n"
 

@@ -90,7 +90,7 @@ def command(args) -> int:
         **({"threshold": float(published["threshold"])}
            if reproduce and "threshold" in published else {}))
     result = run(scene, settings)
-    ph = photometry_of(scene, result.accumulator)
+    ph = photometry_of(scene, result.accumulator, settings.seed)
     _, _, paths = planned_outputs(scene, args.results)
     out = Path(args.out) if args.out else Path(args.stage).absolute().parent / \
         f"{name}.datasheet"

@@ -26,9 +26,11 @@ from .tracer import trace_batch
 BATCH = 1 << 17
 
 
-def exit_rays(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DEPTH
-              ) -> RayFile:
-    """The escaping rays of ``photons`` photons (shared by the emitters as by flux)."""
+def escapes(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DEPTH
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the escaping photons of ``photons`` photons (shared by the emitters as by
+    flux) leave the luminaire's box: positions (N, 3, world m), directions (N, 3, world)
+    and flux (N, lm each). Photon k of an emitter is photon k of any run with ``seed``."""
     ps = prepare(scene)
     pos, dirs, flux = [], [], []
     for k, (e, n) in enumerate(zip(scene.emitters, allocate([e.flux for e in scene.emitters],
@@ -40,7 +42,15 @@ def exit_rays(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DE
             pos.append(p)
             dirs.append(d)
             flux.append(np.full(len(p), e.flux / n))
-    p, d = np.concatenate(pos), np.concatenate(dirs)
+    if not pos:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(pos), np.concatenate(dirs), np.concatenate(flux)
+
+
+def exit_rays(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DEPTH
+              ) -> RayFile:
+    """The escaping rays of ``photons`` photons (shared by the emitters as by flux)."""
+    p, d, flux = escapes(scene, photons, seed, max_depth)
     mpu = scene.meters_per_unit
     m = np.asarray(scene.luminaire_to_world, np.float64) if scene.luminaire_to_world \
         else np.diag([mpu, mpu, mpu, 1.0])  # luminaire stage units to world m
@@ -50,7 +60,7 @@ def exit_rays(scene: Scene, photons: int, seed: int = 0, max_depth: int = MAX_DE
     turned /= np.linalg.norm(turned, axis=1, keepdims=True)
     name = scene.luminaire_path.rsplit("/", 1)[-1] or "luminaire"
     return RayFile(positions=local.astype(np.float32), directions=turned.astype(np.float32),
-                   flux=np.concatenate(flux).astype(np.float32),
+                   flux=flux.astype(np.float32),
                    descriptions=(name, "", "", f"lumitrace {__version__}",
                                  "photon tracing of the USD stage", "",
                                  "", f"{photons} photons, seed {seed}",
