@@ -124,6 +124,9 @@ class LuminousOpening:
 # -- the edge of the light along one coordinate ----------------------------------------
 
 def _histogram(v: np.ndarray, w: np.ndarray, lo: float, hi: float, n: int) -> np.ndarray:
+    """``w`` summed in ``n`` bins of ``lo`` .. ``hi`` (both ends in; values beyond left out)."""
+    inside = (v >= lo) & (v <= hi)
+    v, w = v[inside], w[inside]
     k = ((v - lo) / (hi - lo) * n).astype(np.int64) if hi > lo else np.zeros(len(v), np.int64)
     return np.bincount(np.clip(k, 0, n - 1), w, n)
 
@@ -399,7 +402,7 @@ def opening_of_exits(positions: np.ndarray, flux: np.ndarray, lo, hi,
                "as bright as its inside)")
     if why is not None:
         return replace(opening, length=0.0, width=0.0, height=0.0, error=(0.0, 0.0, 0.0),
-                       source="none",
+                       round=False, source="none",
                        note=f"no luminous opening: the light leaves the box's {name} face "
                             f"({box[0]:.4g} x {box[1]:.4g} m) from everywhere: {why}; "
                             "declare one with lumitrace:luminousOpeningShape and "
