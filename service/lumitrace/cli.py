@@ -135,6 +135,8 @@ def _add_trace(sub) -> None:
                    help="skip the polar curve and the photometric solid (the slow outputs)")
     t.add_argument("--deliverables", action="store_true",
                    help="also write the datasheet (HTML, PDF) and the GLDF container")
+    t.add_argument("--bug-forward", choices=("C0", "C90", "C180", "C270"), help="the C plane "
+                   "BUG takes as forward, this run (default: lumitrace:bugForward, else C0)")
 
 
 def _add_check(sub) -> None:
@@ -273,6 +275,7 @@ def cmd_trace(args) -> int:
         from .run.settings import TraceSettings, default_threads
         from .stage.scene_cache import read_stage
         from .trace.compiled import note
+        from .photometry.bug import facing
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
@@ -296,6 +299,7 @@ def cmd_trace(args) -> int:
                                  time=args.time_code)
     else:
         scene = read_stage(args.stage, args.luminaire, time_code=args.time_code)
+    scene = facing(scene, args.bug_forward)
     if not args.no_sublayer:
         if args.replace_results:
             from .publish.check import strip_result_opinions

@@ -111,7 +111,12 @@ CATALOGUE_NUMBER = "lumitrace:catalogueNumber"
 LAMP_DESCRIPTION = "lumitrace:lampDescription"
 INPUT_POWER = "lumitrace:inputPower"
 COLOUR_RENDERING_INDEX = "lumitrace:colourRenderingIndex"
-LUMINAIRE_TEXT = (MANUFACTURER, LUMINAIRE_NAME, CATALOGUE_NUMBER, LAMP_DESCRIPTION)
+#: Who authored the luminaire's data files (the GLDF's Header/Author).
+AUTHOR = "lumitrace:author"
+LUMINAIRE_TEXT = (MANUFACTURER, LUMINAIRE_NAME, CATALOGUE_NUMBER, LAMP_DESCRIPTION, AUTHOR)
+#: The BUG rating's forward direction (the C plane the luminaire faces).
+BUG_FORWARD = "lumitrace:bugForward"
+BUG_FORWARD_TOKENS = ("C0", "C90", "C180", "C270")
 #: A declared symmetry of the distribution ("auto": shown by lumitrace, see
 #: :mod:`lumitrace.scene.symmetry`), and a declared luminous opening (shape, and size in
 #: stage units: length along C0, width along C90, height).
@@ -309,7 +314,19 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
     # -- application figures (photometry/tables.py): UGR, luminance, BUG, illuminance ----
     _f("ugr_table", "table", "UGR", group="photometry",
        doc="CIE 117 / CIE 190 UGR table: 19 rooms (x, y in H) by 5 reflectances, crosswise "
-           "and endwise, spacing 0.25 H, with standard errors"),
+           "(the luminaire's long axis, C90 unless long_axis says C0, across the line of "
+           "sight) and endwise, spacing 0.25 H, with standard errors"),
+    _f("ugr_observer_variation", "table", "UGR", group="photometry",
+       doc="CIE 190's variation of the observer position: in the 4H x 8H room, 70/50/20, "
+           "with luminaires 1.0, 1.5 and 2.0 H apart, the largest rise and fall from the "
+           "table's value as the observer moves along the wall, crosswise and endwise, with "
+           "standard errors"),
+    _f("ugr_lamp_flux", "double", "lm", group="photometry",
+       doc="the lamp flux (the emitters') the UGR table refers to"),
+    _f("ugr_flux_correction", "string", "", group="photometry",
+       doc="the term to add to the UGR values for lamps of another flux"),
+    _f("ugr_flux_corrections", "table", "UGR", group="photometry",
+       doc="that term for lamps of 0.5, 0.8, 1.25 and 2 times the flux"),
     _f("ugr_4h8h_70_50_20", "double", "UGR", "ugr4H8H", group="photometry",
        doc="catalogue UGR: room 4H x 8H, reflectances 70/50/20, crosswise"),
     _f("ugr_4h8h_70_50_20_error", "double", "UGR", "ugr4H8HError", group="photometry",
@@ -338,6 +355,10 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
        doc="TM-15 zone lumens FL .. BVH, UL, UH"),
     _f("bug_zone_lumens_error", "table", "lm", group="photometry",
        doc="their standard errors"),
+    _f("bug_forward", "string", "", group="photometry",
+       doc="the C plane the BUG rating takes as forward (lumitrace:bugForward or "
+           "--bug-forward: C0 by default, C90 for a roadway luminaire photometered with C0 "
+           "along the road)"),
     _f("cone_diagram", "table", "", group="photometry",
        doc="centre illuminance (lx) and beam diameters (m) at mounting distances, with "
            "errors (inverse-square far field)"),

@@ -2,8 +2,9 @@
 zonal lumens of the goniophotometer's exact photon counts, each with its standard error.
 
 Zones by gamma from nadir: low 0-30, mid 30-60, high 60-80, very high 80-90 deg, forward
-(C within 90 deg of C0, TM-15's 270 to 90 deg) and back; uplight low 90-100 and high
-100-180 deg. Their edges are goniometer cell edges, so the zones are sums of whole cells:
+(C within 90 deg of the forward direction: C0 by default, TM-15's 270 to 90 deg; C90 for a
+roadway luminaire photometered with C0 along the road, as IES files of street lights are)
+and back; uplight low 90-100 and high 100-180 deg. Their edges are goniometer cell edges, so the zones are sums of whole cells:
 exact photon counts, not integrals of a resampled grid, with the binomial variance of
 analog photons. The ratings are the addendum's tables (lumens, asymmetric types I to IV);
 a rating that a zone moved by two standard errors would change is shown as a range.
@@ -31,6 +32,8 @@ GLARE = {"FVH": (10, 100, 225, 500, 750), "BVH": (10, 100, 225, 500, 750),
          "FH": (660, 1800, 5000, 7500, 12000), "BH": (110, 500, 1000, 2500, 5000)}
 #: Standard errors a zone is moved by for the rating's range.
 RANGE_SIGMAS = 2.0
+#: The forward directions a rating may take (the C plane the luminaire faces), in deg.
+FORWARD = {"C0": 0.0, "C90": 90.0, "C180": 180.0, "C270": 270.0}
 
 
 @kept_table
@@ -45,21 +48,31 @@ def zone_of_cell() -> np.ndarray:
     return zone.astype(np.int64).ravel()
 
 
-@functools.lru_cache(maxsize=1)
-def _zone_rows() -> tuple[np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=4)
+def zones(forward: str = "C0") -> np.ndarray:
+    """The zone of every goniometer cell (C-major) with ``forward`` (a key of
+    :data:`FORWARD`) the forward direction: C0's zones turned with it."""
+    shift = int(round(FORWARD[forward] / C_STEP))
+    turned = np.roll(zone_of_cell().reshape(N_C, N_GAMMA), shift, axis=0).ravel()
+    turned.setflags(write=False)
+    return turned
+
+
+@functools.lru_cache(maxsize=4)
+def _zone_rows(forward: str = "C0") -> tuple[np.ndarray, np.ndarray]:
     """Which C planes are forward (N_C,), and the zone of each gamma cell (2, N_GAMMA) on
     the forward planes and on the back ones: a cell's zone depends on its side and gamma
     alone."""
-    zone = zone_of_cell().reshape(N_C, N_GAMMA)
+    zone = zones(forward).reshape(N_C, N_GAMMA)
     forward = np.isin(zone, (0, 1, 2, 3)).any(axis=1)
     return forward, np.stack([zone[np.argmax(forward)], zone[np.argmin(forward)]])
 
 
-def zone_lumens(acc: Accumulator) -> tuple[np.ndarray, np.ndarray]:
-    """Lumens in each of :data:`ZONES` and their standard errors: per emitter, a zone's
-    count is binomial, var = sum w^2 n (1 - n / N)."""
-    zone = zone_of_cell()
-    forward, zone_rows = _zone_rows()
+def zone_lumens(acc: Accumulator, forward: str = "C0") -> tuple[np.ndarray, np.ndarray]:
+    """Lumens in each of :data:`ZONES` (``forward`` the forward direction) and their
+    standard errors: per emitter, a zone's count is binomial, var = sum w^2 n (1 - n / N)."""
+    zone = zones(forward)
+    forward, zone_rows = _zone_rows(forward)
     flux, var = np.zeros(len(ZONES)), np.zeros(len(ZONES))
     for w, total, values, idx in acc.emitter_cells():
         if idx is None:  # the C planes of each side summed first: exact integer counts
@@ -95,6 +108,7 @@ class BugRating:
     errors: dict
     low: tuple[int, int, int]   # ratings with every zone two standard errors lower
     high: tuple[int, int, int]  # and higher
+    forward: str = "C0"         # the forward direction (a key of FORWARD)
 
     @property
     def text(self) -> str:
@@ -111,7 +125,8 @@ class BugRating:
 
     def as_dict(self) -> dict:
         return {"bug_rating": self.text, "bug_rating_range": self.range_text,
-                "bug_zone_lumens": dict(self.lumens), "bug_zone_lumens_error": dict(self.errors)}
+                "bug_zone_lumens": dict(self.lumens), "bug_zone_lumens_error": dict(self.errors),
+                "bug_forward": self.forward}
 
 
 def ratings(zones: dict[str, float]) -> tuple[int, int, int]:
@@ -119,14 +134,31 @@ def ratings(zones: dict[str, float]) -> tuple[int, int, int]:
     return _rating(zones, BACKLIGHT), _rating(zones, UPLIGHT), _rating(zones, GLARE)
 
 
-def bug_rating(acc: Accumulator) -> BugRating:
-    """The BUG rating of the counts in ``acc``."""
-    flux, err = zone_lumens(acc)
+def bug_rating(acc: Accumulator, forward: str = "C0") -> BugRating:
+    """The BUG rating of the counts in ``acc``, ``forward`` (C0, C90, C180 or C270) the
+    direction the luminaire faces."""
+    if forward not in FORWARD:
+        raise ValueError(f"the forward direction must be one of {', '.join(FORWARD)}, "
+                         f"got {forward!r}")
+    flux, err = zone_lumens(acc, forward)
     lumens = {z: float(f) for z, f in zip(ZONES, flux)}
     errors = {z: float(e) for z, e in zip(ZONES, err)}
     b, u, g = ratings(lumens)
     # a zone with no photons is exactly empty: its error does not lift it off zero
     lo = ratings({z: max(lumens[z] - RANGE_SIGMAS * errors[z], 0.0) for z in ZONES})
     hi = ratings({z: lumens[z] + RANGE_SIGMAS * errors[z] for z in ZONES})
-    return BugRating(b, u, g, lumens, errors, lo, hi)
+    return BugRating(b, u, g, lumens, errors, lo, hi, forward)
 
+
+
+def facing(scene, forward: str | None):
+    """``scene`` with the BUG rating's forward direction ``forward`` (a key of
+    :data:`FORWARD`; None: as the stage says, ``lumitrace:bugForward``)."""
+    if forward is None or forward == scene.info.bug_forward:
+        return scene
+    if forward not in FORWARD:
+        raise ValueError(f"the forward direction must be one of {', '.join(FORWARD)}, "
+                         f"got {forward!r}")
+    from dataclasses import replace
+
+    return replace(scene, info=replace(scene.info, bug_forward=forward))

@@ -72,13 +72,15 @@ def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
                dff: float, lor: float, company: str = "lumitrace", report: str = "",
                dc: float = 5.0, number: str = "", file_name: str = "",
                lamp_type: str = "lumitrace emitters", colour: str = "", cri: str = "",
-               watts: float = 0.0) -> str:
+               watts: float = 0.0, linear: bool = False) -> str:
     """EULUMDAT text of a grid (cd) for lamps of ``lamp_lumens`` lm. ``dims_mm`` holds
     luminaire ``length``, ``width``, ``height`` and luminous area ``lum_length``,
     ``lum_width``, ``lum_height`` in mm (a width of 0: circular, the length its
     diameter); ``dff`` and ``lor`` are fractions; ``number`` the luminaire number,
     ``lamp_type``, ``colour`` (appearance, say "3000 K"), ``cri`` (colour rendering) and
-    ``watts`` (wattage including ballast) the lamp set's data."""
+    ``watts`` (wattage including ballast) the lamp set's data; ``linear``: a linear
+    luminaire (type indicator 2; 1 where the distribution is rotationally symmetric, else
+    3)."""
     isym = ISYM[grid.symmetry]
     mc = int(round(360.0 / dc))
     cs = plane_angles(isym, mc, dc)
@@ -88,7 +90,8 @@ def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
     steps = np.diff(grid.gamma)
     dg = float(steps[0]) if steps.size and np.allclose(steps, steps[0]) else 0.0
     f = lambda x: f"{x:.6g}"  # noqa: E731
-    lines = [company[:78], "1" if isym == 1 else "3", str(isym), str(mc), f(dc), str(ng), f(dg),
+    ityp = "1" if isym == 1 else "2" if linear else "3"
+    lines = [company[:78], ityp, str(isym), str(mc), f(dc), str(ng), f(dg),
              report[:78], name[:78], number[:78], file_name[:78],
              f"{_dt.date.today().isoformat()} lumitrace"[:78],
              f(dims_mm["length"]), f(dims_mm["width"]), f(dims_mm["height"]),

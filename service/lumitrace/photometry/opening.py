@@ -53,6 +53,9 @@ SIDE_SHARE = 0.01
 #: typical level (light through a louvre's open ends falls in a band, with a faint tail
 #: below it)
 HEIGHT_LEVEL = 0.1
+#: A luminaire is linear (EULUMDAT's Ityp 2) where its luminous opening (its box where it
+#: has none) is at least this many times as long as it is wide.
+LINEAR_RATIO = 1.5
 #: Rays from the centre along which a round opening's edge is found (its centre and shape).
 SECTORS = 16
 #: A flat opening is round when at most this share of the light within its extents leaves
@@ -418,6 +421,19 @@ def declared_opening(scene, centre=(0.0, 0.0, 0.0), box=(0.0, 0.0, 0.0)) -> Lumi
                            note="declared on the stage (lumitrace:luminousOpening)")
 
 
+def long_axis(opening: LuminousOpening) -> str:
+    """The axis a linear luminaire is long along: "C0" or "C90" (its opening, or its box
+    where no opening is meaningful, :data:`LINEAR_RATIO` times as long one way as the
+    other), or "" (not linear)."""
+    a, b = (opening.length, opening.width) if opening.meaningful else opening.box[:2]
+    if a > 0 and b > 0:
+        if a >= LINEAR_RATIO * b:
+            return "C0"
+        if b >= LINEAR_RATIO * a:
+            return "C90"
+    return ""
+
+
 def opening_photons(photons: int) -> int:
     """Photons whose exits measure the opening of a run of ``photons``."""
     return int(min(OPENING_PHOTONS, max(photons, MIN_OPENING_PHOTONS)))
@@ -426,6 +442,10 @@ def opening_photons(photons: int) -> int:
 #: The openings last measured: (scene, seed, photons, opening); a scene is compared by
 #: identity (a service makes a new one for every edit).
 _MEASURED: list[tuple] = []
+#: Where the photons leave the luminaire: ``escapes(scene, photons, seed)`` -> (positions
+#: (N, 3, world m), directions, flux (N,)), the tracer's (it registers it when loaded:
+#: the tracer reads photometry, not the other way round).
+ESCAPES: list = []
 
 
 def measured_opening(scene, photons: int, seed: int = 0) -> LuminousOpening:
@@ -435,10 +455,12 @@ def measured_opening(scene, photons: int, seed: int = 0) -> LuminousOpening:
         if s is scene and sd == seed and n == photons:
             return opening
     from ..film.goniometer import Goniometer
-    from ..trace.exit_rays import escapes
 
+    if not ESCAPES:
+        raise RuntimeError("the luminous opening is measured by tracing photons: load "
+                           "lumitrace.trace first")
     g = Goniometer.of(scene)  # the box the tracer bins and these exits cross
-    p, _, w = escapes(scene, photons, seed)
+    p, _, w = ESCAPES[0](scene, photons, seed)
     opening = opening_of_exits(np.asarray(p) @ np.asarray(g.axes, np.float64).T, w, g.lo,
                                g.hi, photons)
     _MEASURED[:] = [*_MEASURED[-1:], (scene, seed, photons, opening)]

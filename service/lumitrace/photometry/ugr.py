@@ -4,8 +4,11 @@ standard error for every cell.
 The 19 standard rooms (x across the line of sight by y along it, 2H x 2H to 12H x 8H), the
 five reflectance sets (ceiling / walls / floor cavity: 70/50/20 .. 30/30/20), luminaires
 every 0.25 H (H the height of the luminaire plane above the eye) from S/2 off the walls,
-the observer at the middle of a wall looking along y, crosswise (the luminaire's C90 axis
-across the line of sight, C0 toward the observer) and endwise (turned 90 deg):
+the observer at the middle of a wall looking along y, crosswise (the luminaire's long axis
+across the line of sight) and endwise (turned 90 deg). A luminaire's long axis is C90 (the
+C0-C180 plane across it, as EULUMDAT has a linear luminaire) unless it is linear along C0
+(:func:`~lumitrace.photometry.opening.long_axis`): crosswise then sees it with C90 toward
+the observer. The table in the C0 frame:
 
     UGR = 8 log10(0.25 / Lb * sum L^2 omega / p^2),   L^2 omega = I^2 / (A_p r^2)
 
@@ -145,6 +148,9 @@ class UgrTable:
     endwise: np.ndarray
     crosswise_error: np.ndarray
     endwise_error: np.ndarray
+    #: the axis a linear luminaire is long along ("C0", "C90"; "": not linear, crosswise
+    #: has C90 across the line of sight)
+    long_axis: str = ""
 
     def catalogue(self, endwise: bool = False) -> tuple[float, float]:
         """(UGR, error) for 4H x 8H, 70/50/20."""
@@ -162,7 +168,10 @@ class UgrTable:
                               "crosswise": _rows(self.crosswise),
                               "endwise": _rows(self.endwise),
                               "crosswise_error": _rows(self.crosswise_error),
-                              "endwise_error": _rows(self.endwise_error)},
+                              "endwise_error": _rows(self.endwise_error),
+                              "long_axis": self.long_axis,
+                              "crosswise_is": f"the luminaire's {self.long_axis or 'C90'} axis "
+                                              "across the line of sight"},
                 "ugr_4h8h_70_50_20": cu, "ugr_4h8h_70_50_20_error": ce,
                 "ugr_4h8h_70_50_20_endwise": eu, "ugr_4h8h_70_50_20_endwise_error": ee}
 
@@ -245,7 +254,10 @@ def ugr_table(grid: CGammaGrid, opening) -> UgrTable:
             err = np.sqrt(err ** 2 + np.stack([c2[0] - cross[0], e2[0] - end[0]], axis=1) ** 2)
     bad = ~np.isfinite(np.stack([cross[0], end[0]], axis=1)) | ~np.isfinite(err)
     err = np.where(bad, np.nan, err)
-    return UgrTable(cross[0], end[0], err[:, 0], err[:, 1])
+    (c, ce), (e, ee) = _named(opening, (cross[0], err[:, 0]), (end[0], err[:, 1]))
+    from .opening import long_axis
+
+    return UgrTable(c, e, ce, ee, long_axis(opening))
 
 
 def _propagated(grid: CGammaGrid, d_glare: np.ndarray, d_back: np.ndarray) -> np.ndarray:
@@ -265,6 +277,14 @@ def _propagated(grid: CGammaGrid, d_glare: np.ndarray, d_back: np.ndarray) -> np
         body = np.einsum("rofmg,mg->rof", d[..., 1:-1] ** 2, sigma[:, 1:-1] ** 2)
         poles = sum((d[..., j].sum(axis=-1) * sigma[0, j]) ** 2 for j in (0, -1))
     return np.sqrt(body + poles)
+
+
+def _named(opening, cross, end):
+    """(crosswise, endwise) named from the luminaire's long axis: the tables computed with
+    C90 across the line of sight come first, unless the luminaire is long along C0."""
+    from .opening import long_axis
+
+    return (end, cross) if long_axis(opening) == "C0" else (cross, end)
 
 
 def _layout_tables(c: tuple[float, ...], gamma: tuple[float, ...], symmetry: str) -> tuple:
@@ -345,3 +365,152 @@ def _unfold_index(grid: CGammaGrid) -> np.ndarray:
 def _step(grid: CGammaGrid) -> float:
     d = np.diff(grid.c)
     return float(d.min()) if d.size else 5.0
+
+
+# -- CIE 190: the observer's position, the lamp flux ------------------------------------
+
+#: Luminaire spacings (multiples of H) CIE 190 states the variation of the observer
+#: position for, and the room and reflectances (ceiling / walls / floor cavity) it is
+#: stated in: the catalogue's.
+VARIATION_SPACINGS = (1.0, 1.5, 2.0)
+VARIATION_ROOM, VARIATION_REFLECTANCE = CATALOGUE_ROOM, CATALOGUE_REFLECTANCE
+#: Positions of the observer along the wall, in steps of this fraction of the spacing
+#: (one period of the layout).
+VARIATION_STEPS = 16
+#: Redraws of the grid within its errors that give the variation's standard errors.
+VARIATION_DRAWS = 64
+
+
+@dataclass(frozen=True)
+class ObserverVariation:
+    """How far UGR moves from the table's value (spacing 0.25 H) when the luminaires of
+    the catalogue room (4H x 8H, 70/50/20) stand ``spacings`` H apart (rows from S/2 off
+    the observer's wall, as the table's) and the observer stands anywhere along that wall
+    against their columns: (largest rise, largest fall) per spacing, crosswise and endwise,
+    with standard errors."""
+
+    spacings: tuple[float, ...]
+    crosswise: np.ndarray        # (spacings, 2): + rise, - fall
+    endwise: np.ndarray
+    crosswise_error: np.ndarray
+    endwise_error: np.ndarray
+
+    def as_dict(self) -> dict:
+        r = lambda a: [[round(float(v), 4) if np.isfinite(v) else None for v in row]  # noqa
+                       for row in a]
+        return {"ugr_observer_variation": {
+            "room_h": list(VARIATION_ROOM),
+            "reflectances": REFLECTANCE_NAMES[VARIATION_REFLECTANCE],
+            "spacing_h": list(self.spacings), "crosswise": r(self.crosswise),
+            "endwise": r(self.endwise), "crosswise_error": r(self.crosswise_error),
+            "endwise_error": r(self.endwise_error)}}
+
+
+def _layout(spacing: float, across: float, along: float, x: float, y: float,
+            h: float = HEIGHT) -> tuple[np.ndarray, np.ndarray]:
+    """(T, R) (m) of the luminaires of a room x H by y H on a square grid ``spacing`` H
+    apart, shifted ``across`` and ``along`` (fractions of the spacing; 0.5 and 0.5: the
+    table's layout, centred across, rows from S/2) against the observer at the middle of
+    its wall; those the glare sum takes (:func:`counted`)."""
+    s = spacing * h
+    t = -0.5 * x * h + (np.arange(int(math.ceil(x / spacing)) + 1) + across) * s
+    r = (np.arange(int(math.ceil(y / spacing)) + 1) + along) * s
+    t = t[(t > -0.5 * x * h) & (t < 0.5 * x * h)]
+    r = r[(r > 0.0) & (r < y * h)]
+    t, r = (a.ravel() for a in np.meshgrid(t, r))
+    keep = counted(t, r, h)
+    return t[keep], r[keep]
+
+
+def _sums(values: np.ndarray, grid: CGammaGrid, opening, t: np.ndarray, r: np.ndarray,
+          h: float = HEIGHT) -> np.ndarray:
+    """The glare sums sum I^2 / (A_p d^2 p^2), crosswise and endwise, of luminaires at
+    (T, R) for grid values ``values`` (draws, full cells): (draws, 2)."""
+    gamma = np.degrees(np.arctan2(np.hypot(t, r), h))
+    d2, p2 = t * t + r * r + h * h, table_index(t, r, h) ** 2
+    out = []
+    for c in (np.degrees(np.arctan2(-t, r)) % 360.0, np.degrees(np.arctan2(-r, -t)) % 360.0):
+        idx, w = taps(grid, c, gamma)
+        i = np.einsum("pk,dpk->dp", w, values[:, idx])
+        weight = 1.0 / (projected_area(opening, c, gamma) * d2 * p2)
+        out.append((i * i * weight).sum(axis=1))
+    return np.stack(out, axis=1)
+
+
+def observer_variation(grid: CGammaGrid, opening, spacings=VARIATION_SPACINGS,
+                       seed: int = 0) -> ObserverVariation:
+    """CIE 190's variation of the observer position (see :class:`ObserverVariation`).
+
+    For each spacing S the luminaires fill the room on a square grid S apart, its rows
+    S/2, 3S/2, ... from the observer's wall, its columns' phase against the observer
+    stepped over one period (:data:`VARIATION_STEPS`), the background luminance that of the
+    table's room with the same luminaires per area (the same installation; it does not
+    depend on where the observer stands). The errors: the spread of the rise and fall over
+    :data:`VARIATION_DRAWS` redraws of the grid within its errors, the table's value
+    redrawn with them."""
+    from .grid import redrawn
+
+    full = grid.full()
+    model = _model(grid, opening)
+    unfold = _unfold_index(grid)
+    draws = redrawn(grid, np.random.default_rng(seed), VARIATION_DRAWS)[:, unfold]
+    values = np.concatenate([full.candela.reshape(1, -1), draws.reshape(VARIATION_DRAWS, -1)])
+    cross, end = model.evaluate(values)
+    room_i = ROOMS.index(VARIATION_ROOM)
+    table = np.stack([cross[:, room_i, VARIATION_REFLECTANCE],
+                      end[:, room_i, VARIATION_REFLECTANCE]], axis=1)  # (draws, 2)
+    rings = values.reshape((len(values),) + full.candela.shape).sum(axis=1)
+    lb_table = rings @ model.lb[room_i, VARIATION_REFLECTANCE]  # (draws,)
+    x, y = VARIATION_ROOM
+    steps = np.arange(VARIATION_STEPS) / VARIATION_STEPS
+    rise, fall = [], []
+    for s in spacings:
+        lb = lb_table * (SPACING / s) ** 2  # the same luminaires per area
+        shifted = []
+        for across in steps:
+            t, r = _layout(s, across, 0.5, x, y)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sums = _sums(values, grid, opening, t, r)
+                shifted.append(8.0 * np.log10(0.25 * sums / lb[:, None]) - table)
+        shifted = np.stack(shifted)  # (positions, draws, 2)
+        rise.append(np.nanmax(shifted, axis=0))
+        fall.append(np.nanmin(shifted, axis=0))
+    rise, fall = np.stack(rise, axis=1), np.stack(fall, axis=1)  # (draws, spacings, 2)
+    value = np.stack([rise[0], fall[0]], axis=-1)  # (spacings, 2 orientations, 2)
+    error = np.stack([rise[1:].std(axis=0, ddof=1), fall[1:].std(axis=0, ddof=1)], axis=-1)
+    (c, ce), (e, ee) = _named(opening, (value[:, 0], error[:, 0]), (value[:, 1], error[:, 1]))
+    return ObserverVariation(tuple(spacings), c, e, ce, ee)
+
+
+def position_ugr(grid: CGammaGrid, opening, spacing: float, across: float = 0.5
+                 ) -> tuple[float, float]:
+    """(crosswise, endwise) UGR of the catalogue room, 70/50/20, with luminaires ``spacing``
+    H apart, the observer at ``across`` of a spacing against their columns (0.5: the
+    table's own layout, centred), named from the long axis as the table is."""
+    model = _model(grid, opening)
+    values = grid.full().candela.reshape(1, -1)
+    room_i = ROOMS.index(VARIATION_ROOM)
+    rings = values.reshape((1,) + grid.full().candela.shape).sum(axis=1)
+    lb = (rings @ model.lb[room_i, VARIATION_REFLECTANCE]) * (SPACING / spacing) ** 2
+    t, r = _layout(spacing, across, 0.5, *VARIATION_ROOM)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = 8.0 * np.log10(0.25 * _sums(values, grid, opening, t, r)[0] / lb[0])
+    (c, _), (e, _) = _named(opening, (float(u[0]), 0.0), (float(u[1]), 0.0))
+    return c, e
+
+
+def flux_correction(lamp_flux: float, other: float) -> float:
+    """What UGR gains when the table's lamps (``lamp_flux`` lm) are replaced by lamps of
+    ``other`` lm with the same distribution: 8 log10(other / lamp_flux) (every luminance,
+    and the background, scales with the flux)."""
+    return 8.0 * math.log10(other / lamp_flux)
+
+
+def flux_fields(lamp_flux: float) -> dict:
+    """The record's fields on the lamp flux the table refers to and the correction term."""
+    return {"ugr_lamp_flux": float(lamp_flux),
+            "ugr_flux_correction": "8 log10(flux / ugr_lamp_flux), added to every value of "
+                                   "the table and its observer variation's reference, for "
+                                   "lamps of another flux with the same distribution",
+            "ugr_flux_corrections": {f"{k:g}": round(flux_correction(1.0, k), 4)
+                                     for k in (0.5, 0.8, 1.25, 2.0)}}

@@ -175,9 +175,28 @@ def ugr_section(record: Mapping) -> Section | None:
     end = pm(record.get("ugr_4h8h_70_50_20_endwise"),
              record.get("ugr_4h8h_70_50_20_endwise_error"))
     err = max((v for row in t["crosswise_error"] for v in row if v is not None), default=None)
+    axis = t.get("long_axis") or ""
+    named = (f"crosswise: the luminaire's long axis ({axis}) across the line of sight"
+             if axis else "crosswise: the luminaire's C90 axis across the line of sight")
+    variation = record.get("ugr_observer_variation")
+    if variation:
+        rows.append([Cell("observer position, S =")] + [Cell("") for _ in refl])
+        for k, s in enumerate(variation["spacing_h"]):
+            c, e = variation["crosswise"][k], variation["endwise"][k]
+            text = f"{c[0]:+.1f} / {c[1]:+.1f}  ·  {e[0]:+.1f} / {e[1]:+.1f}"
+            rows.append([Cell(f"  {s:g}H"), Cell(text, f"ugr_observer_variation.crosswise[{k}]",
+                                                 c)] + [Cell("") for _ in refl[1:]])
+    lamp = record.get("ugr_lamp_flux")
     note = (f"crosswise/endwise, spacing {t.get('spacing_h', 0.25):g} H (CIE 117, CIE 190); "
-            f"catalogue 4H 8H 70/50/20: {cat} crosswise, {end} endwise"
-            + ("" if err is None else f"; largest standard error of a cell {err:.2f}"))
+            f"{named}; catalogue 4H 8H 70/50/20: {cat} crosswise, {end} endwise"
+            + ("" if err is None else f"; largest standard error of a cell {err:.2f}")
+            + ("" if not variation else
+               "; observer position: the largest rise / fall (crosswise · endwise) in the "
+               "4H 8H room, 70/50/20, as the observer moves along the wall with luminaires "
+               "S apart")
+            + ("" if lamp is None else
+               f"; for {lamp:,.0f} lm of lamps: for lamps of another flux F (the same "
+               f"distribution) add 8 log10(F / {lamp:,.0f} lm)"))
     return Section("UGR table", ("room",) + tuple(refl), rows, note)
 
 
@@ -210,7 +229,8 @@ def application_section(record: Mapping) -> Section | None:
     rows = []
     if record.get("bug_rating") and (record.get("upward_flux_fraction") or 0) > 0:
         rows.append([Cell("BUG rating (TM-15-11)"),
-                     Cell(f"{record['bug_rating']} (range {record.get('bug_rating_range')})",
+                     Cell(f"{record['bug_rating']} (range {record.get('bug_rating_range')}; "
+                          f"forward {record.get('bug_forward') or 'C0'})",
                           "bug_rating", record["bug_rating"])])
     cone = record.get("cone_diagram")
     if cone and cone.get("distance_m"):

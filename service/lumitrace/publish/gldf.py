@@ -12,8 +12,17 @@ prim's ``lumitrace:*`` attributes) fills the fields GLDF has for it: manufacture
 (``Header/Manufacturer``, ``FixedLightSource/Manufacturer``), luminaire name
 (``ProductMetaData/Name``, ``Variant/Name``, L3D ``Header/Name``), catalogue number
 (``ProductMetaData/ProductNumber``, ``Variant/ProductNumber``, ``UniqueProductId``), lamp
-description (``FixedLightSource/Name``), input power (``RatedInputPower``, and the
-efficacy) and colour rendering index (``ColorInformation/ColorRenderingIndex``).
+description (``FixedLightSource/Name``), author (``Header/Author``), input power
+(``RatedInputPower``, and the efficacy) and colour rendering index
+(``ColorInformation/ColorRenderingIndex``). What the stage does not say is left out where
+the schema allows (the light source's manufacturer, the author, the efficacy); where it
+requires a value (``Header/Manufacturer``, ``RatedInputPower``) the writer of the outputs
+warns, naming the attributes to author.
+
+Fluxes as GLDF defines them: the emitter's ``RatedLuminousFlux`` is the initial flux of
+the entire equipment, the luminaire's output (every escaping photon, the files' luminous
+flux); a fixed light source has no flux of its own in GLDF (its lamps' flux, the emitters'
+lumens, is the LDT's lamp set, which its photometry is relative to).
 """
 from __future__ import annotations
 
@@ -91,8 +100,8 @@ def descriptive_photometry(record: Mapping, input_power_w: float | None) -> str:
     if record.get("cie_flux_code"):
         parts.append(f"<CIE-FluxCode>{escape(record['cie_flux_code'])}</CIE-FluxCode>")
     ugr = catalogue_ugr(record)
-    if ugr is not None:  # X crosswise, Y endwise
-        parts.append(f"<UGR-4H8H-70-50-20-LQ><X>{_num(ugr[0])}</X><Y>{_num(ugr[1])}</Y>"
+    if ugr is not None:  # GLDF's X is lengthways (endwise), its Y across (crosswise)
+        parts.append(f"<UGR-4H8H-70-50-20-LQ><X>{_num(ugr[1])}</X><Y>{_num(ugr[0])}</Y>"
                      "</UGR-4H8H-70-50-20-LQ>")
     if record.get("bug_rating"):
         parts.append(f"<LightDistributionBUG-Rating>{escape(record['bug_rating'])}"
@@ -118,7 +127,8 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
     when = (when or datetime.now(timezone.utc)).replace(microsecond=0)
     stamp = when.strftime("%Y-%m-%dT%H:%M:%SZ")
     major, minor, pre = FORMAT_VERSION
-    manufacturer = info.manufacturer or "unknown manufacturer"
+    manufacturer = info.manufacturer or "unknown manufacturer"  # the schema requires one
+    author = getattr(info, "author", "")
     number = info.catalogue_number or name
     present = {k: getattr(files, k) for k in _KINDS if getattr(files, k) is not None}
     file_list = "".join(f'<File id="file_{k}" contentType="{_KINDS[k][1]}" '
@@ -139,9 +149,10 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
             "</CorrelatedColorTemperature>"
         colour = f"<ColorInformation>{cri}{cct}</ColorInformation>"
     lamp = info.lamp or f"lumitrace emitters, {_num(record.get('lamp_flux') or 0.0)} lm"
+    source_maker = f"<Manufacturer>{escape(info.manufacturer)}</Manufacturer>" \
+        if info.manufacturer else ""  # optional: left out where unknown
     light_source = ("<LightSources><FixedLightSource id=\"light_source\">"
-                    f"{_locale('Name', lamp)}"
-                    f"<Manufacturer>{escape(manufacturer)}</Manufacturer>"
+                    f"{_locale('Name', lamp)}{source_maker}"
                     f"<RatedInputPower>{_num(info.input_power_w or 0.0)}</RatedInputPower>"
                     f"{colour}</FixedLightSource></LightSources>")
     flux = record.get("luminous_flux") or 0.0
@@ -178,7 +189,8 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
             f'<FormatVersion major="{major}" minor="{minor}" pre-release="{pre}"/>'
             f"<CreatedWithApplication>lumitrace {__version__}</CreatedWithApplication>"
             f"<GldfCreationTimeCode>{stamp}</GldfCreationTimeCode>"
-            f"<UniqueGldfId>{gldf_id or uuid.uuid4()}</UniqueGldfId></Header>"
+            f"<UniqueGldfId>{gldf_id or uuid.uuid4()}</UniqueGldfId>"
+            f"{f'<Author>{escape(author)}</Author>' if author else ''}</Header>"
             f"{general}<ProductDefinitions>{meta}{variant}</ProductDefinitions></Root>\n")
 
 

@@ -25,6 +25,7 @@ from ..photometry.distribution import (SYMMETRY_TOLERANCE, Photometry, files_acc
                                       photometry_of)
 from ..schema import SYMMETRY as LUMINAIRE_SYMMETRY
 from ..photometry.measured import emitter_rings
+from ..photometry.opening import long_axis
 from ..photometry.zonal import zonal_flux
 from ..photometry.tables import application_figures
 from ..film.result import TraceResult
@@ -64,6 +65,28 @@ def photometric_light(scene: Scene, ph: Photometry, ies_path: Path, layer_dir: P
             "emitters": [p for e in scene.emitters for p in e.light_paths if "[" not in p]}
 
 
+def unauthored(info, deliverables: bool) -> str:
+    """What the files say for lack of the luminaire's own data, and the attributes to
+    author on the luminaire prim ("" where nothing is missing)."""
+    from ..schema import AUTHOR, INPUT_POWER, MANUFACTURER
+
+    said, names = [], []
+    if not info.manufacturer:
+        said.append("no manufacturer (IES [MANUFAC] unknown, the EULUMDAT company line "
+                    "lumitrace" + (", the GLDF's 'unknown manufacturer'" if deliverables
+                                   else "") + ")")
+        names.append(MANUFACTURER)
+    if info.input_power_w is None:
+        said.append("an input power of 0 W (no efficacy)")
+        names.append(INPUT_POWER)
+    if deliverables and not info.author:
+        said.append("no author (the GLDF's Header/Author is left out; readers show none)")
+        names.append(AUTHOR)
+    if not said:
+        return ""
+    return f"the files carry {'; '.join(said)}: author {', '.join(names)}"
+
+
 def plotting_available() -> bool:
     """Whether the plot extra (matplotlib) is installed."""
     return importlib.util.find_spec("matplotlib") is not None
@@ -82,7 +105,8 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
                          "symmetry_source": ph.symmetry.source,
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          **ph.opening.as_dict(),
-                         **application_figures(ph, result.accumulator),
+                         **application_figures(ph, result.accumulator,
+                                               result.scene.info.bug_forward),
                          "zonal_flux": zonal_flux(emitter_rings(result.accumulator)),
                          **(col.as_dict() if col is not None else {}),
                          **{k: str(v) for k, v in paths.items()}})
@@ -203,6 +227,15 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
     if not ph.opening.meaningful:
         warn(f"{scene.luminaire_path}: {ph.opening.note}: the luminance and UGR tables are "
              "not applicable, and the files state no luminous area", OutputWarning)
+    missing = unauthored(scene.info, deliverables)
+    if missing:
+        warn(f"{scene.luminaire_path}: {missing}", OutputWarning)
+    if long_axis(ph.opening) == "C0":
+        warn(f"{scene.luminaire_path}: a linear luminaire long along C0 (its +X): EULUMDAT "
+             "has a linear luminaire's length along C90, so a reader of the LDT names its "
+             "crosswise and endwise the other way round from the datasheet (named from the "
+             "long axis); model the long axis along +Y (C90) for files that follow the "
+             "convention", OutputWarning)
     if ph.symmetry.contradicted:
         warn(f"{scene.luminaire_path}.{LUMINAIRE_SYMMETRY}: declared {ph.symmetry.name}, but "
              "the photon counts show a departure from it of more than "

@@ -14,6 +14,7 @@ from ..photometry.colour import ColourOverAngle
 from ..photometry.distribution import Photometry
 from ..photometry.eulumdat import write_ldt
 from ..photometry.lm63 import write_ies
+from ..photometry.opening import long_axis
 from ..scene import Scene
 from .record import defined
 from .transaction import signals_held
@@ -70,7 +71,8 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     (and, with ``pictures``, the polar curve and the photometric solid) of ``ph`` to
     ``paths`` (see :func:`photometric_paths`). The luminaire's own data (``scene.info``)
     and ``cct_K`` (the traced colour's CCT, where the stage has colour) go into both
-    files; a round opening is written as round. ``checkpoint`` runs before each picture
+    files; a round opening is written as round, a linear luminaire as linear (EULUMDAT's
+    type indicator 2; its length runs along C90). ``checkpoint`` runs before each picture
     (it may raise to abandon the write)."""
     fig, opening, grid, lamp = ph.figures, ph.opening, ph.grid, ph.lamp_flux
     info = scene.info
@@ -115,7 +117,7 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
               colour="" if cct_K is None else f"{cct_K:.0f} K",
               cri="" if info.colour_rendering_index is None
               else f"{info.colour_rendering_index:g}",
-              watts=info.input_power_w or 0.0)
+              watts=info.input_power_w or 0.0, linear=bool(long_axis(opening)))
     if pictures:
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \
                 f"LOR {fig.light_output_ratio:.2f}"

@@ -96,7 +96,8 @@ def summary_text(r, stage) -> str:
         f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
         *(f"                  {key.replace('_', ' ')}: - ({why})"
           for key, why in (r.spread_notes or {}).items()),
-        f"  symmetry        {r.symmetry} ({_SOURCE.get(r.symmetry_source, '?')})"]
+        f"  symmetry        {r.symmetry} ({_SOURCE.get(r.symmetry_source, '?')})",
+        f"  opening         {_opening(r)}"]
     if r.chromaticity_uv is not None:
         cct = "none (Duv beyond 0.05)" if r.cct_K is None else f"{r.cct_K:.0f} K"
         lines += [
@@ -113,7 +114,21 @@ def summary_text(r, stage) -> str:
         f"  pictures        {r.polar_diagram}  {r.photometric_solid}" if r.polar_diagram
         else "  pictures        (not drawn)",
         f"  result layer    {r.result_layer}"]
+    if r.datasheet_html or r.gldf:
+        lines += [f"  datasheet       {r.datasheet_html}  {r.datasheet_pdf}",
+                  f"  GLDF            {r.gldf}"]
     return "\n".join(lines)
+
+
+def _opening(r) -> str:
+    """The luminous opening (mm) with its errors, shape and source; none and why."""
+    if r.luminous_opening_source == "none" or not r.luminous_opening:
+        return "none: the luminance and UGR tables are not applicable (see the warning)"
+    errors = r.luminous_opening_error or (None,) * 3
+    exact = r.luminous_opening_source != "measured"
+    dims = " x ".join(pm(1000 * v, None if exact or not e else 1000 * e, "", 2)
+                      for v, e in zip(r.luminous_opening, errors))
+    return f"{dims} mm ({r.luminous_opening_shape}, {r.luminous_opening_source})"
 
 
 #: How the summary says why the files have their symmetry.

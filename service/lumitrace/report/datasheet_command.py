@@ -40,6 +40,9 @@ def add_parser(sub) -> None:
                    help="photons of a trace when there is no current result (default 2e6)")
     d.add_argument("--seed", type=int, default=0, help="its seed (default 0)")
     d.add_argument("--threads", type=int, default=None)
+    d.add_argument("--bug-forward", choices=("C0", "C90", "C180", "C270"), default=None,
+                   help="the C plane the BUG rating takes as forward (default: the stage's "
+                        "lumitrace:bugForward, else C0)")
     d.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -74,7 +77,9 @@ def command(args) -> int:
     if not plotting_available():
         raise LumitraceError("the datasheet needs matplotlib: install lumitrace[plot]",
                              str(args.stage))
-    scene = read_stage(args.stage)
+    from ..photometry.bug import facing
+
+    scene = facing(read_stage(args.stage), args.bug_forward)
     name = stage_name(args.stage)
     folder = Path(args.results) if args.results else Path(args.stage).absolute().parent
     layer = folder / f"{name}{RESULT_LAYER_SUFFIX}"

@@ -18,6 +18,7 @@ from ..film.convergence import MapEstimate, estimate
 from ..scene import Scene
 from ..film.result import TraceResult
 from ..photometry.accuracy import FilesAccuracy
+from ..photometry import opening as _opening
 from ..photometry.distribution import files_accuracy
 from ..trace.allocation import MIN_EMITTER_PHOTONS, allocate
 from ..trace.job import BatchJob
@@ -491,3 +492,14 @@ def run(scene: Scene, settings: TraceSettings, prepared: PreparedScene | None = 
         lost.result = result
         raise lost
     return result
+
+
+def _escapes(scene: Scene, photons: int, seed: int):
+    """:func:`~lumitrace.trace.exit_rays.escapes`, loaded when first asked for."""
+    from ..trace.exit_rays import escapes
+
+    return escapes(scene, photons, seed)
+
+
+# the luminous opening is measured from where a run's first photons leave the luminaire
+_opening.ESCAPES[:] = [_escapes]

@@ -261,6 +261,10 @@ class LuminaireInfo:
     lamp: str = ""
     input_power_w: float | None = None
     colour_rendering_index: float | None = None
+    #: the BUG rating's forward direction (lumitrace:bugForward: C0, C90, C180, C270)
+    bug_forward: str = "C0"
+    #: who authored the luminaire's data (lumitrace:author; the GLDF's Header/Author)
+    author: str = ""
 
 
 @dataclass(frozen=True, eq=False)

@@ -299,9 +299,10 @@ class _Reader:
         return shape, tuple(float(v) * self.meters_per_unit for v in values)
 
     def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
-        """The luminaire's own data (manufacturer, names, lamp, power, colour rendering),
-        checked: text must be text without NUL, the power finite and at least 0, the
-        colour rendering index finite and at most 100."""
+        """The luminaire's own data (manufacturer, names, lamp, author, power, colour
+        rendering, the BUG rating's forward direction), checked: text must be text without
+        NUL, the power finite and at least 0, the colour rendering index finite and at most
+        100, the forward direction one of the C planes C0, C90, C180, C270."""
         where = str(root.GetPath())
 
         def authored(name: str):
@@ -323,9 +324,12 @@ class _Reader:
             if cri > 100.0:
                 raise StageError(f"must be at most 100, got {cri:g}", where,
                                  schema.COLOUR_RENDERING_INDEX)
+        forward = authored(schema.BUG_FORWARD)
+        forward = "C0" if forward is None else validate.check_token(
+            forward, schema.BUG_FORWARD_TOKENS, where, schema.BUG_FORWARD)
         return LuminaireInfo(text[schema.MANUFACTURER], text[schema.LUMINAIRE_NAME],
                              text[schema.CATALOGUE_NUMBER], text[schema.LAMP_DESCRIPTION],
-                             power, cri)
+                             power, cri, forward, text[schema.AUTHOR])
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
         """The luminaire prim's local-to-world transform (local stage units to world m),
