@@ -98,3 +98,81 @@ def test_zone_counts_of_dense_and_listed_cells_are_equal():
                           minlength=len(bug.ZONES))
     assert np.array_equal(dense[0], listed[0]) and np.array_equal(dense[1], listed[1])
     assert np.array_equal(dense[0], 0.01 * by_cell)
+
+
+def _street_light(path, forward=None):
+    """A street light photometered as IES files have them (C0 along the road): a
+    Lambertian disc tilted 40 deg toward +Y, the street side (C90); ``forward`` authored
+    as lumitrace:bugForward."""
+    from pxr import Sdf, Usd, UsdGeom, UsdLux
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    lum = UsdGeom.Xform.Define(stage, "/Luminaire")
+    stage.SetDefaultPrim(lum.GetPrim())
+    disk = UsdLux.DiskLight.Define(stage, "/Luminaire/Led")
+    disk.CreateRadiusAttr(0.05)
+    disk.AddRotateXOp().Set(40.0)  # its normal from -Z toward +Y
+    disk.GetPrim().AddAppliedSchema("LumitraceEmitterAPI")
+    disk.GetPrim().CreateAttribute("lumitrace:luminousFlux",
+                                   Sdf.ValueTypeNames.Float).Set(10000.0)
+    if forward is not None:
+        lum.GetPrim().CreateAttribute("lumitrace:bugForward",
+                                      Sdf.ValueTypeNames.Token).Set(forward)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_the_forward_direction_turns_the_zones(tmp_path):
+    """C90 forward: the zones turned a quarter; the street light's light toward C90 is
+    front light there, and C270 forward makes it back light: the zones swap exactly."""
+    from lumitrace.run.session import TraceSettings, run
+    from lumitrace.stage.reader import read_stage
+
+    np.testing.assert_array_equal(bug.zones("C90").reshape(bug.N_C, -1),
+                                  np.roll(bug.zones("C0").reshape(bug.N_C, -1),
+                                          int(90 / bug.C_STEP), axis=0))
+    scene = read_stage(_street_light(tmp_path / "street.usda"))
+    acc = run(scene, TraceSettings(photons=100_000, resolution=8, threads=2)).accumulator
+    c90, c270, c0 = (bug.bug_rating(acc, f) for f in ("C90", "C270", "C0"))
+    for z in ("L", "M", "H", "VH"):
+        assert c90.lumens["F" + z] == pytest.approx(c270.lumens["B" + z], abs=1e-9)
+        assert c90.lumens["B" + z] == pytest.approx(c270.lumens["F" + z], abs=1e-9)
+    front = sum(c90.lumens["F" + z] for z in ("L", "M", "H", "VH"))
+    back = sum(c90.lumens["B" + z] for z in ("L", "M", "H", "VH"))
+    assert front > 3 * back  # tilted toward the street: mostly front light
+    # C0 forward splits it down the middle: a roadway rating read the wrong way
+    assert c0.lumens["FH"] == pytest.approx(c0.lumens["BH"], rel=0.1)
+    assert c90.b < c0.b or c90.lumens["BH"] < c0.lumens["BH"]
+    assert (c90.forward, c90.as_dict()["bug_forward"]) == ("C90", "C90")
+    with pytest.raises(ValueError, match="C0, C90, C180, C270"):
+        bug.bug_rating(acc, "C45")
+
+
+def test_the_stage_and_the_command_line_choose_the_forward_direction(tmp_path):
+    """lumitrace:bugForward on the luminaire prim, validated; --bug-forward overrides it
+    for one run and the record says which."""
+    import json
+    import subprocess
+    import sys
+
+    from lumitrace.errors import StageError
+    from lumitrace.stage.reader import read_stage
+
+    assert read_stage(_street_light(tmp_path / "a.usda", "C90")).info.bug_forward == "C90"
+    assert read_stage(_street_light(tmp_path / "b.usda")).info.bug_forward == "C0"
+    with pytest.raises(StageError, match="lumitrace:bugForward"):
+        read_stage(_street_light(tmp_path / "c.usda", "sideways"))
+
+    def trace(stage, *more):
+        p = subprocess.run([sys.executable, "-m", "lumitrace", "trace", str(stage),
+                            "--photons", "100000", "--resolution", "8", "--no-progress",
+                            "--no-pictures", "--no-sublayer", "--json", *more],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout.strip().splitlines()[-1])["photometry"]
+
+    declared = trace(tmp_path / "a.usda")
+    overridden = trace(tmp_path / "a.usda", "--bug-forward", "C270")
+    assert (declared["bug_forward"], overridden["bug_forward"]) == ("C90", "C270")
+    assert declared["bug_zone_lumens"]["FL"] == overridden["bug_zone_lumens"]["BL"]

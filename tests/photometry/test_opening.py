@@ -136,7 +136,7 @@ def test_the_fresnel_slab_has_no_opening(tmp_path):
     assert "ugr_table" not in figures and "luminance_table" not in figures
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        record = write_outputs(result, tmp_path, pictures=False)
+        record = write_outputs(result, tmp_path, pictures=False, sublayer=False)
     said = [str(w.message) for w in caught if issubclass(w.category, OutputWarning)]
     assert any("not applicable" in s and "lumitrace:luminousOpeningShape" in s for s in said)
     assert record["luminous_opening_source"] == "none"
@@ -183,3 +183,66 @@ def test_a_declared_rectangle_in_stage_units(tmp_path):
         photons=20_000, seed=1, resolution=16, threads=2)).accumulator).opening
     assert (o.source, o.round) == ("declared", False)
     assert (o.length, o.width, o.height) == pytest.approx((0.24, 0.12, 0.0))
+
+
+def _turned_louvre(tmp_path):
+    """The louvre turned a quarter inside its luminaire prim: long along C90, as EULUMDAT
+    has a linear luminaire."""
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "turned.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.001)
+    root = UsdGeom.Xform.Define(stage, "/Luminaire")
+    stage.SetDefaultPrim(root.GetPrim())
+    inner = UsdGeom.Xform.Define(stage, "/Luminaire/Louvre")
+    inner.AddRotateZOp().Set(90.0)
+    inner.GetPrim().GetReferences().AddReference(str(STAGES / "louvre.usda"))
+    stage.GetRootLayer().Save()
+    return tmp_path / "turned.usda"
+
+
+_RECORDS: dict = {}
+
+
+@pytest.mark.parametrize("turned", [False, True])
+def test_a_linear_luminaire_is_linear_in_the_ldt(tmp_path, turned):
+    """The louvre (239 x 121 mm) is linear: EULUMDAT's Ityp 2, its length along C90; as
+    modelled (long along C0) the file's length is its C90 extent and a warning says a
+    reader names crosswise and endwise the other way round; turned to C90, no warning and
+    the file's length is its long side. Either way the datasheet's crosswise is the same."""
+    pyldt = pytest.importorskip("pyldt")
+    stage = _turned_louvre(tmp_path) if turned else STAGES / "louvre.usda"
+    result = run(read_stage(stage), TraceSettings(photons=60_000, seed=2, resolution=8,
+                                                  threads=2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        record = write_outputs(result, tmp_path / "out", pictures=False, sublayer=False)
+    said = [str(w.message) for w in caught if "linear luminaire long along C0" in
+            str(w.message)]
+    ldt = pyldt.LdtReader.read(str(record["ldt"])).header
+    assert ldt.ityp == 2 and read_ldt(record["ldt"]).ityp == 2
+    long_side, short_side = sorted(record["luminous_opening"][:2], reverse=True)
+    if turned:
+        assert not said and record["ugr_table"]["long_axis"] == "C90"
+        assert ldt.length_lum_area == pytest.approx(1000 * long_side, abs=0.01)
+    else:
+        assert len(said) == 1 and record["ugr_table"]["long_axis"] == "C0"
+        assert ldt.length_lum_area == pytest.approx(1000 * short_side, abs=0.01)
+    _RECORDS[turned] = record
+    if len(_RECORDS) == 2:  # crosswise the long side across the line of sight, either way
+        a, b = _RECORDS[False], _RECORDS[True]
+        for key in ("ugr_4h8h_70_50_20", "ugr_4h8h_70_50_20_endwise"):
+            sigma = math.hypot(a[key + "_error"], b[key + "_error"])
+            assert abs(a[key] - b[key]) < 4 * sigma + 0.05, (key, a[key], b[key])
+    variation = record["ugr_observer_variation"]
+    assert variation["spacing_h"] == [1.0, 1.5, 2.0] and variation["room_h"] == [4, 8]
+    assert record["ugr_lamp_flux"] == pytest.approx(4000.0)
+
+
+def test_a_round_luminaire_is_not_linear(tmp_path):
+    pyldt = pytest.importorskip("pyldt")
+    result = run(read_stage(REFERENCE / "lambertian_disc.usda"), SETTINGS)
+    record = write_outputs(result, tmp_path / "out", pictures=False, sublayer=False)
+    assert pyldt.LdtReader.read(str(record["ldt"])).header.ityp == 1  # rotational
+    assert record["ugr_table"]["long_axis"] == ""

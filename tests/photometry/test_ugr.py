@@ -68,6 +68,15 @@ def _their_table(ldt_path) -> np.ndarray:
     return calc.UgrCalculator.compute(pyldt.LdtReader.read(str(ldt_path))).values
 
 
+def _file_frame(table) -> tuple:
+    """(crosswise, endwise, their errors) as a reader of the LDT names them, C90 across the
+    line of sight crosswise: ours, named from the luminaire's long axis, turned where it is
+    long along C0."""
+    if table.long_axis == "C0":
+        return table.endwise, table.crosswise, table.endwise_error, table.crosswise_error
+    return table.crosswise, table.endwise, table.crosswise_error, table.endwise_error
+
+
 @pytest.mark.parametrize("name", ["demo", "louvre", "disc"])
 def test_table_against_eulumdat_ugr(name):
     _, _, ph, ldt = traced(name)
@@ -75,8 +84,10 @@ def test_table_against_eulumdat_ugr(name):
     # the file's luminous length runs along C90 (the side seen from C0 is length wide), its
     # width along C0, as eulumdat-ugr reads them: the opening as measured
     table = ugr.ugr_table(ph.grid, ph.opening)
-    ours = np.hstack([table.crosswise, table.endwise])
-    err = np.hstack([table.crosswise_error, table.endwise_error])
+    assert table.long_axis == {"louvre": "C0"}.get(name, "")
+    cross, end, cross_err, end_err = _file_frame(table)
+    ours = np.hstack([cross, end])
+    err = np.hstack([cross_err, end_err])
     assert np.isfinite(theirs).all() and np.isfinite(ours).all()
     assert (err > 0).all()
     bad = np.abs(ours - theirs) > np.maximum(0.5, 3.0 * err)
@@ -106,9 +117,10 @@ def test_propagated_errors_against_a_bootstrap(name):
     table = ugr.ugr_table(ph.grid, ph.opening)
     model = ugr._model(ph.grid, ph.opening)
     drawn = redrawn(ph.grid, np.random.default_rng(5), 400)[:, ugr._unfold_index(ph.grid)]
-    cross, end = model.evaluate(drawn.reshape(400, -1))
-    ratio = np.hstack([table.crosswise_error / cross.std(axis=0, ddof=1),
-                       table.endwise_error / end.std(axis=0, ddof=1)])
+    cross, end = model.evaluate(drawn.reshape(400, -1))  # C90 across crosswise
+    _, _, cross_err, end_err = _file_frame(table)
+    ratio = np.hstack([cross_err / cross.std(axis=0, ddof=1),
+                       end_err / end.std(axis=0, ddof=1)])
     assert 0.85 < ratio.min() and ratio.max() < 1.15, ratio
     assert 0.95 < np.median(ratio) < 1.05, np.median(ratio)
 
@@ -150,6 +162,90 @@ def test_closed_form_asymmetric_grid_against_eulumdat_ugr(tmp_path):
     path.write_text(format_ldt(grid, grid.flux(), "asym", dims, 1.0, 1.0), encoding="latin-1")
     theirs = calc.UgrCalculator.compute(pyldt.LdtReader.read(str(path))).values
     table = ugr.ugr_table(grid, opening)
-    assert np.abs(table.crosswise - theirs[:, :5]).max() < 0.5
+    assert table.long_axis == "C0"  # 0.6 m along C0, 0.3 m along C90: named from C0
+    cross, end, *_ = _file_frame(table)
+    assert np.abs(cross - theirs[:, :5]).max() < 0.5
     # endwise, the dim C180 side of half the luminaires lowers the rating
-    assert (table.endwise < theirs[:, 5:]).all()
+    assert (end < theirs[:, 5:]).all()
+
+
+@pytest.mark.parametrize("name", ["demo", "louvre"])
+def test_one_h_spacing_against_eulumdat_ugr(name):
+    """Luminaires 1.0 H apart, the observer at the table's own place: eulumdat-ugr's table
+    for that spacing (its _shr 1.0, CIE 190's validation layout), 4H x 8H, 70/50/20, both
+    ways (as the file names them); the variation's range holds that place's deviation."""
+    pyldt = pytest.importorskip("pyldt")
+    calc = pytest.importorskip("eulumdat_ugr")
+    _, _, ph, ldt = traced(name)
+    theirs = calc.UgrCalculator.compute(pyldt.LdtReader.read(str(ldt)), _shr=1.0).values
+    i = ugr.ROOMS.index((4, 8))
+    cross, end = ugr.position_ugr(ph.grid, ph.opening, 1.0)
+    table = ugr.ugr_table(ph.grid, ph.opening)
+    file_order = (end, cross) if table.long_axis == "C0" else (cross, end)
+    assert file_order == pytest.approx((theirs[i, 0], theirs[i, 5]), abs=0.1)
+    var = ugr.observer_variation(ph.grid, ph.opening)
+    k = var.spacings.index(1.0)
+    for here, (rise, fall), err, at in ((cross, var.crosswise[k], var.crosswise_error[k],
+                                         table.catalogue()[0]),
+                                        (end, var.endwise[k], var.endwise_error[k],
+                                         table.catalogue(endwise=True)[0])):
+        assert fall <= here - at <= rise and rise >= fall
+        assert (err > 0).all() and (err < 0.5).all()
+
+
+def test_the_variation_grows_with_the_spacing_and_comes_from_the_draws():
+    """The observer's place matters more the further apart the luminaires: the demo's
+    range (rise - fall) at 2 H above that at 1 H; the errors are the draws' spread."""
+    ph = traced("demo")[2]
+    var = ugr.observer_variation(ph.grid, ph.opening)
+    width = var.crosswise[:, 0] - var.crosswise[:, 1]
+    assert width[2] > width[0] > 0
+    again = ugr.observer_variation(ph.grid, ph.opening, seed=1)
+    np.testing.assert_array_equal(again.crosswise, var.crosswise)  # the values: no draws
+    assert np.allclose(again.crosswise_error, var.crosswise_error, rtol=0.5)
+
+
+def test_lamp_flux_correction_is_exact():
+    """Every luminance and the background scale with the lamps' flux: the table of lamps k
+    times as strong is the table plus 8 log10 k (to rounding), the variation unchanged."""
+    ph = traced("demo")[2]
+    from dataclasses import replace
+
+    one = ugr.ugr_table(ph.grid, ph.opening)
+    for k in (0.5, 2.0):
+        grid = replace(ph.grid, candela=ph.grid.candela * k, sigma=ph.grid.sigma * k)
+        scaled = ugr.ugr_table(grid, ph.opening)
+        np.testing.assert_allclose(scaled.crosswise - one.crosswise,
+                                   ugr.flux_correction(1.0, k), atol=1e-9)
+        np.testing.assert_allclose(scaled.crosswise_error, one.crosswise_error, rtol=1e-6)
+        assert ugr.flux_correction(1200.0, 1200.0 * k) == pytest.approx(8 * math.log10(k))
+    fields = ugr.flux_fields(1200.0)
+    assert fields["ugr_lamp_flux"] == 1200.0
+    assert fields["ugr_flux_corrections"]["2"] == pytest.approx(8 * math.log10(2), abs=1e-4)
+
+
+def test_crosswise_is_named_from_the_long_axis():
+    """A linear luminaire modelled along C0 and the same along C90 (its distribution turned
+    90 deg with it): the same table crosswise (long axis across the line of sight) and
+    endwise."""
+    from lumitrace.photometry.distribution import LuminousOpening
+    from lumitrace.photometry.grid import CGammaGrid, default_gammas
+
+    gam, c = default_gammas(), np.arange(0.0, 360.0 + 1e-9, 5.0)
+    cc, gg = np.meshgrid(c, gam, indexing="ij")
+
+    def batten(long_c):  # broad across the long axis, narrow along it
+        across = np.abs(np.sin(np.radians(cc - long_c)))
+        return np.maximum(np.cos(np.radians(gg)), 0.0) ** (1.0 + 3.0 * (1.0 - across))
+
+    along_c0 = CGammaGrid(c, gam, 400.0 * batten(0.0), "none", np.full(cc.shape, 1.0))
+    along_c90 = CGammaGrid(c, gam, 400.0 * batten(90.0), "none", np.full(cc.shape, 1.0))
+    a = ugr.ugr_table(along_c0, LuminousOpening(1.2, 0.1, 0.0))
+    b = ugr.ugr_table(along_c90, LuminousOpening(0.1, 1.2, 0.0))
+    assert (a.long_axis, b.long_axis) == ("C0", "C90")
+    np.testing.assert_allclose(a.crosswise, b.crosswise, atol=0.02)
+    np.testing.assert_allclose(a.endwise, b.endwise, atol=0.02)
+    assert (a.crosswise > a.endwise + 0.5).all()  # a batten glares more seen crosswise
+    va = ugr.observer_variation(along_c0, LuminousOpening(1.2, 0.1, 0.0))
+    vb = ugr.observer_variation(along_c90, LuminousOpening(0.1, 1.2, 0.0))
+    np.testing.assert_allclose(va.crosswise, vb.crosswise, atol=0.02)

@@ -29,7 +29,8 @@ INFO = {"lumitrace:manufacturer": ("string", "Acme Lighting GmbH"),
         "lumitrace:catalogueNumber": ("string", "AL-DL120-840"),
         "lumitrace:lampDescription": ("string", "LED module 840"),
         "lumitrace:inputPower": ("double", 13.5),
-        "lumitrace:colourRenderingIndex": ("double", 82.0)}
+        "lumitrace:colourRenderingIndex": ("double", 82.0),
+        "lumitrace:author": ("string", "Photometry lab, Acme")}
 
 
 def _lumitrace(*args: str) -> subprocess.CompletedProcess:
@@ -115,10 +116,15 @@ def test_gldf_rs_reads_the_product_and_its_file_references(demo, tmp_path):
     assert figures["LuminousEfficacy"] == ph["luminous_flux"] / 13.5
     assert figures["CIE-FluxCode"] == ph["cie_flux_code"]
     assert figures["LightDistributionBUG-Rating"] == ph["bug_rating"]
-    assert figures["UGR-4H8H-70-50-20-LQ"] == {"X": ph["ugr_4h8h_70_50_20"],
-                                                "Y": ph["ugr_4h8h_70_50_20_endwise"]}
+    # GLDF's X is lengthways (endwise), its Y across (crosswise)
+    assert figures["UGR-4H8H-70-50-20-LQ"] == {"X": ph["ugr_4h8h_70_50_20_endwise"],
+                                                "Y": ph["ugr_4h8h_70_50_20"]}
     emitter = general["Emitters"]["Emitter"][0]["FixedLightEmitter"][0]
+    # GLDF: the emitter's rated flux is the entire equipment's, the luminaire's output; the
+    # lamps' flux is the LDT's lamp set, which its photometry is relative to
     assert emitter["RatedLuminousFlux"] == round(ph["luminous_flux"])
+    assert source["Manufacturer"] == "Acme Lighting GmbH"
+    assert doc["Header"]["Author"] == "Photometry lab, Acme"
     variant = doc["ProductDefinitions"]["Variants"]["Variant"][0]
     ref = variant["Geometry"]["ModelGeometryReference"]["EmitterReference"][0]
     assert ref["EmitterObjectExternalName"] == "leo_opening"
@@ -330,3 +336,53 @@ def test_a_bare_light_and_a_rectangular_opening_make_valid_l3d():
                  dtype=float)
     assert bare.triangles.size == 0  # no geometry: a stand-in box the opening's size
     assert v.max(axis=0) - v.min(axis=0) == pytest.approx((0.3, 0.1, 0.01))
+
+
+def test_what_the_stage_does_not_say_is_left_out_and_said(tmp_path):
+    """A stage with none of the luminaire's data: the GLDF is valid without the light
+    source's manufacturer and the author (optional), keeps the required manufacturer and
+    power as placeholders, and writing it warns, naming the attributes to author."""
+    import warnings
+
+    from lumitrace.errors import OutputWarning
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import TraceSettings, run
+    from lumitrace.stage.reader import read_stage
+
+    gldf = pytest.importorskip("gldf_rs_python")
+    stage = tmp_path / "disc.usda"
+    shutil.copy(ROOT / "stages" / "reference" / "lambertian_disc.usda", stage)
+    result = run(read_stage(stage), TraceSettings(photons=50_000, resolution=8, threads=2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        record = write_outputs(result, tmp_path, pictures=True, deliverables=True,
+                               sublayer=False)
+    said = [str(w.message) for w in caught if issubclass(w.category, OutputWarning)]
+    missing = [s for s in said if "author lumitrace:manufacturer" in s]
+    assert len(missing) == 1, said
+    for name in ("lumitrace:inputPower", "lumitrace:author", "unknown manufacturer", "0 W"):
+        assert name in missing[0]
+    xml = zipfile.ZipFile(record["gldf"]).read("product.xml").decode()
+    assert [f"{e.path}: {e.reason}" for e in _schema(GLDF_XSD).iter_errors(xml)] == []
+    assert "<Author>" not in xml
+    doc = json.loads(gldf.gldf_to_json(record["gldf"]))
+    source = doc["GeneralDefinitions"]["LightSources"]["FixedLightSource"][0]
+    assert "Manufacturer" not in source or source["Manufacturer"] in (None, "")
+    assert source["RatedInputPower"] == 0.0  # required by the schema: said in the warning
+    assert doc["Header"]["Manufacturer"] == "unknown manufacturer"  # required likewise
+    assert "LuminousEfficacy" not in json.dumps(doc)
+
+
+def test_the_summary_prints_the_opening_the_datasheet_and_the_gldf(demo):
+    """The text summary of a run with --deliverables: their paths, as --json has them."""
+    from lumitrace.publish.record import ResultRecord
+    from lumitrace.report.console import summary_text
+
+    stage, summary = demo
+    flat = {k: v for k, v in _flat(summary).items() if k not in ("target_reached", "warnings")}
+    text = summary_text(ResultRecord(flat), stage)
+    outputs = summary["outputs"]
+    assert outputs["gldf"] and outputs["datasheet_html"] and outputs["datasheet_pdf"]
+    assert f"GLDF            {outputs['gldf']}" in text
+    assert f"datasheet       {outputs['datasheet_html']}  {outputs['datasheet_pdf']}" in text
+    assert "(round, measured)" in text
