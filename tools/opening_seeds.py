@@ -48,7 +48,7 @@ def study(name: str, seeds: int, photons: int, reference_photons: int) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--photons", type=int, default=1 << 15)
+    ap.add_argument("--photons", type=int, default=1 << 16)
     ap.add_argument("--reference-photons", type=int, default=1 << 20)
     ap.add_argument("--stages", nargs="*", default=list(STAGES))
     ap.add_argument("--json", action="store_true")
