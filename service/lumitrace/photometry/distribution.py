@@ -4,6 +4,8 @@ opening, ready for the IES and EULUMDAT writers, the pictures and the sidecar JS
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property, partial
+from typing import Callable
 
 import numpy as np
 
@@ -26,13 +28,19 @@ C_STEP = 5.0
 class Photometry:
     """The photometric description of a result: the published C-gamma grid (reduced to the
     symmetry the counts hold, with standard errors), the figures, the luminous opening, the
-    emitters' flux and each symmetry's estimated departure."""
+    emitters' flux and each symmetry's estimated departure. ``measure`` is the opening, or
+    what measures it when first asked for (:attr:`opening`: a live preview never does)."""
 
     grid: CGammaGrid
     figures: PhotometricFigures
-    opening: LuminousOpening
+    measure: LuminousOpening | Callable[[], LuminousOpening]
     lamp_flux: float
     symmetry: SymmetryChoice
+
+    @cached_property
+    def opening(self) -> LuminousOpening:
+        """The luminous opening (:func:`~lumitrace.photometry.opening.luminous_opening`)."""
+        return self.measure() if callable(self.measure) else self.measure
 
     @property
     def departures(self) -> dict:
@@ -111,7 +119,8 @@ def _scaled(ph: Photometry, k: float, lamp_flux: float) -> Photometry:
     grid = replace(ph.grid, candela=ph.grid.candela * k,
                    sigma=None if ph.grid.sigma is None else ph.grid.sigma * k)
     figures = PhotometricFigures(**scaled_figures(ph.figures.as_dict(), k))
-    return replace(ph, grid=grid, figures=figures, lamp_flux=lamp_flux)
+    measure = ph.__dict__.get("opening", ph.measure)  # measured already: kept
+    return replace(ph, grid=grid, figures=figures, measure=measure, lamp_flux=lamp_flux)
 
 
 def _measured(scene: Scene, acc: Accumulator, seed: int = 0) -> Photometry:
@@ -119,7 +128,7 @@ def _measured(scene: Scene, acc: Accumulator, seed: int = 0) -> Photometry:
     half_width = beam_half_width(rings)
     grid, halves, choice = _files_grid(scene, acc, default_gammas(half_width))
     fig = figures(acc, grid, halves, C_STEP, rings, half_width)
-    return Photometry(grid, fig, luminous_opening(scene, acc.photons, seed),
+    return Photometry(grid, fig, partial(luminous_opening, scene, acc.photons, seed),
                       scene.total_flux, choice)
 
 
