@@ -249,3 +249,25 @@ def test_crosswise_is_named_from_the_long_axis():
     va = ugr.observer_variation(along_c0, LuminousOpening(1.2, 0.1, 0.0))
     vb = ugr.observer_variation(along_c90, LuminousOpening(0.1, 1.2, 0.0))
     np.testing.assert_allclose(va.crosswise, vb.crosswise, atol=0.02)
+
+
+def test_the_flux_correction_against_eulumdat_ugr(tmp_path):
+    """eulumdat-ugr reads the lamp flux from the LDT's lamp set: the same distribution for
+    lamps of twice the flux (the same cd/klm) rates 8 log10 2 higher, in every cell."""
+    pyldt = pytest.importorskip("pyldt")
+    calc = pytest.importorskip("eulumdat_ugr")
+    from lumitrace.photometry.eulumdat import format_ldt
+    from lumitrace.photometry.grid import CGammaGrid, default_gammas
+
+    gam = default_gammas()
+    cd = 400.0 * np.maximum(np.cos(np.radians(gam)), 0.0) ** 2
+    dims = dict(length=300, width=300, height=10, lum_length=300, lum_width=300, lum_height=0)
+    tables = []
+    for k in (1.0, 2.0):
+        grid = CGammaGrid(np.array([0.0]), gam, k * cd[None, :], "rotational", 0.01 * cd[None])
+        path = tmp_path / f"lamps{k:g}.ldt"
+        path.write_text(format_ldt(grid, grid.flux(), "x", dims, 1.0, 1.0), encoding="latin-1")
+        tables.append(calc.UgrCalculator.compute(pyldt.LdtReader.read(str(path))).values)
+    # (to the LDT's six significant digits of the lamp flux)
+    np.testing.assert_allclose(tables[1] - tables[0], ugr.flux_correction(1.0, 2.0),
+                               atol=2e-5)
