@@ -271,3 +271,14 @@ def test_the_flux_correction_against_eulumdat_ugr(tmp_path):
     # (to the LDT's six significant digits of the lamp flux)
     np.testing.assert_allclose(tables[1] - tables[0], ugr.flux_correction(1.0, 2.0),
                                atol=2e-5)
+
+
+def test_the_variations_errors_cover_a_second_seed():
+    """The observer variation of the louvre traced with two seeds: its stated errors
+    (redraws of the grid) cover the difference, neither too small nor too large."""
+    one = ugr.observer_variation(*(lambda p: (p.grid, p.opening))(traced("louvre")[2]))
+    two = ugr.observer_variation(*(lambda p: (p.grid, p.opening))(traced("louvre", seed=2)[2]))
+    z = np.abs(np.stack([one.crosswise - two.crosswise, one.endwise - two.endwise])) / \
+        np.hypot(np.stack([one.crosswise_error, one.endwise_error]),
+                 np.stack([two.crosswise_error, two.endwise_error]))
+    assert z.max() < 4.5 and np.median(z) < 1.5, z
