@@ -40,6 +40,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "live_loop_bench.py": ("--edits", "1", "--client", "page"),
     "part_edit_bench.py": ("--triangles", "20000", "--repeats", "1"),
     "make_stages.py": ("--check",),
+    "opening_seeds.py": ("--seeds", "2", "--photons", "8192", "--reference-photons", "16384",
+                         "--stages", "disc"),
     "photometry_accuracy.py": ("--photons", "20000", "--stages", "isotropic"),
     "profile_run.py": ("--photons", "20000"),
     "publish_stress.py": ("--runs", "1", "--bursts", "1", "--seconds", "1"),

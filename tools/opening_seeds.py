@@ -17,6 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "service"))
 
 from lumitrace.photometry.opening import measured_opening  # noqa: E402
+from lumitrace.run import session  # noqa: E402,F401  (lends the opening its tracer)
 from lumitrace.stage.reader import read_stage  # noqa: E402
 
 #: Stages and their truths (length, width in m; None: a run of many photons).
