@@ -2,7 +2,7 @@
 disc's 100 mm) or a run of many photons, and its stated standard errors against their
 spread (mean squared z-score; 1 where the errors are honest).
 
-    python tools/opening_seeds.py [--seeds 20] [--photons 32768] [--json]
+    python tools/opening_seeds.py [--seeds 20] [--photons 65536] [--json]
 """
 from __future__ import annotations
 
