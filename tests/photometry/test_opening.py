@@ -246,3 +246,20 @@ def test_a_round_luminaire_is_not_linear(tmp_path):
     record = write_outputs(result, tmp_path / "out", pictures=False, sublayer=False)
     assert pyldt.LdtReader.read(str(record["ldt"])).header.ityp == 1  # rotational
     assert record["ugr_table"]["long_axis"] == ""
+
+
+def test_the_datasheet_says_the_tables_are_not_applicable():
+    from lumitrace.publish.datasheet_content import (luminance_section, opening_cell,
+                                                      ugr_section)
+
+    record = {"luminous_opening": (0.0, 0.0, 0.0), "luminous_opening_source": "none",
+              "luminous_opening_note": "no luminous opening: light from everywhere",
+              "ugr_table": None, "luminance_table": None}
+    for section in (ugr_section(record), luminance_section(record)):
+        assert section.rows[0][0].text == "not applicable"
+        assert section.note == record["luminous_opening_note"]
+    assert opening_cell(record).text.startswith("none")
+    declared = {**record, "luminous_opening": (0.1, 0.1, 0.0),
+                "luminous_opening_source": "declared", "luminous_opening_shape": "round"}
+    assert opening_cell(declared).text == "100.00 x 100.00 x 0.00 (round, declared)"
+    assert ugr_section({}) is None  # no opening said, no table: nothing to show
