@@ -8,21 +8,24 @@ again with its seed; :data:`OPENING_PHOTONS` at most). The box face most of the 
 leaves through (its bottom, or its top for a luminaire that sends more light up) holds the
 flat opening; the sides give its luminous height where they carry light.
 
-An edge is where the light ends: on each side of the face's light (along C0 and C90 for a
-rectangular opening; along 16 rays from the centre for a round one, an ellipse then fitted
-through them) the bins of the profile that still hold :data:`EDGE_LEVEL` of the opening's
-typical exitance locate it to a bin, and a two-level maximum likelihood on the photons'
-own positions there places it: the step from the light inside to what lies beyond (nothing,
-or a faint glow). Its standard error is the mean gap between photons at the edge (the
-photons there are a Poisson sample; the estimate adds that mean gap to the outermost one),
-an ellipse's from the fit, scaled up where the edge points scatter more than that (a
-polygon's corners). No part of the estimate trims light: a disc's edge is its rim.
+An edge is where the light ends. The bins of a profile across it that still hold
+:data:`EDGE_LEVEL` of the opening's typical exitance locate it to a bin; there, on the
+photons' own positions, it follows the outermost photon still within the light (reached
+without a gap many mean spacings wide, and with less light beyond it than the edge level),
+one mean spacing of the last photons further: the gap from a Poisson sample's last point to
+its edge is exponential, that spacing its mean and its spread, the edge's standard error.
+A rectangular opening has its edges along C0 and C90; a round one its centre and shape from
+the edges along 16 rays from its centre (an ellipse fitted through them, a circle where its
+axes agree), its size from the edge of all its light along the ellipse's radius, its error
+that edge's or the rays' scatter where that is larger (a polygon's corners, a rim that
+fades). No part of the estimate trims light: a disc's edge is its rim.
 
 Where more than :data:`STRAY_LIMIT` of the face's light leaves outside the outline, or
 the light has no edge (the outline's outer tenth less than :data:`RIM_LEVEL` as bright as
 its inside: it leaves from everywhere, as through the Fresnel slab's 40 m of glass) no
-opening is meaningful: the opening is none, and the tables that need one are not applicable, unless
-the stage declares one (``lumitrace:luminousOpeningShape`` and ``lumitrace:luminousOpening``).
+opening is meaningful: the opening is none, and the tables that need one are not
+applicable, unless the stage declares one (``lumitrace:luminousOpeningShape`` and
+``lumitrace:luminousOpening``).
 """
 from __future__ import annotations
 
@@ -106,15 +109,6 @@ class LuminousOpening:
     def shape(self) -> str:
         return "round" if self.round else "rectangular"
 
-    @property
-    def area_error(self) -> float:
-        """Standard error (m^2) of :attr:`area` (length and width independent)."""
-        a = self.area
-        if a <= 0:
-            return 0.0
-        return a * math.hypot(self.error[0] / self.length if self.length else 0.0,
-                              self.error[1] / self.width if self.width else 0.0)
-
     def as_dict(self) -> dict:
         """The record's fields."""
         return {"luminous_opening": (self.length, self.width, self.height),
@@ -166,9 +160,12 @@ def _change_point(v: np.ndarray, w: np.ndarray, a: float, b: float, end: float,
     The edge follows the outermost photon that is still within the light: reached from the
     photons before it without a gap of :data:`_WIDE_GAP` mean spacings, and with less light
     beyond it (up to ``end``) than :data:`EDGE_LEVEL` of the density there (where that
-    level would put at least :data:`_BEYOND` photons beyond). The edge lies one mean spacing past it: the gap
-    to an edge of a Poisson sample is exponential, that spacing its mean and its spread.
-    ``squared``: densities per unit of v^2 (a radius: area grows as r dr)."""
+    level would put at least :data:`_BEYOND` photons beyond). The edge lies one mean
+    spacing of the last :data:`_RIM` photons past it (the gap to the edge of a Poisson
+    sample is exponential, that spacing its mean and its spread; where the light fades to
+    its edge the difference from the spacing before adds to the error); with no such
+    photon, at the split of the photons into two runs of constant density (maximum
+    likelihood). ``squared``: densities per unit of v^2 (a radius: area grows as r dr)."""
     g = (lambda t: t * t) if squared else (lambda t: t)
     outer = (v > b) & (v <= end)
     past = float(w[outer].sum())
