@@ -394,7 +394,7 @@ def _op_layer(ctx: _Context, d: dict) -> None:
 
 def _data_problems(layer: Sdf.Layer) -> list[tuple[str, str]]:
     """(where, why) of every value of the luminaire's own data in ``layer`` (defaults and
-    time samples) that the stage reader would refuse (see :mod:`lumitrace.stage.luminaire_data`)."""
+    time samples) that the stage reader would refuse (:mod:`~lumitrace.stage.luminaire_data`)."""
     found: list[tuple[str, str]] = []
 
     def visit(path: Sdf.Path) -> None:
