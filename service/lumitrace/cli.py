@@ -141,9 +141,12 @@ def _add_trace(sub) -> None:
 def _add_check(sub) -> None:
     c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
                                      "current and converged, 1 stale or missing, 3 not "
-                                     "converged)",
+                                     "converged, 4 a publishing interrupted that it could "
+                                     "not finish)",
                        description="Compose the stage and compare its lumitrace:result:* "
-                                   "attributes with the scene as it is now: a pipeline gate.")
+                                   "attributes with the scene as it is now: a pipeline gate. "
+                                   "A publishing that a killed run left half done is "
+                                   "finished first, as the next trace would finish it.")
     c.add_argument("stage", type=Path)
     c.add_argument("--out", type=Path, default=None,
                    help="the folder a trace wrote the results to (trace --out DIR, with or "
@@ -392,6 +395,8 @@ def cmd_check(args) -> int:
     from .publish.check import check_stage
 
     verdict = check_stage(args.stage, args.out)
+    for note in verdict.values.get("recovered", ()):
+        print(f"warning: {note}", file=sys.stderr)
     print(json.dumps(verdict.as_dict()) if args.json else f"{args.stage}: {verdict.status}: "
           f"{verdict.message}")
     return verdict.exit_status
