@@ -29,6 +29,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "application_cost.py": ("--photons", "20000", "--repeats", "1"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
+    "early_interrupt.py": ("--delays", "0", "--repeats", "1", "--dispositions", "default"),
     "dask_bench.py": ("--photons", "100000", "--resolution", "8", "--small-batches", "10"),
     "deliverables_cost.py": ("--photons", "20000", "--repeats", "1", "--no-pictures"),
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",

@@ -101,8 +101,7 @@ def _add_trace(sub) -> None:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
-    t.add_argument("--scheduler", type=scheduler_address, default=None,
-                   metavar="tcp://HOST:PORT",
+    t.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
                         "the map does not depend on it); exit 4 if it goes away mid-run")
     t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
@@ -144,9 +143,8 @@ def _add_check(sub) -> None:
                                      "converged, 4 a publishing interrupted that it could "
                                      "not finish)",
                        description="Compose the stage and compare its lumitrace:result:* "
-                                   "attributes with the scene as it is now: a pipeline gate. "
-                                   "A publishing that a killed run left half done is "
-                                   "finished first, as the next trace would finish it.")
+                                   "attributes with the scene as it is now: a pipeline gate; "
+                                   "a killed run's half-done publishing is finished first.")
     c.add_argument("stage", type=Path)
     c.add_argument("--out", type=Path, default=None,
                    help="the folder a trace wrote the results to (trace --out DIR, with or "
@@ -174,8 +172,7 @@ def _add_serve(sub) -> None:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
-    v.add_argument("--scheduler", type=scheduler_address, default=None,
-                   metavar="tcp://HOST:PORT",
+    v.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
