@@ -7,8 +7,8 @@ program; ``ignored``: as a background job of a shell script inherits it) and eac
 already exist gets SIGINT, and the outcome is tabulated:
 
 - ``stopped``: exit 130, lumitrace's one line, the outputs unchanged;
-- ``killed``: ended by the signal's default action before Python took it (status -2),
-  the outputs unchanged;
+- ``killed``: ended by the signal's default action before Python took it (status -2;
+  -15 for ``--signal TERM``), the outputs unchanged;
 - ``traceback``: a KeyboardInterrupt in the interpreter's start-up, before lumitrace's
   first line ran (exit 1), the outputs unchanged;
 - ``rewritten``: exit 0 and the outputs rewritten: the signal was lost (only where it was
@@ -18,7 +18,12 @@ already exist gets SIGINT, and the outcome is tabulated:
     python tools/early_interrupt.py --delays 0,5,10,20,40,80 --repeats 5
 
 prints a table per way in and disposition (counts of each outcome per delay) and, with
-``--json``, one JSON object. Where ``rewritten`` appears is the window that is left.
+``--json``, one JSON object. Where ``rewritten`` appears is the window that is left. It
+also times, as whole processes (median of ``--repeats``), the interpreter alone
+(``python -I -S -c pass``), the interpreter with this environment's site start-up
+(``python -c pass``: its ``.pth`` files, an editable install's finder among them) and the
+same up to lumitrace's recorders (``python -c "import lumitrace_launch"``): the window
+lies inside the last.
 """
 from __future__ import annotations
 
@@ -59,21 +64,23 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def trial(command: list[str], folder: Path, delay_s: float, ignored: bool) -> tuple[str, int]:
-    """One run signalled ``delay_s`` after it started: (outcome, exit status)."""
+def trial(command: list[str], folder: Path, delay_s: float, ignored: bool,
+          sig: int = signal.SIGINT) -> tuple[str, int]:
+    """One run sent ``sig`` ``delay_s`` after it started: (outcome, exit status)."""
     before = _digest(folder)
     args = [*command, "trace", str(folder / "iso.usda"), "--photons", "20000",
             "--resolution", "8", "--no-pictures", "--no-progress", "--quiet"]
     p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                          preexec_fn=_ignore_sigint if ignored else None)
     time.sleep(delay_s)  # counted from here: Popen returns once the child has exec'd
-    p.send_signal(signal.SIGINT)
+    p.send_signal(sig)
     _, err = p.communicate(timeout=300)
     same = _digest(folder) == before
     lines = err.strip().splitlines()
-    if p.returncode == 130 and same and lines[-1:] == [STOPPED]:
+    name = signal.Signals(sig).name
+    if p.returncode == 128 + sig and same and lines[-1:] == [STOPPED.replace("SIGINT", name)]:
         return "stopped", p.returncode
-    if p.returncode == -signal.SIGINT and same:
+    if p.returncode == -sig and same:
         return "killed", p.returncode
     if p.returncode == 1 and same and "KeyboardInterrupt" in err:
         return "traceback", p.returncode
@@ -82,12 +89,33 @@ def trial(command: list[str], folder: Path, delay_s: float, ignored: bool) -> tu
     return "other", p.returncode
 
 
+def startup_ms(repeats: int) -> dict[str, float]:
+    """Median wall time (ms) of the processes that bound the window (see the module's
+    note)."""
+    import statistics
+
+    probes = {"interpreter alone": [sys.executable, "-I", "-S", "-c", "pass"],
+              "with site start-up": [sys.executable, "-c", "pass"],
+              "to lumitrace's recorders": [sys.executable, "-c", "import lumitrace_launch"]}
+    out = {}
+    for name, command in probes.items():
+        times = []
+        for _ in range(max(repeats, 3)):
+            t0 = time.perf_counter()
+            subprocess.run(command, check=True)
+            times.append(1000.0 * (time.perf_counter() - t0))
+        out[name] = statistics.median(times)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--delays", default="0,5,10,20,40,80,160",
                     help="delays after the start, ms, comma-separated")
     ap.add_argument("--repeats", type=int, default=3, help="runs per delay")
     ap.add_argument("--dispositions", default="default,ignored")
+    ap.add_argument("--signal", choices=("INT", "TERM"), default="INT",
+                    help="the signal sent (SIGINT by default; SIGTERM to compare)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     delays = [float(d) for d in args.delays.split(",")]
@@ -108,16 +136,20 @@ def main() -> int:
                     others = []
                     for _ in range(args.repeats):
                         outcome, code = trial(command, folder, d / 1000.0,
-                                              disposition == "ignored")
+                                              disposition == "ignored",
+                                              getattr(signal, f"SIG{args.signal}"))
                         counts[outcome] += 1
                         if outcome == "other":
                             others.append(code)
                     table[d] = {**counts, "other_statuses": others}
-                results[f"{name}, SIGINT {disposition}"] = table
+                results[f"{name}, SIGINT {disposition}, SIG{args.signal} sent"] = table
+    startup = startup_ms(args.repeats)
     if args.json:
         print(json.dumps({"delays_ms": delays, "repeats": args.repeats,
-                          "results": results}))
+                          "results": results, "startup_ms": startup}))
         return 0
+    print("process start-up, median ms: " + ", ".join(f"{k} {v:.1f}"
+                                                       for k, v in startup.items()))
     for key, table in results.items():
         print(f"\n{key} ({args.repeats} runs per delay)")
         print("| delay (ms) | " + " | ".join(OUTCOMES) + " |")
