@@ -3,6 +3,10 @@
 // /scene, /status, /results, /settings and the event stream; edits are POST /deltas.
 "use strict";
 
+// the service's key for this page (in the page itself, which no other origin can read):
+// every request carries it, so that the service tells the page from a forged request
+const KEY = document.querySelector('meta[name="lumitrace-key"]').content;
+
 const LT = (window.lumitrace = {
   token: sessionStorage.getItem("lumitrace-token") || null,
   status: null, scene: null, geometry: null, preview: null, results: null,
@@ -14,7 +18,7 @@ window.addEventListener("error", (e) => LT.errors.push(String(e.message)));
 // ---- HTTP -------------------------------------------------------------------------------
 
 function headers(extra) {
-  const h = Object.assign({}, extra || {});
+  const h = Object.assign({ "X-Lumitrace-Key": KEY }, extra || {});
   if (LT.token) h.Authorization = "Bearer " + LT.token;
   return h;
 }
