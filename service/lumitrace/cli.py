@@ -17,7 +17,7 @@ from .loading import collector_paused
 from .pyplot import short_setter_docs
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
-from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
+from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
 from .trace.job import MAX_DEPTH
 
 
@@ -102,7 +102,8 @@ def _add_trace(sub) -> None:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
-    t.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    t.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
                         "the map does not depend on it); exit 4 if it goes away mid-run")
     t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
@@ -171,7 +172,8 @@ def _add_serve(sub) -> None:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
-    v.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    v.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")

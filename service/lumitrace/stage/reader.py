@@ -60,6 +60,7 @@ from ..scene.groups import group_emitters
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
+from .luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
 from .materials import BoundMaterials
 from .reuse import ReadCache
@@ -300,32 +301,24 @@ class _Reader:
 
     def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
         """The luminaire's own data (manufacturer, names, lamp, power, colour rendering),
-        checked: text must be text without NUL, the power finite and at least 0, the
-        colour rendering index finite and at most 100."""
+        checked as :mod:`.luminaire_data` says: one line of printable text, the power
+        finite and at least 0, the colour rendering index finite in [0, 100]."""
         where = str(root.GetPath())
-
-        def authored(name: str):
+        values = {}
+        for name in LUMINAIRE_DATA:
             attr = root.GetAttribute(name)
-            return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
-
-        text = {}
-        for name in schema.LUMINAIRE_TEXT:
-            value = authored(name)
-            if value is not None and (not isinstance(value, str) or "\x00" in value):
-                raise StageError(f"must be text, got {value!r}", where, name)
-            text[name] = (value or "").strip()
-        power = authored(schema.INPUT_POWER)
-        power = None if power is None else validate.check_non_negative(
-            power, where, schema.INPUT_POWER)
-        cri = authored(schema.COLOUR_RENDERING_INDEX)
-        if cri is not None:
-            cri = validate.check_finite(cri, where, schema.COLOUR_RENDERING_INDEX)
-            if cri > 100.0:
-                raise StageError(f"must be at most 100, got {cri:g}", where,
-                                 schema.COLOUR_RENDERING_INDEX)
+            value = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+            if value is None:
+                continue
+            problem = luminaire_data_problem(name, value)
+            if problem is not None:
+                raise StageError(problem, where, name)
+            values[name] = value.strip() if isinstance(value, str) else float(value)
+        text = {name: values.get(name, "") for name in schema.LUMINAIRE_TEXT}
         return LuminaireInfo(text[schema.MANUFACTURER], text[schema.LUMINAIRE_NAME],
                              text[schema.CATALOGUE_NUMBER], text[schema.LAMP_DESCRIPTION],
-                             power, cri)
+                             values.get(schema.INPUT_POWER),
+                             values.get(schema.COLOUR_RENDERING_INDEX))
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
         """The luminaire prim's local-to-world transform (local stage units to world m),
