@@ -27,6 +27,7 @@ from ..film.cubemap import bilinear_taps, face_size, sample_map
 from ..photometry import frame
 from ..photometry.distribution import photometry_of
 from ..photometry.quantities import scaled_figures
+from ..photometry.ugr import ugr_table
 from ..publish.record import defined
 from ..scene import Scene
 
@@ -112,7 +113,9 @@ class _Cached:
 class PreviewCache:
     """The current preview frame, made once per (revision, photons, threshold)."""
 
-    def __init__(self) -> None:
+    def __init__(self, kept=None) -> None:
+        #: where every frame made is handed (:class:`~lumitrace.serve.reference.KeptFrames`)
+        self.kept = kept
         self._lock = threading.Lock()
         # one frame is made at a time: requests arriving while it is made wait for it and
         # take it, rather than each making its own (and slowing every one down)
@@ -162,6 +165,8 @@ class PreviewCache:
                 if self._cached is None or self._cached.key[0] <= key[0]:  # none newer
                     self._cached = _Cached(key, data, acc.version, acc.lineage, lights,
                                            header, arrays)
+            if self.kept is not None:
+                self.kept.keep(header, data)
         return data
 
     def _earlier_rescaled(self, engine, key: tuple) -> bytes | None:
@@ -188,6 +193,8 @@ class PreviewCache:
             if self._cached is last:  # no newer frame was made meanwhile
                 self._cached = _Cached((revision, *last.key[1:]) if done else key, data,
                                        last.version, last.lineage, lights, header, arrays)
+        if self.kept is not None:
+            self.kept.keep(header, data)
         return data
 
 
@@ -211,9 +218,12 @@ def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: floa
     """A preview's header and arrays for the same counts with every light's flux times
     ``k``, as revision ``revision`` (and the header's fields ``changes``): intensities and
     fluxes scale, angles and relative errors stay."""
+    figures = scaled_figures(header["figures"], k)
+    for key in UGR_KEYS[::2]:  # L^2 omega / Lb scales with k: UGR moves by 8 log10 k
+        if figures.get(key) is not None:
+            figures[key] += 8.0 * math.log10(k)
     header = {**header, **changes, "revision": revision, "seconds": seconds,
-              "lamp_lumens": header["lamp_lumens"] * k,
-              "figures": scaled_figures(header["figures"], k)}
+              "lamp_lumens": header["lamp_lumens"] * k, "figures": figures}
     return header, {name: a * k for name, a in arrays.items()}
 
 
@@ -232,7 +242,7 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
     shape = (len(LATLONG_GAMMA), len(LATLONG_C))
     both = np.stack([est.filtered, est.raw], axis=-1)
     filtered, raw = (m.reshape(shape) for m in sample_map(both, None, taps).T)
-    fig = ph.figures.as_dict()
+    fig = {**ph.figures.as_dict(), **catalogue_ugr(ph)}
     header = {
         "revision": revision, "photons": photons, "iterations": iteration,
         "seconds": seconds, "threshold": threshold, "target_error": target,
@@ -248,6 +258,28 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
     return header, {"filtered": filtered, "raw": raw, "grid": full.candela, "sigma": sigma}
 
 
+#: The UGR figures a preview carries (4H x 8H, 70/50/20, crosswise and endwise), each
+#: followed by its standard error.
+UGR_KEYS = ("ugr_4h8h_70_50_20", "ugr_4h8h_70_50_20_error", "ugr_4h8h_70_50_20_endwise",
+            "ugr_4h8h_70_50_20_endwise_error")
+#: The last photometry whose UGR was computed, and its UGR figures.
+_LAST_UGR: list = [None, None]
+
+
+def catalogue_ugr(ph) -> dict[str, float | None]:
+    """The catalogue UGR figures (:data:`UGR_KEYS`) of a
+    :class:`~lumitrace.photometry.distribution.Photometry` (None where its opening has no
+    area or no light leaves), computed once per photometry (a few ms)."""
+    if _LAST_UGR[0] is ph:
+        return _LAST_UGR[1]
+    out = dict.fromkeys(UGR_KEYS)
+    if (ph.opening.area > 0 or ph.opening.height > 0) and ph.figures.luminous_flux > 0:
+        table = ugr_table(ph.grid, ph.opening).as_dict()
+        out = {k: defined(table[k]) for k in UGR_KEYS}
+    _LAST_UGR[:] = [ph, out]
+    return out
+
+
 def _plain(value: Any) -> Any:
     """A figure as JSON holds it: numbers as floats (None where undefined), tuples as
     lists."""
@@ -260,16 +292,20 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-def editable_scene(scene: Scene, revision: int) -> dict[str, Any]:
-    """The parts, their materials (the prim that holds each material's values, and the
-    values), the emitters and their fluxes, with the ranges a delta must respect."""
+def editable_scene(scene: Scene, revision: int,
+                   transforms: dict[str, dict] | None = None) -> dict[str, Any]:
+    """The parts (with their local ``transforms`` where given:
+    :func:`~lumitrace.serve.transforms.part_transforms`), their materials (the prim that
+    holds each material's values, and the values), the emitters and their fluxes, with the
+    ranges a delta must respect."""
     index = np.asarray(scene.material_index)
     part = np.asarray(scene.part_index)
     parts = []
     for k, name in enumerate(scene.parts):
         mats = sorted(set(index[part == k].tolist()))
         parts.append({"path": name, "materials": [scene.materials[m].path for m in mats],
-                      "triangles": int((part == k).sum())})
+                      "triangles": int((part == k).sum()),
+                      "transform": (transforms or {}).get(name)})
     materials = [{"path": m.path, "scattering": m.scattering, "reflectance": m.reflectance,
                   "specularReflectance": m.specular_reflectance,
                   "transmittance": m.transmittance, "ior": m.ior, "roughness": m.roughness,
