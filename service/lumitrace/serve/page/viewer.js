@@ -557,7 +557,7 @@ function drawFigures() {
 
 // ---- the 3D view (WebGL2) -------------------------------------------------------------------
 
-const gl = document.getElementById("view3d").getContext("webgl2", { antialias: true, preserveDrawingBuffer: true });
+const gl = document.getElementById("view3d").getContext("webgl2", { alpha: false, antialias: true, preserveDrawingBuffer: true });
 const cam = { theta: -0.9, phi: -0.3, dist: 0.6, target: [0, 0, 0] };  // from below: the light side
 const FOV_HALF = 0.4;  // half the vertical field of view (rad)
 const meshes = { parts: null, solid: null, picked: null };
