@@ -54,7 +54,8 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     kept = KeptFrames()
     previews = PreviewCache(kept)
     if viewer:  # an edit's first preview is made as soon as its map is, before its files
-        engine.refreshed = lambda: previews.get(engine, hold=False)
+        # (its UGR figures with the next frame; a done revision's, kept, has them)
+        engine.refreshed = lambda: previews.get(engine, hold=False, ugr=engine.done)
 
     @web.middleware
     async def guard(request: web.Request, handler):

@@ -108,6 +108,8 @@ class _Cached:
     lights: tuple
     header: dict
     arrays: dict
+    #: whether its figures hold the UGR (computed, even where undefined)
+    ugr: bool = True
 
 
 class PreviewCache:
@@ -122,16 +124,19 @@ class PreviewCache:
         self._making = threading.Lock()
         self._cached: _Cached | None = None
 
-    def get(self, engine, hold: bool = True) -> bytes | None:
+    def get(self, engine, hold: bool = True, ugr: bool = True) -> bytes | None:
         """The current preview frame of ``engine``; with ``hold`` (a client's request) the
         last frame while the engine is about to replace it (:meth:`Engine.preview_waits`),
-        without (the engine's own refresh) always the current one."""
+        without (the engine's own refresh) always the current one. ``ugr`` False leaves
+        the UGR figures out of a frame made now (an edit's first preview, which a designer
+        waits for: they come with the next one)."""
         # the key first: a client polling an unchanged preview costs no copy of the counts
         key = engine.snapshot_key()
         if key is None:
             return None
         with self._lock:
-            if self._cached is not None and self._cached.key == key:
+            if self._cached is not None and self._cached.key == key and \
+                    (self._cached.ugr or not ugr):
                 return self._cached.data
         early = self._earlier_rescaled(engine, key)
         if early is not None:
@@ -147,24 +152,25 @@ class PreviewCache:
             key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
             with self._lock:
                 last = self._cached
-            if last is not None and last.key == key:
+            if last is not None and last.key == key and (last.ugr or not ugr):
                 return last.data
             acc = snap["accumulator"]
             lights = acc.light_state()
             k = flux_scale(last.lights, lights) if last is not None and \
-                last.version == acc.version and last.key[2] == key[2] else None
+                last.version == acc.version and last.key[2] == key[2] and \
+                (last.ugr or not ugr) else None
             if k is not None:  # the same counts, every light dimmed alike: a rescale
                 header, arrays = _rescaled(last.header, last.arrays, k, snap["revision"],
                                            snap["seconds"], iterations=snap["iteration"],
                                            target_error=snap["target"],
                                            converged=snap["converged"])
             else:
-                header, arrays = preview_parts(**snap)
+                header, arrays = preview_parts(**snap, ugr=ugr)
             data = frame_bytes(header, arrays)
             with self._lock:
                 if self._cached is None or self._cached.key[0] <= key[0]:  # none newer
                     self._cached = _Cached(key, data, acc.version, acc.lineage, lights,
-                                           header, arrays)
+                                           header, arrays, last.ugr if k is not None else ugr)
             if self.kept is not None:
                 self.kept.keep(header, data)
         return data
@@ -192,7 +198,8 @@ class PreviewCache:
         with self._lock:
             if self._cached is last:  # no newer frame was made meanwhile
                 self._cached = _Cached((revision, *last.key[1:]) if done else key, data,
-                                       last.version, last.lineage, lights, header, arrays)
+                                       last.version, last.lineage, lights, header, arrays,
+                                       last.ugr)
         if self.kept is not None:
             self.kept.keep(header, data)
         return data
@@ -229,7 +236,7 @@ def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: floa
 
 def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
-                  converged: bool, seconds: float) -> tuple[dict, dict]:
+                  converged: bool, seconds: float, ugr: bool = True) -> tuple[dict, dict]:
     """The header and arrays of a refinement's preview (an
     :meth:`~lumitrace.serve.engine.Engine.snapshot`): the map (filtered and raw, cd) on a
     lat-long grid in the photometric frame, the published C-gamma grid (cd) with its
@@ -242,7 +249,8 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
     shape = (len(LATLONG_GAMMA), len(LATLONG_C))
     both = np.stack([est.filtered, est.raw], axis=-1)
     filtered, raw = (m.reshape(shape) for m in sample_map(both, None, taps).T)
-    fig = {**ph.figures.as_dict(), **catalogue_ugr(ph)}
+    fig = {**ph.figures.as_dict(),
+           **(catalogue_ugr(ph) if ugr else dict.fromkeys(UGR_KEYS))}
     header = {
         "revision": revision, "photons": photons, "iterations": iteration,
         "seconds": seconds, "threshold": threshold, "target_error": target,
