@@ -266,6 +266,7 @@ class Engine:
                 "relative_error": defined(est.error) if est else None,
                 "relative_error_bound": defined(est.error_bound) if est else None,
                 **self._judged(r),
+                "target_error": self.settings.convergence_target,
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
                 "written_photons": self.written.get("photons"),
