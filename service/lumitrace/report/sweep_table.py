@@ -192,20 +192,22 @@ def overview(rows: list[dict], out: Path) -> str:
     from a chosen one."""
     grids = []
     for r in rows:
-        if r.get("error"):
-            cards.append(f'<div class="card failed"><h2>{html.escape(Path(r["stage"]).name)}'
-                         f'</h2><h3>{html.escape(r["variant"] or "as composed")}</h3>'
-                         f'<p>failed: {html.escape(r["error"])}</p></div>')
-            continue
         try:
-            grid = json.loads(Path(r["photometry_data"]).read_text())
-            grid_peak(grid)
+            grid = None if r.get("error") else \
+                json.loads(Path(r["photometry_data"]).read_text())
+            if grid is not None:
+                grid_peak(grid)
             grids.append(grid)
         except (OSError, ValueError, KeyError, TypeError, IndexError):
             grids.append(None)
     common = max((grid_peak(g) for g in grids if g is not None), default=0.0) or None
     cards = []
     for r, grid in zip(rows, grids):
+        if r.get("error"):
+            cards.append(f'<div class="card failed"><h2>{html.escape(Path(r["stage"]).name)}'
+                         f'</h2><h3>{html.escape(r["variant"] or "as composed")}</h3>'
+                         f'<p>failed: {html.escape(r["error"])}</p></div>')
+            continue
         svg = "<p>(no photometry file)</p>" if grid is None else \
             polar_svg(grid, peak=common, css=' class="common"') + \
             polar_svg(grid, css=' class="own"')
