@@ -1,0 +1,247 @@
+"""The search: CMA-ES (``cma``) over the parameters, generation by generation.
+
+Continuous parameters are searched in [0, 1] over their ranges, discrete ones (variant
+sets, whole numbers) by the index of their choice, rounded (``cma``'s integer handling
+keeps its steps from shrinking below one choice). Every candidate of a generation is traced
+with the same photons; the photons double for the next generation whenever the spread of
+the generation's merits is no longer above their typical standard error (the differences
+being judged are drowning in noise), up to a most. The search ends at the evaluations or
+time given, or when ``cma`` says it has converged. The best is the lowest merit measured
+at the last photon count, the optimiser's mean among the candidates.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .candidates import CandidateStage
+from .journal import Journal, pack_state, unpack_state
+from .objective import Merit, Objective
+from .parameters import Parameter
+from .pool import Evaluator
+
+#: The optimiser's first step, as a share of each range.
+SIGMA0 = 0.25
+#: The photons double when a generation's merit spread is below this many of its
+#: median merit standard error.
+GROW_BELOW = 1.0
+#: ``cma``'s step tolerance, in shares of the ranges: closer than this is converged.
+TOLX = 1e-4
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """Photons per candidate at first and at most, the stop (evaluations and/or
+    seconds), the seed of every candidate's photons (the optimiser's own is derived from
+    it) and the population (None: ``cma``'s default for the dimension)."""
+
+    photons: int
+    max_photons: int
+    evaluations: int | None
+    seconds: float | None
+    seed: int
+    popsize: int | None = None
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One traced candidate: its values (one per parameter), photons, merit and the parts
+    of it, and when it was done (seconds and CPU seconds since the fit began)."""
+
+    index: int
+    generation: int
+    values: tuple
+    photons: int
+    merit: float
+    merit_error: float
+    noise: float
+    match: float | None
+    terms: tuple
+    feasible: bool
+    retraced: int | None
+    seconds: float
+    cpu_seconds: float
+    mean: bool = False  # the optimiser's mean, measured at the end
+
+    def as_dict(self) -> dict:
+        return {"index": self.index, "generation": self.generation,
+                "values": list(self.values), "photons": self.photons, "merit": self.merit,
+                "merit_error": self.merit_error, "noise_floor": self.noise,
+                "match": self.match, "terms": list(self.terms), "feasible": self.feasible,
+                "retraced": self.retraced, "seconds": self.seconds,
+                "cpu_seconds": self.cpu_seconds, "mean": self.mean}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Evaluation":
+        return cls(d["index"], d["generation"], tuple(d["values"]), d["photons"],
+                   d["merit"], d["merit_error"], d["noise_floor"], d["match"],
+                   tuple(d["terms"]), d["feasible"], d["retraced"], d["seconds"],
+                   d["cpu_seconds"], d.get("mean", False))
+
+
+@dataclass
+class SearchResult:
+    """The evaluations made, the best of them, why the search ended, and its time."""
+
+    evaluations: list[Evaluation]
+    best: Evaluation
+    stopped: str
+    seconds: float
+    cpu_seconds: float
+    generations: int
+    resumed_from: int = 0
+    photon_steps: list = field(default_factory=list)
+
+
+def _json_value(v):
+    return v if isinstance(v, str) else float(v) if not isinstance(v, (int, np.integer)) \
+        else int(v)
+
+
+class Search:
+    """A fit's search over ``params`` of ``objective``: candidates made on ``stage``,
+    traced by ``evaluator``, journalled in ``journal``; ``progress(evaluations,
+    generation, photons, best merit, error)`` is told after every generation."""
+
+    def __init__(self, params: Sequence[Parameter], objective: Objective,
+                 stage: CandidateStage, evaluator: Evaluator, settings: SearchSettings,
+                 journal: Journal,
+                 progress: Callable[[int, int, int, float, float], None] | None = None):
+        self.params, self.objective, self.stage = list(params), objective, stage
+        self.evaluator, self.settings, self.journal = evaluator, settings, journal
+        self.progress = progress
+
+    @property
+    def dimension(self) -> int:
+        """The search's dimension: ``cma`` with bounds fails in one dimension, so a single
+        parameter is searched beside a dummy coordinate that nothing reads."""
+        return max(2, len(self.params))
+
+    def _options(self) -> dict:
+        lo = [p.unit_bounds[0] for p in self.params] + [0.0] * (self.dimension -
+                                                                 len(self.params))
+        hi = [p.unit_bounds[1] for p in self.params] + [1.0] * (self.dimension -
+                                                                 len(self.params))
+        opts = {"bounds": [lo, hi], "seed": self.settings.seed + 1, "verbose": -9,
+                "tolx": TOLX, "tolfun": 0.0, "tolflatfitness": 10_000}
+        discrete = [i for i, p in enumerate(self.params) if p.discrete]
+        if discrete:
+            opts["integer_variables"] = discrete
+            opts["CMA_stds"] = [max(1.0, len(p.choices) - 1.0) if p.discrete else 1.0
+                                for p in self.params] + [1.0] * (self.dimension -
+                                                                 len(self.params))
+        if self.settings.popsize:
+            opts["popsize"] = self.settings.popsize
+        return opts
+
+    def values(self, x) -> tuple:
+        return tuple(_json_value(p.from_unit(v)) for p, v in zip(self.params, x))
+
+    def run(self, fresh: bool = False) -> SearchResult:
+        import cma
+
+        s = self.settings
+        generations = self.journal.load(fresh)
+        evaluations: list[Evaluation] = []
+        steps = []
+        if generations:
+            last = generations[-1]
+            es = unpack_state(last["state"])
+            photons = int(last["next_photons"])
+            for g in generations:
+                evaluations += [Evaluation.from_dict(e) for e in g["evaluations"]]
+                steps.append((g["generation"], g["photons"]))
+            offset, cpu_offset = float(last["seconds"]), float(last["cpu_seconds"])
+        else:
+            x0 = [p.to_unit(p.start) for p in self.params] + [0.5] * (self.dimension -
+                                                                       len(self.params))
+            es = cma.CMAEvolutionStrategy(x0, SIGMA0, self._options())
+            photons = s.photons
+            offset = cpu_offset = 0.0
+        resumed = len(generations)
+        t0, c0 = time.perf_counter(), time.process_time()
+        clock = lambda: (offset + time.perf_counter() - t0,  # noqa: E731
+                         cpu_offset + time.process_time() - c0)
+        generation = resumed
+        stopped = ""
+        while True:
+            if s.evaluations is not None and len(evaluations) >= s.evaluations:
+                stopped = f"{len(evaluations)} evaluations"
+                break
+            if s.seconds is not None and clock()[0] >= s.seconds:
+                stopped = f"{s.seconds:g} s"
+                break
+            done = es.stop()
+            if done:
+                stopped = "converged (" + ", ".join(sorted(done)) + ")"
+                break
+            xs = es.ask()
+            batch = self._evaluate([self.values(x) for x in xs], photons, generation,
+                                   len(evaluations), clock)
+            es.tell(xs, [e.merit for e in batch])
+            evaluations += batch
+            steps.append((generation, photons))
+            next_photons = self._next_photons(batch, photons)
+            seconds, cpu = clock()
+            self.journal.append({"kind": "generation", "generation": generation,
+                                 "photons": photons, "next_photons": next_photons,
+                                 "evaluations": [e.as_dict() for e in batch],
+                                 "seconds": seconds, "cpu_seconds": cpu,
+                                 "state": pack_state(es)})
+            photons = next_photons
+            generation += 1
+            if self.progress is not None:
+                best = min(batch, key=lambda e: e.merit)
+                self.progress(len(evaluations), generation, photons, best.merit,
+                              best.merit_error)
+        last_photons = max((e.photons for e in evaluations), default=photons)
+        mean = self.values(es.mean)
+        final = [e for e in evaluations if e.photons == last_photons]
+        if not any(e.values == mean for e in final):
+            m = self._evaluate([mean], last_photons, generation, len(evaluations), clock,
+                               mean=True)
+            evaluations += m
+            final += m
+        best = min(final, key=lambda e: (not e.feasible, e.merit))
+        seconds, cpu = clock()
+        return SearchResult(evaluations, best, stopped, seconds, cpu, generation, resumed,
+                            steps)
+
+    def _next_photons(self, batch: list[Evaluation], photons: int) -> int:
+        """The next generation's photons: twice these where the merits' spread no longer
+        stands above their noise (at most the settings' most)."""
+        if photons >= self.settings.max_photons or len(batch) < 2:
+            return photons
+        merits = np.array([e.merit for e in batch])
+        errors = np.array([e.merit_error for e in batch])
+        if float(merits.std(ddof=1)) < GROW_BELOW * float(np.median(errors)):
+            return min(2 * photons, self.settings.max_photons)
+        return photons
+
+    def _evaluate(self, values: list[tuple], photons: int, generation: int, first: int,
+                  clock, mean: bool = False) -> list[Evaluation]:
+        scenes = [self.stage.scene(self.params, v) for v in values]
+        traced = self.evaluator.evaluate(scenes, photons)
+        seconds, cpu = clock()
+        out = []
+        for i, (v, t) in enumerate(zip(values, traced)):
+            m: Merit = self.objective.merit(t.measurement)
+            out.append(Evaluation(first + i, generation, v, photons, m.merit, m.error,
+                                  m.noise, m.match, m.terms, m.feasible, t.retraced,
+                                  seconds, cpu, mean))
+        return out
+
+
+def moved(param: Parameter, start, best) -> float | None:
+    """How far a continuous parameter moved, as a share of its range (None: discrete)."""
+    if param.discrete:
+        return None
+    return (float(best) - float(start)) / (param.hi - param.lo)
+
+
+def finite(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
