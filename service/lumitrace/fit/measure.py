@@ -144,13 +144,17 @@ def retrace_counts(base: Base, scene: Scene, plan: Plan) -> tuple[Accumulator, i
 
 def measurement(scene: Scene, acc: Accumulator, needs: Needs) -> Measurement:
     """What the merit needs from a candidate's counts (see :class:`Needs`)."""
-    cd = sigma = None
+    cd = sigma = halves = None
     if needs.symmetry is not None:
-        grid = measure_all(acc, np.asarray(needs.gammas), C_STEP,
-                           (needs.symmetry,))[needs.symmetry, None]
-        cd, sigma = grid.candela, grid.sigma
-        if needs.symmetry == "none":  # the 360 plane repeats 0
-            cd, sigma = cd[:-1], sigma[:-1]
+        grids = measure_all(acc, np.asarray(needs.gammas), C_STEP, (needs.symmetry,))
+        cut = slice(None, -1) if needs.symmetry == "none" else slice(None)  # 360 repeats 0
+        cd, sigma, halves = None, None, []
+        for h in (None, 0, 1):
+            g = grids[needs.symmetry, h]
+            if h is None:
+                cd, sigma = g.candela[cut], g.sigma[cut]
+            else:
+                halves.append((g.candela[cut], g.sigma[cut]))
     figures = {}
     if needs.figures:
         ph = photometry_of(scene, acc)
@@ -161,7 +165,8 @@ def measurement(scene: Scene, acc: Accumulator, needs: Needs) -> Measurement:
             values.update(application_figures(ph, acc))
         figures = {n: (values.get(n), values.get(f"{n}_error")) for n in needs.figures}
     fluxes = acc.fluxes()
-    return Measurement(cd, sigma, figures, int(acc.photons), float(fluxes["escaped"]))
+    return Measurement(cd, sigma, figures, int(acc.photons), float(fluxes["escaped"]),
+                       tuple(halves) if halves else None)
 
 
 def measure_fresh(scene: Scene, plan: Plan, photons: int, needs: Needs) -> Measurement:

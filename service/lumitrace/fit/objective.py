@@ -143,6 +143,9 @@ class Measurement:
     figures: dict
     photons: int
     escaped_lm: float
+    #: the grid from each of the two independent halves of the photons: ((cd, sigma),
+    #: (cd, sigma)), None without a target
+    halves: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -156,6 +159,9 @@ class Merit:
     match_error: float | None = None
     terms: tuple = ()
     feasible: bool = True
+    #: the merit from each half of the photons (None without a target): two independent
+    #: measurements with common random numbers across candidates
+    halves: tuple[float, float] | None = None
 
     def as_dict(self) -> dict:
         return {"merit": self.merit, "merit_error": self.error, "noise_floor": self.noise,
@@ -241,7 +247,11 @@ class Objective:
         error = math.sqrt(variances) / merit if merit > 0 else 0.0
         if self.target is not None and merit > 0 and match == merit:
             error = match_error  # the match alone: its own error, second order included
-        return Merit(merit, error, noise, match, match_error, tuple(parts), feasible)
+        halves = None
+        if self.target is not None and m.halves is not None:
+            rest = squares - match * match
+            halves = tuple(math.sqrt(self._match(cd, s)[0] ** 2 + rest) for cd, s in m.halves)
+        return Merit(merit, error, noise, match, match_error, tuple(parts), feasible, halves)
 
     def _match(self, cd: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
         """(m, its standard error, the noise floor) of the candidate's grid."""

@@ -26,9 +26,9 @@ from .pool import Evaluator
 
 #: The optimiser's first step, as a share of each range.
 SIGMA0 = 0.25
-#: The photons double when a generation's merit spread is below this many of its
-#: median merit standard error.
-GROW_BELOW = 1.0
+#: The photons double when a generation's merits spread less than this many times the
+#: noise of their comparison (the differences being judged drown in it).
+GROW_BELOW = 2.0
 #: ``cma``'s step tolerance, in shares of the ranges: closer than this is converged.
 TOLX = 1e-4
 
@@ -66,6 +66,7 @@ class Evaluation:
     seconds: float
     cpu_seconds: float
     mean: bool = False  # the optimiser's mean, measured at the end
+    halves: tuple | None = None  # the merit from each half of the photons
 
     def as_dict(self) -> dict:
         return {"index": self.index, "generation": self.generation,
@@ -73,14 +74,16 @@ class Evaluation:
                 "merit_error": self.merit_error, "noise_floor": self.noise,
                 "match": self.match, "terms": list(self.terms), "feasible": self.feasible,
                 "retraced": self.retraced, "seconds": self.seconds,
-                "cpu_seconds": self.cpu_seconds, "mean": self.mean}
+                "cpu_seconds": self.cpu_seconds, "mean": self.mean,
+                "halves": None if self.halves is None else list(self.halves)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Evaluation":
         return cls(d["index"], d["generation"], tuple(d["values"]), d["photons"],
                    d["merit"], d["merit_error"], d["noise_floor"], d["match"],
                    tuple(d["terms"]), d["feasible"], d["retraced"], d["seconds"],
-                   d["cpu_seconds"], d.get("mean", False))
+                   d["cpu_seconds"], d.get("mean", False),
+                   None if d.get("halves") is None else tuple(d["halves"]))
 
 
 @dataclass
@@ -94,6 +97,7 @@ class SearchResult:
     cpu_seconds: float
     generations: int
     resumed_from: int = 0
+    #: per generation: (generation, photons, the noise of comparing its merits)
     photon_steps: list = field(default_factory=list)
 
 
@@ -154,7 +158,7 @@ class Search:
             photons = int(last["next_photons"])
             for g in generations:
                 evaluations += [Evaluation.from_dict(e) for e in g["evaluations"]]
-                steps.append((g["generation"], g["photons"]))
+                steps.append((g["generation"], g["photons"], g.get("comparison_noise")))
             offset, cpu_offset = float(last["seconds"]), float(last["cpu_seconds"])
         else:
             x0 = [p.to_unit(p.start) for p in self.params] + [0.5] * (self.dimension -
@@ -184,11 +188,13 @@ class Search:
                                    len(evaluations), clock)
             es.tell(xs, [e.merit for e in batch])
             evaluations += batch
-            steps.append((generation, photons))
+            noise = comparison_noise(batch)
+            steps.append((generation, photons, noise))
             next_photons = self._next_photons(batch, photons)
             seconds, cpu = clock()
             self.journal.append({"kind": "generation", "generation": generation,
                                  "photons": photons, "next_photons": next_photons,
+                                 "comparison_noise": noise,
                                  "evaluations": [e.as_dict() for e in batch],
                                  "seconds": seconds, "cpu_seconds": cpu,
                                  "state": pack_state(es)})
@@ -212,15 +218,14 @@ class Search:
                             steps)
 
     def _next_photons(self, batch: list[Evaluation], photons: int) -> int:
-        """The next generation's photons: twice these where the merits' spread no longer
-        stands above their noise (at most the settings' most)."""
-        if photons >= self.settings.max_photons or len(batch) < 2:
+        """The next generation's photons: twice these where the spread of this
+        generation's merits is less than :data:`GROW_BELOW` times the noise of comparing
+        them (:func:`comparison_noise`), at most the settings' most."""
+        if photons >= self.settings.max_photons or len(batch) < 3:
             return photons
-        merits = np.array([e.merit for e in batch])
-        errors = np.array([e.merit_error for e in batch])
-        if float(merits.std(ddof=1)) < GROW_BELOW * float(np.median(errors)):
-            return min(2 * photons, self.settings.max_photons)
-        return photons
+        spread = float(np.std([e.merit for e in batch], ddof=1))
+        noisy = spread < GROW_BELOW * comparison_noise(batch)
+        return min(2 * photons, self.settings.max_photons) if noisy else photons
 
     def _evaluate(self, values: list[tuple], photons: int, generation: int, first: int,
                   clock, mean: bool = False) -> list[Evaluation]:
@@ -232,8 +237,24 @@ class Search:
             m: Merit = self.objective.merit(t.measurement)
             out.append(Evaluation(first + i, generation, v, photons, m.merit, m.error,
                                   m.noise, m.match, m.terms, m.feasible, t.retraced,
-                                  seconds, cpu, mean))
+                                  seconds, cpu, mean, m.halves))
         return out
+
+
+def comparison_noise(batch: Sequence[Evaluation]) -> float:
+    """The standard deviation of the noise in a generation's merits *relative to one
+    another*, which is what ranks them: with common random numbers far below each merit's
+    own standard error, since neighbours share most of their noise. Measured from the two
+    independent halves of the photons (each a common-random-number experiment of its
+    own): the candidates' deviations from their generation's mean in one half less those
+    in the other are twice a half's noise, four times the variance of the whole's. Without
+    halves (figure goals alone), the median merit standard error."""
+    if len(batch) < 2 or any(e.halves is None for e in batch):
+        return float(np.median([e.merit_error for e in batch]))
+    a = np.array([e.halves[0] for e in batch])
+    b = np.array([e.halves[1] for e in batch])
+    d = (a - a.mean()) - (b - b.mean())
+    return math.sqrt(float((d * d).sum()) / (len(d) - 1) / 4.0)
 
 
 def moved(param: Parameter, start, best) -> float | None:
