@@ -119,31 +119,32 @@ class Search:
         self.evaluator, self.settings, self.journal = evaluator, settings, journal
         self.progress = progress
 
-    @property
-    def dimension(self) -> int:
-        """The search's dimension: ``cma`` with bounds fails in one dimension, so a single
-        parameter is searched beside a dummy coordinate that nothing reads."""
-        return max(2, len(self.params))
-
     def _options(self) -> dict:
-        lo = [p.unit_bounds[0] for p in self.params] + [0.0] * (self.dimension -
-                                                                 len(self.params))
-        hi = [p.unit_bounds[1] for p in self.params] + [1.0] * (self.dimension -
-                                                                 len(self.params))
-        opts = {"bounds": [lo, hi], "seed": self.settings.seed + 1, "verbose": -9,
-                "tolx": TOLX, "tolfun": 0.0, "tolflatfitness": 10_000}
+        opts = {"seed": self.settings.seed + 1, "verbose": -9, "tolx": TOLX,
+                "tolfun": 0.0, "tolflatfitness": 10_000}
         discrete = [i for i, p in enumerate(self.params) if p.discrete]
         if discrete:
             opts["integer_variables"] = discrete
             opts["CMA_stds"] = [max(1.0, len(p.choices) - 1.0) if p.discrete else 1.0
-                                for p in self.params] + [1.0] * (self.dimension -
-                                                                 len(self.params))
+                                for p in self.params]
         if self.settings.popsize:
             opts["popsize"] = self.settings.popsize
         return opts
 
+    def unit(self, x) -> list[float]:
+        """The parameters' search coordinates of an optimiser's point: each folded into
+        its bounds by reflection at them (``cma``'s own bound handling fails in one
+        dimension; a reflection keeps the search's distribution whole at an edge)."""
+        out = []
+        for p, v in zip(self.params, x):
+            lo, hi = p.unit_bounds
+            t = math.fmod(abs(float(v) - lo) / (hi - lo), 2.0)
+            out.append(lo + (2.0 - t if t > 1.0 else t) * (hi - lo))
+        return out
+
     def values(self, x) -> tuple:
-        return tuple(_json_value(p.from_unit(v)) for p, v in zip(self.params, x))
+        """The parameters' values at an optimiser's point."""
+        return tuple(_json_value(p.from_unit(v)) for p, v in zip(self.params, self.unit(x)))
 
     def run(self, fresh: bool = False) -> SearchResult:
         import cma
@@ -161,8 +162,7 @@ class Search:
                 steps.append((g["generation"], g["photons"], g.get("comparison_noise")))
             offset, cpu_offset = float(last["seconds"]), float(last["cpu_seconds"])
         else:
-            x0 = [p.to_unit(p.start) for p in self.params] + [0.5] * (self.dimension -
-                                                                       len(self.params))
+            x0 = [p.to_unit(p.start) for p in self.params]
             es = cma.CMAEvolutionStrategy(x0, SIGMA0, self._options())
             photons = s.photons
             offset = cpu_offset = 0.0
