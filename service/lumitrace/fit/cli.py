@@ -133,12 +133,31 @@ def command(args) -> int:
     say = None if args.quiet or args.json else (
         lambda s: print(s, file=sys.stderr, flush=True))
     show = not (args.no_progress or args.json or args.quiet)
-    summary = run_fit(opts, say=say, progress=show)
+    from ..errors import Interrupted
+
+    try:
+        summary = run_fit(opts, say=say, progress=show)
+    except Interrupted as exc:
+        journal = getattr(exc, "fit_journal", None)
+        held = _generations(journal) if journal is not None else 0
+        if held and not args.quiet:
+            print(f"lumitrace fit: {journal} holds the {held} generation(s) traced so far: "
+                  "run the same command again to resume", file=sys.stderr, flush=True)
+        raise
     if args.json:
         print(json.dumps(summary))
     elif not args.quiet:
         print(summary_text(summary))
     return 0
+
+
+def _generations(journal: Path) -> int:
+    """Generations a journal holds (its whole lines after the first)."""
+    try:
+        text = Path(journal).read_text(encoding="utf-8")
+    except OSError:
+        return 0
+    return sum(1 for line in text.split("\n")[1:] if '"kind":"generation"' in line)
 
 
 def summary_text(s: dict) -> str:

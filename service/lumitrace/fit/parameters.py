@@ -5,8 +5,8 @@ A ``--vary`` argument names one of:
 - a numeric attribute, ``/Luminaire/Materials/Mirror.lumitrace:specularReflectance``;
 - a component of a vector or array attribute by index,
   ``/Luminaire/Reflector.xformOp:translate[2]``,
-  ``/Luminaire/Reflector.lumitrace:profile:points[3][0]`` (``[*]`` names every element:
-  ``points[*][1]`` is one parameter per point);
+  ``/Luminaire/Reflector.lumitrace:profile:points[3][0]`` (``[*]`` names every element,
+  ``[A:B]`` elements A to B - 1: ``points[1:5][0]`` is one parameter per point);
 - a variant set, ``/Luminaire{finish}`` (every variant) or ``/Luminaire{finish}=white,black``
   (a discrete parameter).
 
@@ -141,8 +141,12 @@ def parse(text: str) -> dict:
             index.append("*")
         elif re.fullmatch(r"\d+", item):
             index.append(int(item))
+        elif re.fullmatch(r"\d*:\d*", item):
+            a, b = item.split(":")
+            index.append(slice(int(a) if a else None, int(b) if b else None))
         else:
-            raise FitError(f"an index is a whole number or *, got [{item}]", f"--vary {text}")
+            raise FitError(f"an index is a whole number, A:B or *, got [{item}]",
+                           f"--vary {text}")
     return {"path": path, "prop": m.group("prop"), "index": index, "set": m.group("set"),
             "range": m.group("range")}
 
@@ -182,20 +186,26 @@ def _element(value, index: list, type_name: Sdf.ValueTypeName, where: str) -> li
     out = [()]
     for depth, i in enumerate(index):
         size = array.shape[depth]
-        picks = range(size) if i == "*" else [i]
-        if i != "*" and not 0 <= i < size:
-            raise FitError(f"index {i} is out of range: it has {size} "
-                           f"{'elements' if depth == 0 else 'components'}", where)
+        what = "elements" if depth == 0 else "components"
+        if isinstance(i, slice):
+            picks = range(size)[i]
+            if not picks or (i.stop is not None and i.stop > size):
+                raise FitError(f"[{i.start or ''}:{i.stop or ''}] is out of range: it has "
+                               f"{size} {what}", where)
+        else:
+            picks = range(size) if i == "*" else [i]
+        if not isinstance(i, slice) and i != "*" and not 0 <= i < size:
+            raise FitError(f"index {i} is out of range: it has {size} {what}", where)
         out = [t + (k,) for t in out for k in picks]
     return out
 
 
 def _spelling(text: str, index: tuple[int, ...]) -> str:
-    """The argument without its range, ``[*]`` replaced by the indices."""
+    """The argument without its range, each ``[*]``, ``[A:B]`` and ``[i]`` replaced by
+    the element's indices in turn."""
     base = text.split("=", 1)[0].strip()
     it = iter(index)
-    return re.sub(r"\[\s*\*\s*\]", lambda _: f"[{next(it)}]",
-                  re.sub(r"\[\s*(\d+)\s*\]", lambda m: f"[{next(it)}]", base))
+    return re.sub(r"\[[^\]]*\]", lambda _: f"[{next(it)}]", base)
 
 
 def resolve(stage: Usd.Stage, texts: list[str]) -> list[Parameter]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..errors import LumitraceError
+from ..errors import Interrupted
 from ..filenames import stage_name
 from ..run.settings import TraceSettings, default_threads
 from .candidates import CandidateStage
@@ -158,10 +158,13 @@ def run_fit(opts: FitOptions, say: Callable[[str], None] | None = None,
         f"({', '.join(p.name for p in params[:4])}{' ...' if len(params) > 4 else ''}); "
         f"{mode} x {evaluator.workers}; journal {folder / 'fit.journal'}")
     bar, update = _progress(budget, opts.seconds, progress)
+    journal = Journal(folder, key)
     try:
-        search = Search(params, objective, stage, evaluator, settings,
-                        Journal(folder, key), update)
+        search = Search(params, objective, stage, evaluator, settings, journal, update)
         result = search.run(fresh=opts.fresh)
+    except Interrupted as exc:
+        exc.fit_journal = journal.path
+        raise
     finally:
         if bar is not None:
             bar.close()
@@ -172,8 +175,12 @@ def run_fit(opts: FitOptions, say: Callable[[str], None] | None = None,
     say(f"search: {len(result.evaluations)} evaluations, {result.stopped}; best merit "
         f"{best.merit:.4g} +- {best.merit_error:.2g} at {best.photons:,} photons; "
         f"confirming it (seed {opts.seed + 1}, files' error {opts.final_error:.1%})")
-    return _finish(opts, stage, params, objective, target, result, folder, threads,
-                   time.perf_counter(), time.process_time())
+    try:
+        return _finish(opts, stage, params, objective, target, result, folder, threads,
+                       time.perf_counter(), time.process_time())
+    except Interrupted as exc:
+        exc.fit_journal = journal.path
+        raise
 
 
 def _finish(opts: FitOptions, stage: CandidateStage, params: list[Parameter],
