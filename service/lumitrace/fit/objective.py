@@ -270,9 +270,13 @@ class Objective:
         m2 = float((omega * d * d).sum()) / den
         if not self.absolute:
             c = float((omega * d * a).sum())
+        # var(m^2) for Gaussian noise s about the true differences: sum (2 dOmega / D)^2
+        # (d_true^2 s^2 + s^4 / 2); the observed d^2 holds s^2 more than d_true^2, so the
+        # second-order term is taken off rather than added (floored at half the first)
         grad = 2.0 * omega * (d - c) / den  # d(m^2)/d(a_j), the normaliser's part included
-        var_m2 = float(((grad * s) ** 2).sum()) + 2.0 * float(((omega * s * s) ** 2).sum()) \
-            / den ** 2
+        first = float(((grad * s) ** 2).sum())
+        var_m2 = max(first - 2.0 * float(((omega * s * s) ** 2).sum()) / den ** 2,
+                     0.5 * first)
         m = math.sqrt(m2)
         noise = math.sqrt(float((omega * s * s).sum()) / den)
         error = math.sqrt(var_m2) / (2.0 * m) if m > 0 else math.sqrt(math.sqrt(var_m2))
