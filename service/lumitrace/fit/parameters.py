@@ -27,7 +27,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom
 
 from ..errors import LumitraceError
-from ..schema import MATERIAL_RANGES, PROFILE_ATTRIBUTES, PROFILE_POINTS
+from ..schema import MATERIAL_RANGES, PROFILE_ATTRIBUTES, PROFILE_KIND, PROFILE_POINTS
 
 
 class FitError(LumitraceError):
@@ -288,6 +288,7 @@ def _numeric(prim: Usd.Prim, spec: dict, text: str, where: str) -> list[Paramete
     value = attr.Get()
     elements = _element(value, spec["index"], type_name, where)
     schema_range = MATERIAL_RANGES.get(prop)
+    revolve = prop == PROFILE_POINTS and prim.GetAttribute(PROFILE_KIND).Get() != "extrude"
     out = []
     array = np.asarray(value, dtype=np.float64)
     for index in elements:
@@ -301,13 +302,15 @@ def _numeric(prim: Usd.Prim, spec: dict, text: str, where: str) -> list[Paramete
             lo, hi = schema_range
         else:
             lo, hi = _range(spec["range"], start, pwhere)
-        if schema_range is not None:
-            s_lo, s_hi = schema_range
+        domain = (0.0, math.inf) if revolve and index[-1:] == (0,) else schema_range
+        if domain is not None:
+            s_lo, s_hi = domain
             if spec["range"] is not None and spec["range"].strip().startswith(("+-", "±")):
                 lo, hi = max(lo, s_lo), min(hi, s_hi)
             if lo < s_lo or hi > s_hi:
-                raise FitError(f"the range {lo:g}:{hi:g} leaves the attribute's own "
-                               f"[{s_lo:g}, {s_hi:g}]", pwhere)
+                what = "a revolved profile's radii [0, inf)" if domain is not schema_range \
+                    else f"the attribute's own [{s_lo:g}, {s_hi:g}]"
+                raise FitError(f"the range {lo:g}:{hi:g} leaves {what}", pwhere)
         if kind == "integer":
             lo_i, hi_i = math.ceil(lo), math.floor(hi)
             if hi_i <= lo_i:
