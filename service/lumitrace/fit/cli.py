@@ -168,8 +168,8 @@ def summary_text(s: dict) -> str:
     for name, value in s["best"].items():
         p = s["parameters"][name]
         edge = f"  (at its {p['at_edge']} edge)" if p.get("at_edge") else ""
-        v = value if isinstance(value, str) else f"{value:.6g}"
-        start = p["start"] if isinstance(p["start"], str) else f"{p['start']:.6g}"
+        v = value if isinstance(value, str) else f"{value + 0.0:.6g}"
+        start = p["start"] if isinstance(p["start"], str) else f"{p['start'] + 0.0:.6g}"
         lines.append(f"  {name:<{width}}  {v}  (from {start}){edge}")
     lines.append(f"  merit        {s['merit']:.4g} +- {s['merit_error']:.2g} (confirmed at "
                  f"{s['final_photons']:,} photons, seed {s['final_seed']}; noise floor "

@@ -21,7 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ..errors import Interrupted
+from ..schema import PROFILE_POINTS
 from ..filenames import stage_name
 from ..run.settings import TraceSettings, default_threads
 from .candidates import CandidateStage
@@ -233,12 +236,20 @@ def _finish(opts: FitOptions, stage: CandidateStage, params: list[Parameter],
         "evaluations": len(result.evaluations), "seed": opts.seed,
         "best": {p.name: v for p, v in zip(params, best.values)}})
     summary["edits"] = str(layer)
+    profiles = {}
+    for path in sorted({p.path for p in params if p.profile}):
+        pts = []
+        for values in ([p.start for p in params], best.values):
+            stage.author(params, values)
+            attr = stage.stage.GetPrimAtPath(path).GetAttribute(PROFILE_POINTS)
+            pts.append(np.array(attr.Get(), np.float64).tolist())
+        profiles[path] = pts
     summary["seconds"] = result.seconds + (time.perf_counter() - t_end)
     summary["cpu_seconds"] = result.cpu_seconds + (time.process_time() - c_end)
     from .report import write_reports
 
     write_reports(folder, summary, result, params, objective, target, traced, record,
-                  pictures=opts.pictures)
+                  pictures=opts.pictures, profiles=profiles)
     summary["seconds"] = result.seconds + (time.perf_counter() - t_end)
     summary["cpu_seconds"] = result.cpu_seconds + (time.process_time() - c_end)
     return summary

@@ -50,7 +50,8 @@ class SearchSettings:
 @dataclass(frozen=True)
 class Evaluation:
     """One traced candidate: its values (one per parameter), photons, merit and the parts
-    of it, and when it was done (seconds and CPU seconds since the fit began)."""
+    of it, and when it was done (seconds and CPU seconds since the fit began: since
+    lumitrace loaded and since the process started, of every run of a resumed fit)."""
 
     index: int
     generation: int
@@ -168,6 +169,10 @@ class Search:
             offset = cpu_offset = 0.0
         resumed = len(generations)
         t0, c0 = time.perf_counter(), time.process_time()
+        if not resumed:  # a fresh fit counts from the command's start: loading, reading
+            from .. import STARTED
+
+            t0, c0 = STARTED, 0.0
         clock = lambda: (offset + time.perf_counter() - t0,  # noqa: E731
                          cpu_offset + time.process_time() - c0)
         generation = resumed
