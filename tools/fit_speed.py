@@ -1,7 +1,8 @@
 """``lumitrace fit`` against a naive loop of whole ``lumitrace trace`` commands, side by side.
 
     python tools/fit_speed.py [--evaluations 96] [--photons 8192] [--max-photons 131072]
-                              [--naive schedule fixed] [--out DIR] [--json]
+                              [--naive schedule fixed] [--target-photons 2e6]
+                              [--confirm-photons 262144] [--out DIR] [--json]
 
 The problem: the demo downlight with its diffuser deactivated (an open reflector: its beam
 shows its reflector), whose reflector's roughness and reflectance and whose LED's height
@@ -66,7 +67,7 @@ def own_cpu() -> float:
     return time.process_time()
 
 
-def make_problem(folder: Path) -> tuple[Path, Path]:
+def make_problem(folder: Path, photons: int) -> tuple[Path, Path]:
     """The open downlight (start) and the target LDT of its true values."""
     text = (ROOT / "stages" / "downlight.usda").read_text()
     marker = 'def Mesh "Diffuser" (\n'
@@ -81,7 +82,7 @@ def make_problem(folder: Path) -> tuple[Path, Path]:
                  "double3 xformOp:translate = (0, 0, 46)")
     (folder / "true.usda").write_text(true)
     subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace", str(folder / "true.usda"),
-                    "--photons", "2000000", "--seed", "99", "--no-pictures", "--no-sublayer",
+                    "--photons", str(photons), "--seed", "99", "--no-pictures", "--no-sublayer",
                     "--out", str(folder / "target"), "--quiet"], check=True)
     return stage, folder / "target" / "true.ldt"
 
@@ -90,7 +91,7 @@ class Judge:
     """The merit of candidate values traced with another seed and more photons (the same
     for both runs; cached by values)."""
 
-    def __init__(self, stage: Path, target: Path):
+    def __init__(self, stage: Path, target: Path, photons: int = CONFIRM_PHOTONS):
         from lumitrace.fit.candidates import CandidateStage
         from lumitrace.fit.measure import Plan
         from lumitrace.fit.objective import Objective
@@ -103,6 +104,7 @@ class Judge:
         self.plan = Plan.of(self.cs.scene(self.params, [p.start for p in self.params]),
                             CONFIRM_SEED)
         self.cache: dict[tuple, float] = {}
+        self.photons = photons
 
     def __call__(self, values) -> float:
         from lumitrace.fit.measure import measurement, trace_counts
@@ -110,7 +112,7 @@ class Judge:
         key = tuple(round(float(v), 12) for v in values)
         if key not in self.cache:
             scene = self.cs.scene(self.params, list(values))
-            acc, _ = trace_counts(scene, self.plan, CONFIRM_PHOTONS)
+            acc, _ = trace_counts(scene, self.plan, self.photons)
             self.cache[key] = self.objective.merit(
                 measurement(scene, acc, self.objective.needs)).merit
         return self.cache[key]
@@ -248,14 +250,18 @@ def main(argv=None) -> int:
     ap.add_argument("--max-photons", type=int, default=1 << 17)
     ap.add_argument("--naive", nargs="+", choices=("schedule", "fixed"),
                     default=["schedule", "fixed"])
+    ap.add_argument("--target-photons", type=int, default=2_000_000,
+                    help="photons of the target's trace (default 2e6)")
+    ap.add_argument("--confirm-photons", type=int, default=CONFIRM_PHOTONS,
+                    help="photons of the judging traces (default 2^18)")
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     folder = args.out or Path(tempfile.mkdtemp(prefix="fit-speed-"))
     folder.mkdir(parents=True, exist_ok=True)
     try:
-        stage, target = make_problem(folder)
-        judge = Judge(stage, target)
+        stage, target = make_problem(folder, args.target_photons)
+        judge = Judge(stage, target, args.confirm_photons)
         floor = judge(TRUTH)
         level = FLOOR_FACTOR * floor
         fit = run_fit(stage, target, folder / "fit", args)
@@ -275,8 +281,8 @@ def main(argv=None) -> int:
         if args.json:
             print(json.dumps(report))
         else:
-            print(f"noise floor: the true values' merit {floor:.4f} (2^18 photons, seed "
-                  f"{CONFIRM_SEED}); level {level:.4f}")
+            print(f"noise floor: the true values' merit {floor:.4f} ({judge.photons:,} "
+                  f"photons, seed {CONFIRM_SEED}); level {level:.4f}")
             for name, r in results.items():
                 to = "not reached" if r["cpu_to_floor"] is None else \
                     f"{r['cpu_to_floor']:.1f} CPU s"
