@@ -6,7 +6,6 @@ merit is its stated error, and the spread of a difference between neighbours (co
 numbers) the comparison noise the halves measure, far below it."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
