@@ -65,7 +65,8 @@ def add_parser(sub) -> None:
                         '"light_output_ratio >= 0.8")')
     f.add_argument("--vary", nargs="+", action="extend", required=True, metavar="PARAM",
                    help="PATH.PROPERTY[=LO:HI | =+-D], PATH.PROPERTY[i][k][=...] (a "
-                        "component; [*] every element), PATH{VARIANTSET}[=A,B]; the range "
+                        "component; [*] every element, [A:B] elements A to B - 1), "
+                        "PATH{VARIANTSET}[=A,B]; the range "
                         "defaults to the schema's where it has one")
     f.add_argument("--absolute", action="store_true",
                    help="compare candela with the target's, not the shape (cd/klm)")
@@ -171,9 +172,9 @@ def summary_text(s: dict) -> str:
         v = value if isinstance(value, str) else f"{value + 0.0:.6g}"
         start = p["start"] if isinstance(p["start"], str) else f"{p['start'] + 0.0:.6g}"
         lines.append(f"  {name:<{width}}  {v}  (from {start}){edge}")
+    floor = f"; noise floor {s['noise_floor']:.2g}" if s.get("match") is not None else ""
     lines.append(f"  merit        {s['merit']:.4g} +- {s['merit_error']:.2g} (confirmed at "
-                 f"{s['final_photons']:,} photons, seed {s['final_seed']}; noise floor "
-                 f"{s['noise_floor']:.2g})")
+                 f"{s['final_photons']:,} photons, seed {s['final_seed']}{floor})")
     lines.append(f"  search merit {s['search_merit']:.4g} +- {s['search_merit_error']:.2g} at "
                  f"{s['search_photons']:,} photons")
     for t in s.get("terms", []):
