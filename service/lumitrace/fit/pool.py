@@ -67,7 +67,10 @@ def _on_dask_worker(expected: tuple[str, str], scene: Scene, plan: Plan, photons
 
 class Evaluator:
     """Traces candidates' scenes at a photon count and measures them, ``workers`` at a
-    time, in ``mode`` (threads, processes or dask with ``scheduler``)."""
+    time, in ``mode`` (threads, processes or dask with ``scheduler``). On threads it keeps
+    a base trace (with its photons' records) of :meth:`use_base`'s scene at each photon
+    count, until a generation comes none of whose candidates it could retrace
+    selectively."""
 
     def __init__(self, plan: Plan, needs: Needs, mode: str = "threads", workers: int = 1,
                  scheduler: str | None = None, selective: bool = True):
@@ -124,10 +127,16 @@ class Evaluator:
             self.base = make_base(self.base_scene, self.plan, photons)
         base = self.base if self.selective else None
         if self._pool is None:
-            return [_selective(base, s, self.plan, photons, self.needs) for s in scenes]
-        futures = [self._pool.submit(_selective, base, s, self.plan, photons, self.needs)
-                   for s in scenes]
-        return [f.result() for f in futures]
+            out = [_selective(base, s, self.plan, photons, self.needs) for s in scenes]
+        else:
+            futures = [self._pool.submit(_selective, base, s, self.plan, photons,
+                                         self.needs) for s in scenes]
+            out = [f.result() for f in futures]
+        if base is not None and all(t.retraced is None for t in out):
+            # every candidate of the generation changed too much (a material most light
+            # meets, a part most light hits): no base is kept at the next photon counts
+            self.selective, self.base = False, None
+        return out
 
     def close(self) -> None:
         if self._pool is not None:
