@@ -31,7 +31,9 @@ def test_each_commands_parser_alone_parses_as_the_whole_one():
                  ["serve", "a.usda", "--port", "0", "--target-error", "0.01"],
                  ["check", "a.usda", "--json"], ["edits", "merge", "a.usda"],
                  ["report", "a.usda", "--time", "3"], ["bench", "--seconds", "2"],
-                 ["rays", "a.usda", "--photons", "1000"]):
+                 ["rays", "a.usda", "--photons", "1000"],
+                 ["fit", "a.usda", "--target", "t.ldt", "--vary", "/L/M.lumitrace:reflectance",
+                  "/L/P.xformOp:translate[2]=-1:1", "--evaluations", "40"]):
         assert cli.build_parser(argv[0]).parse_args(argv) == cli.build_parser().parse_args(argv)
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
 from .loading import collector_paused
 from .pyplot import short_setter_docs
+from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
@@ -206,6 +207,9 @@ def _add_edits(sub) -> None:
                                    "it. Stop the service first.")
     e.add_argument("action", choices=("merge", "discard"))
     e.add_argument("stage", type=Path)
+    e.add_argument("--layer", type=Path, default=None,
+                   help="the edits layer (default NAME.lumitrace-edits.usda beside the stage; "
+                        "a fit's NAME.lumitrace-fit.usda to keep its best)")
 
 
 def _add_report(sub) -> None:
@@ -271,7 +275,7 @@ def _add_rays(sub) -> None:
 _COMMANDS = {"trace": _add_trace, "check": _add_check, "serve": _add_serve,
              "edits": _add_edits, "report": _add_report, "bench": _add_bench,
              "rays": _add_rays, "sweep": sweep.add_parser,
-             "datasheet": datasheet_command.add_parser}
+             "datasheet": datasheet_command.add_parser, "fit": fit.add_parser}
 
 
 _QUIET = False
@@ -468,12 +472,12 @@ def cmd_edits(args) -> int:
     from .delta.edits import discard_edits, merge_edits
     from .filenames import edits_layer_path
 
-    path = edits_layer_path(args.stage)
+    path = args.layer or edits_layer_path(args.stage)
     if args.action == "merge":
-        merge_edits(args.stage)
+        merge_edits(args.stage, args.layer)
         print(f"merged {path.name} into {args.stage} and removed it")
     else:
-        print(f"removed {path.name}" if discard_edits(args.stage) else
+        print(f"removed {path.name}" if discard_edits(args.stage, args.layer) else
               f"no edits layer ({path.name}) to discard")
     return 0
 
@@ -668,7 +672,7 @@ def _dispatch(args) -> int:
     check_interrupted()  # the others have no USD-loading phase of their own
     return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve, "edits": cmd_edits,
             "check": cmd_check, "rays": cmd_rays, "sweep": sweep.command,
-            "datasheet": datasheet_command.command}[args.command](args)
+            "datasheet": datasheet_command.command, "fit": fit.command}[args.command](args)
 
 
 def _failure(exc: BaseException) -> tuple[int, str]:

@@ -62,6 +62,7 @@ from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_
 from .geometry import LocalMesh, local_mesh, non_degenerate
 from .luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
+from .profile import has_profile, mesh_agrees, read_profile
 from .materials import BoundMaterials
 from .reuse import ReadCache
 from .representation import is_stand_in_light, modelled_luminaire
@@ -182,6 +183,7 @@ class _Reader:
         #: the world (None for a part placed more than once, or a light's body)
         self.part_frames: dict[int, PartFrame | None] = {}
         self.meters_per_unit = 1.0
+        self.up_axis = "Z"
 
     # -- top level ----------------------------------------------------------------------
 
@@ -210,6 +212,7 @@ class _Reader:
         validate.check_stage_units(self.meters_per_unit, layer_where)
         up_axis = str(UsdGeom.GetStageUpAxis(self.stage))
         validate.check_up_axis(up_axis, layer_where)
+        self.up_axis = up_axis
         check_composition(self.stage, root, layer_where, self._warn)
 
         if self._visible_and_rendered(root, computed=True):
@@ -457,6 +460,8 @@ class _Reader:
         """Place a gprim's triangles (read once, see :func:`.geometry.local_mesh`) in the
         world, at every placement of ``frame``."""
         path = str(prim.GetPath())
+        if path not in self.local_meshes and has_profile(prim) and prim.IsA(UsdGeom.Mesh):
+            self._check_profile(prim)
         if path not in self.local_meshes:
             self.local_meshes[path] = local_mesh(prim, self.time, self.materials, self._warn,
                                                  self.cache)
@@ -496,6 +501,23 @@ class _Reader:
             self.part_frames[part] = None if part in self.part_frames or own is None else \
                 PartFrame(own, matrix[:3, :3] * self.meters_per_unit,
                           matrix[3, :3] * self.meters_per_unit)
+
+    def _check_profile(self, prim: Usd.Prim) -> None:
+        """Validate a mesh's generating profile (a bad value is an error naming it) and
+        warn where its points and faces are not the profile's: the mesh is traced as
+        authored, which is what every DCC shows."""
+        profile = read_profile(prim, self.time, self.up_axis)
+        mesh = UsdGeom.Mesh(prim)
+        path = str(prim.GetPath())
+        points = check_array(mesh.GetPointsAttr().Get(self.time), path, "points", width=3)
+        counts = check_array(mesh.GetFaceVertexCountsAttr().Get(self.time), path,
+                             "faceVertexCounts", np.int64)
+        indices = check_array(mesh.GetFaceVertexIndicesAttr().Get(self.time), path,
+                              "faceVertexIndices", np.int64)
+        if not mesh_agrees(profile, points, counts, indices):
+            self._warn(f"{path}: its points and faces are not those of its profile "
+                       "(lumitrace:profile:*): traced as authored; a scene delta or a fit "
+                       "that changes the profile writes them anew")
 
     def _light_body(self, prim: Usd.Prim, kind: str, emitters: list[Emitter]) -> None:
         """The light's own surface as a part of the material bound to the light, at each of
