@@ -57,11 +57,7 @@ def edits_layer(entry: dict, changes: list[state.Edit], original: str | None = N
     Usd, Sdf, UsdGeom, UsdLux, UsdShade, Gf, Vt = pxr_modules()
     layer = Sdf.Layer.CreateAnonymous(".usda")
     if original is not None:
-        try:
-            sub = os.path.relpath(original, anchor) if anchor else original
-        except ValueError:  # another drive
-            sub = original
-        layer.subLayerPaths.append(sub.replace(os.sep, "/"))
+        layer.subLayerPaths.append(layer_path(original, anchor))
         if entry.get("defaultPrim"):
             layer.defaultPrim = entry["defaultPrim"]
         layer.pseudoRoot.SetInfo("metersPerUnit", float(entry["metersPerUnit"]))
@@ -71,6 +67,20 @@ def edits_layer(entry: dict, changes: list[state.Edit], original: str | None = N
     for edit in changes:
         author(layer, edit, Sdf, Gf, Vt)
     return layer
+
+
+def layer_path(target: str, anchor: str | None) -> str:
+    """``target`` as a layer names it from the folder ``anchor``: relative (``./``) where
+    the two share a folder below the root, so the pair can move together; else absolute."""
+    if anchor:
+        try:
+            shared = os.path.commonpath([target, anchor]) != os.path.abspath(os.sep)
+        except ValueError:  # another drive
+            shared = False
+        if shared:
+            rel = os.path.relpath(target, anchor).replace(os.sep, "/")
+            return rel if rel.startswith(".") else "./" + rel
+    return target.replace(os.sep, "/")
 
 
 def _spec(layer, path: str, Sdf):

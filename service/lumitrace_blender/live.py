@@ -193,6 +193,22 @@ class LiveLink:
             loaded = self.refresh()
         return loaded
 
+    def wait_for(self, predicate, timeout: float = 120.0):
+        """Take events until one satisfies ``predicate(kind, data)`` (handling each as the
+        tick does); returns its data. Raises TimeoutError after ``timeout`` s without it."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("the service sent no such event")
+            try:
+                event = self.events.get(timeout=left)
+            except queue.Empty:
+                continue
+            self.take_events([event])
+            if predicate(event[1], event[2]):
+                return event[2]
+
     def refresh(self) -> bool:
         """Read the service's status and newest result; load its IES into the light when
         it is newer than the one shown. True when the light changed."""
@@ -200,7 +216,8 @@ class LiveLink:
             self.status = self.service.status()
             results = self.service.results()
         except ServiceError as exc:
-            self.error = str(exc)
+            if exc.status != 404:  # 404: nothing written yet
+                self.error = str(exc)
             return False
         self.results = results
         revision = int(results.get("revision", -1))
@@ -214,6 +231,7 @@ class LiveLink:
         scene = self.scene
         matrix = self.light_matrix(results.get("outputs", {}).get("result_layer"))
         ies_light.show_ies(scene, text, matrix)
+        photometric_view(self.entry, True)
         self.light_revision, self.light_ies = revision, text
         return True
 
@@ -235,12 +253,29 @@ class LiveLink:
 
     def close(self) -> None:
         self._stop.set()
+        photometric_view(self.entry, False)
 
 
 def _same_state(a: dict, b: dict) -> bool:
     if a.keys() != b.keys():
         return False
     return all(state._same(a[k], b[k]) for k in a)
+
+
+def photometric_view(entry: dict, on: bool) -> None:
+    """Let the photometric light stand for the luminaire in renders (``on``): the
+    imported emitters give no light (their flux is in the IES light) and the parts cast
+    no shadow (the IES light sits inside them). Off restores both. Neither is exported."""
+    from .importer import LUMENS_PER_WATT
+    scene = bpy.context.scene
+    scale = ies_light.light_energy(scene)
+    for obj, rec in state.imported_objects(entry["file"]):
+        if rec["kind"] == "light" and obj.data is not None:
+            flux = obj.data.get("lumitrace:luminousFlux")
+            obj.data.energy = 0.0 if on else (float(flux) / LUMENS_PER_WATT * scale
+                                              if flux else obj.data.energy)
+        elif obj.type == "MESH":
+            obj.visible_shadow = not on
 
 
 def luminaire_object(entry: dict):
@@ -280,6 +315,7 @@ def connect(scene, url: str, token: str | None = None, stage: str | None = None,
     disconnect(scene)
     link = LiveLink(scene, url, token, stage, **kwargs)
     LINKS[scene.name] = link
+    link.refresh()  # the result the service has already written
     if timer:
         def tick():
             if LINKS.get(link.scene_name) is not link:

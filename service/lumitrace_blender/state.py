@@ -8,6 +8,7 @@ state it last sent. Both go through :func:`edits` so they always agree.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import re
 from array import array
@@ -315,7 +316,10 @@ def value_edits(path: str, before: dict, after: dict, where: str) -> list[Edit]:
             continue
         attr = schema.BY_NAME.get(name)
         if attr is None:
-            raise ExportError("is not an attribute of the lumitrace schema", where, name)
+            near = difflib.get_close_matches(name, list(schema.BY_NAME), n=2, cutoff=0.6)
+            hint = f": did you mean {' or '.join(near)}?" if near else ""
+            raise ExportError("is not an attribute of the lumitrace schema" + hint, where,
+                              name)
         if new is None:
             out.append(Edit("block", path, name, usd_type=attr.usd_type, api=attr.api,
                             uniform=attr.uniform))
