@@ -68,23 +68,3 @@ class Service:
     def history(self, last_id: int = 0) -> list[dict]:
         """The kept events after ``last_id`` (``{"id", "event", "data"}`` each)."""
         return self.json("GET", f"/events?format=json&last_id={int(last_id)}")["events"]
-
-    def events(self, last_id: int | None = None, timeout: float | None = None):
-        """Follow the event stream: yields ``(id, kind, data)``; ``timeout`` bounds the wait
-        for each line (s)."""
-        headers = {"Accept": "text/event-stream"}
-        if last_id is not None:
-            headers["Last-Event-ID"] = str(last_id)
-        with self._open("GET", "/events", headers=headers, timeout=timeout) as response:
-            fields: dict[str, str] = {}
-            for raw in response:
-                line = raw.decode("utf-8").rstrip("\r\n")
-                if not line:
-                    if "data" in fields or "event" in fields:
-                        yield (int(fields["id"]) if "id" in fields else None,
-                               fields.get("event", "message"),
-                               json.loads(fields.get("data") or "{}"))
-                    fields = {}
-                elif not line.startswith(":"):
-                    key, _, value = line.partition(":")
-                    fields[key] = value[1:] if value.startswith(" ") else value

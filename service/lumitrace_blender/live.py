@@ -3,8 +3,8 @@
 Every tick (a Blender timer, 10 times a second) the link compares what Blender shows of
 the imported stage with what it last sent; once the state has held still for
 ``debounce`` seconds (a drag has ended) the difference goes to the service as one batch
-of scene deltas. A thread follows the service's event stream; the tick takes its events
-on Blender's main thread, and when a newer result is written it loads the service's IES
+of scene deltas. A thread reads the service's events (its kept history, after the last one
+seen); the tick takes them on Blender's main thread, and when a newer result is written it loads the service's IES
 file into the photometric light (:mod:`.ies_light`) at the luminaire's place.
 
 Nothing here waits on the service inside a tick longer than one HTTP request.
@@ -26,6 +26,8 @@ from .usd import pxr_modules
 #: Seconds the state must hold still before it is sent (a drag sends once, at its end).
 DEBOUNCE = 0.3
 TICK = 0.1
+#: Seconds between two reads of the service's events.
+FOLLOW = 0.1
 #: The links of this Blender session, by scene name.
 LINKS: dict[str, "LiveLink"] = {}
 
@@ -104,7 +106,8 @@ class LiveLink:
         self.seen = self.sent
         self.changed_at = self.clock()
         self.events: queue.Queue = queue.Queue()
-        self.last_event_id = 0
+        kept = self.service.history(0)  # what happened before the link is not its news
+        self.last_event_id = max((int(e["id"]) for e in kept), default=0)
         self._stop = threading.Event()
         self._thread = None
         if follow:
@@ -151,22 +154,17 @@ class LiveLink:
     # -- receiving -------------------------------------------------------------------------
 
     def _follow(self) -> None:
-        """The event stream, into ``self.events`` (reconnecting after the last id seen)."""
-        backoff = 0.2
+        """The service's events, into ``self.events``: its kept history after the last id
+        seen, read every :data:`FOLLOW` s (short requests, so closing never waits on a
+        stream)."""
         while not self._stop.is_set():
             try:
-                for event_id, kind, data in self.service.events(
-                        last_id=self.last_event_id or None, timeout=5.0):
-                    if event_id is not None:
-                        self.last_event_id = event_id
-                    self.events.put((event_id, kind, data))
-                    backoff = 0.2
-                    if self._stop.is_set():
-                        return
-            except Exception:  # noqa: BLE001 - a dropped stream is reconnected
-                if self._stop.wait(backoff):
-                    return
-                backoff = min(backoff * 2, 5.0)
+                for e in self.service.history(self.last_event_id):
+                    self.last_event_id = max(self.last_event_id, int(e["id"]))
+                    self.events.put((e["id"], e["event"], e["data"]))
+            except (ServiceError, KeyError, ValueError) as exc:
+                self.error = str(exc)
+            self._stop.wait(FOLLOW)
 
     def take_events(self, events=None) -> bool:
         """Handle the events received (or ``events``: ``(id, kind, data)``); True when a
@@ -253,6 +251,8 @@ class LiveLink:
 
     def close(self) -> None:
         self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
         photometric_view(self.entry, False)
 
 

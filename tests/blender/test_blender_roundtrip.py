@@ -38,7 +38,7 @@ def _trace(stage: Path, out: Path, seed: int, *extra) -> tuple[dict, np.ndarray]
     p = subprocess.run([sys.executable, "-m", "lumitrace.cli", "trace", str(stage),
                         "--photons", "60000", "--resolution", "16", "--seed", str(seed),
                         "--threads", "2", "--no-progress", "--no-pictures", "--json",
-                        "--out", str(out), *map(str, extra)],
+                        "--no-sublayer", "--out", str(out), *map(str, extra)],
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout.strip().splitlines()[-1])
