@@ -40,8 +40,8 @@ def test_a_move_in_blender_is_one_delta_and_the_light_is_the_services_newest_ies
     shutil.copy(DEMO, stage)
     with Service(stage, *FAST) as s:
         s.wait_done(0)
-        report = run_bpy("live_session.py", s.url, stage, tmp_path, PHOTONS, "--render",
-                         timeout=400)
+        report = run_bpy("blender_live_session.py", s.url, stage, "--out", tmp_path,
+                         "--photons", PHOTONS, "--render", "96x72", timeout=400)
         # ten moves while dragging sent nothing; the move held still went as one delta
         assert report["drag_answers"] == [False] * 11 + [True]
         move, reflector = report["batches"]

@@ -13,6 +13,7 @@ import pytest
 from helpers.paths import ROOT
 
 SCRIPTS = ROOT / "tests" / "blender" / "scripts"
+TOOLS = ROOT / "tools"
 
 
 def blender_python() -> Path:
@@ -27,10 +28,11 @@ def blender_python() -> Path:
 
 
 def run_bpy(script: str, *args, timeout: float = 300.0) -> dict:
-    """Run ``tests/blender/scripts/SCRIPT`` in the bpy environment with the add-on on its
-    path; returns the JSON object its last line prints."""
+    """Run ``tests/blender/scripts/SCRIPT`` (or ``tools/SCRIPT``) in the bpy environment
+    with the add-on on its path; returns the JSON object its last line prints."""
     env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
-    p = subprocess.run([str(blender_python()), str(SCRIPTS / script), "--", *map(str, args)],
+    path = SCRIPTS / script if (SCRIPTS / script).exists() else TOOLS / script
+    p = subprocess.run([str(blender_python()), str(path), "--", *map(str, args)],
                        capture_output=True, text=True, timeout=timeout, env=env)
     lines = [line for line in p.stdout.splitlines() if line.startswith("{")]
     assert p.returncode == 0 and lines, f"{script} failed ({p.returncode}):\n" \

@@ -1,15 +1,23 @@
-"""Run in the bpy environment: the add-on linked to a running ``lumitrace serve``.
+"""A scripted session of the Blender add-on's live link to a running ``lumitrace serve``
+of the demo downlight (run it in the Blender environment, ``.venv-blender``)::
 
-    python live_session.py URL STAGE OUT_DIR PHOTONS [--render]
+    .venv-blender/bin/python tools/blender_live_session.py URL STAGE --out DIR
+        [--photons N] [--render WxH] [--samples S] [--denoise]
 
-The stage is imported and linked (its clock driven here, so the debounce is tested by
-the clock and not by sleeping). The diffuser is dragged 5 stage units down in ten steps
-0.05 s apart, then left: one delta. Once the service has written that revision's last
-result, the photometric light holds its IES; with ``--render`` a small room around the
-luminaire is rendered by Cycles (CPU), then the reflector's specular reflectance is set to
-0.5 and the room rendered again once the service's new result is in the light.
+The stage (the file the service serves) is imported and linked, the link's clock driven
+here, so that the debounce is shown by the clock and not by sleeping. The diffuser is
+dragged 5 stage units down in ten steps 0.05 s apart, then left: one delta. Once the
+service has written that revision's last result the photometric light holds its IES;
+with ``--render`` a white room around the luminaire (3 m x 3 m x 2.4 m, the luminaire in
+the middle of its ceiling) is rendered by Cycles on the CPU. Then the reflector's specular
+reflectance is set to 0.5, and the room rendered again once the service's new result is
+in the light. ``N`` is the service's photon budget (its ``--photons``): a revision's last
+result is the one of N photons with its pictures.
 
-Prints one JSON object as its last line."""
+Prints one JSON object as its last line: the batches sent, the revisions, the light's IES
+(SHA-256 of its text, also written to DIR/light.ies) and the pictures' mean values.
+"""
+import argparse
 import hashlib
 import json
 import os
@@ -17,8 +25,9 @@ import sys
 
 import bpy
 
-import lumitrace_blender
-from lumitrace_blender import ies_light, live, records
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "service"))
+import lumitrace_blender  # noqa: E402  (the add-on beside lumitrace, in service/)
+from lumitrace_blender import ies_light, live, records  # noqa: E402
 
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
 SPEC = "lumitrace:specularReflectance"
@@ -40,7 +49,7 @@ def by_prim(collection, path):
     raise LookupError(path)
 
 
-def room(scene):
+def room(scene, size=(96, 72), samples=16, denoise=False):
     """A white room 3 m x 3 m x 2.4 m (the stage's millimetres), the luminaire recessed
     in the middle of its ceiling; a camera in a corner looking at the floor."""
     mat = bpy.data.materials.new("room white")
@@ -48,12 +57,13 @@ def room(scene):
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = \
         (0.7, 0.7, 0.7, 1)
     mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 1.0
-    for name, location, rotation, size in (
+    for name, location, rotation, extent in (
             ("floor", (0, 0, -2400), (0, 0, 0), 3000),
             ("wall +x", (1500, 0, -1200), (0, 1.5708, 0), 3000),
             ("wall -x", (-1500, 0, -1200), (0, 1.5708, 0), 3000),
-            ("wall +y", (0, 1500, -1200), (1.5708, 0, 0), 3000)):
-        bpy.ops.mesh.primitive_plane_add(size=size, location=location, rotation=rotation)
+            ("wall +y", (0, 1500, -1200), (1.5708, 0, 0), 3000),
+            ("ceiling", (0, 0, 0.5), (0, 0, 0), 3000)):
+        bpy.ops.mesh.primitive_plane_add(size=extent, location=location, rotation=rotation)
         bpy.context.object.name = name
         bpy.context.object.data.materials.append(mat)
     cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
@@ -65,9 +75,9 @@ def room(scene):
     scene.camera = cam
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 16
-    scene.cycles.use_denoising = False
-    scene.render.resolution_x, scene.render.resolution_y = 96, 72
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = denoise
+    scene.render.resolution_x, scene.render.resolution_y = size
     scene.render.image_settings.file_format = "PNG"
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.exposure = 2.0
@@ -98,13 +108,14 @@ def wait_written(link, revision, photons):
     assert link.light_revision == revision, (link.light_revision, revision)
 
 
-def main(url, stage, out, photons, do_render):
+def main(url, stage, out, photons, size=None, samples=16, denoise=False):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     lumitrace_blender.register()
     scene = bpy.context.scene
     assert bpy.ops.lumitrace.import_stage(filepath=stage) == {"FINISHED"}
+    do_render = size is not None
     if do_render:
-        room(scene)
+        room(scene, size, samples, denoise)
     clock = Clock()
     link = live.connect(scene, url, timer=False, clock=clock)
     report = {"connected_revision": link.revision}
@@ -157,5 +168,17 @@ def main(url, stage, out, photons, do_render):
 
 
 if __name__ == "__main__":
-    args = sys.argv[sys.argv.index("--") + 1:]
-    print(json.dumps(main(args[0], args[1], args[2], int(args[3]), "--render" in args)))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("url")
+    parser.add_argument("stage")
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--photons", type=int, default=2_000_000,
+                        help="the service's photon budget (default: its own, 2e6)")
+    parser.add_argument("--render", default=None, help="render the room: WIDTHxHEIGHT")
+    parser.add_argument("--samples", type=int, default=16)
+    parser.add_argument("--denoise", action="store_true")
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    a = parser.parse_args(argv)
+    size = tuple(int(v) for v in a.render.split("x")) if a.render else None
+    print(json.dumps(main(a.url, os.path.abspath(a.stage), os.path.abspath(a.out), a.photons,
+                          size, a.samples, a.denoise)))
