@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -121,6 +122,63 @@ def test_the_demo_edited_in_blender_traces_as_the_same_edits_sent_as_deltas(
     lor, lor_error = _figures(a)["lor"]
     original, original_error = _figures(d)["lor"]
     assert original - lor > 10 * math.hypot(lor_error, original_error)
+
+
+def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_path):
+    """A flux, a light's size, a mesh edit, a preview-surface colour, another material
+    bound, a part turned and moved, a new part with a new material: the export and the
+    live link's deltas (applied as the service applies them) give lumitrace one scene."""
+    stage = tmp_path / "downlight.usda"
+    shutil.copy(DEMO, stage)
+    report = run_bpy("roundtrip.py", "many", stage, tmp_path)
+    ops = {(op, path) for op, path, _ in report["edits"]}
+    assert {("set", "/Luminaire/LED"), ("set", "/Luminaire/Board"),
+            ("set", "/Luminaire/Materials/HousingPaint/PreviewSurface"),
+            ("bind", "/Luminaire/Housing"), ("transform", "/Luminaire/Diffuser"),
+            ("define", "/Luminaire/Baffle"),
+            ("define", "/Luminaire/Materials/BaffleBlack")} <= ops
+    assert not any("Plane" in path for _, path in ops)  # the room is not the luminaire's
+    exported = read_stage(report["exported"])
+    folder = tmp_path / "deltas"
+    folder.mkdir()
+    copy = folder / "downlight.usda"
+    shutil.copy(DEMO, copy)
+    layer = open_edits_layer(folder / "edits.usda")
+    apply_deltas(open_with_edits(copy, layer), layer, report["deltas"], folder)
+    assert [d["op"] for d in report["deltas"]].count("layer") == 1  # the new prims
+    with_deltas = scene_from_stage(open_with_edits(copy, layer))
+    assert exported.content_hash() == with_deltas.content_hash()
+    original = read_stage(DEMO)
+    assert [e.flux for e in exported.emitters] == [1500.0]
+    assert exported.emitters[0].width == pytest.approx(25.0)  # mm, the stage's unit
+    assert len(exported.parts) == len(original.parts) + 1
+    assert "/Luminaire/Baffle" in exported.parts
+    assert exported.content_hash() != original.content_hash()
+    # the panels show the schema's values and offer the missing ones
+    material = report["panels"]["material"]
+    assert ["prop", '["lumitrace:specularReflectance"]', "specularReflectance",
+            pytest.approx(0.92)] in material
+    assert ["label", "reflectance: (schema default)"] in material
+    assert ["prop", '["lumitrace:luminousFlux"]', "luminousFlux", 1200.0] in \
+        report["panels"]["light"]
+    assert ["label", "manufacturer: (schema default)"] in report["panels"]["luminaire"]
+
+
+def test_one_command_installs_and_enables_the_addon(bpy_python, tmp_path):
+    """tools/blender_install.py in a Blender whose user folder is a temporary one: the
+    next Blender started with it has the add-on's operators."""
+    env = {**os.environ, "BLENDER_USER_RESOURCES": str(tmp_path / "blender")}
+    p = subprocess.run([str(bpy_python), str(ROOT / "tools" / "blender_install.py")],
+                       capture_output=True, text=True, timeout=120, env=env)
+    assert p.returncode == 0 and "installed at" in p.stdout, p.stdout + p.stderr
+    assert (tmp_path / "blender" / "scripts" / "addons" / "lumitrace_blender" /
+            "__init__.py").exists()
+    check = ("import bpy; bpy.ops.wm.read_userpref(); "  # Blender the app reads them itself
+             "print('enabled', 'lumitrace_blender' in bpy.context.preferences.addons.keys(),"
+             " hasattr(bpy.types, 'LUMITRACE_OT_export_stage'))")
+    p = subprocess.run([str(bpy_python), "-c", check], capture_output=True, text=True,
+                       timeout=120, env=env)
+    assert "enabled True True" in p.stdout, p.stdout + p.stderr
 
 
 def test_every_stage_survives_the_addons_import_and_export(bpy_python, tmp_path):
