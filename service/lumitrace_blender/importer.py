@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+from array import array
 
 import bpy
 import mathutils
@@ -156,21 +157,35 @@ class _Importer:
         return not attr or attr.Get(time) != "invisible"
 
     def _mesh(self, prim, time):
+        """A Blender mesh of the Mesh's points and faces (hole faces left out), built from
+        the arrays' buffers."""
         UsdGeom = self.UsdGeom
         mesh = UsdGeom.Mesh(prim)
-        points = mesh.GetPointsAttr().Get(time) or []
-        counts = mesh.GetFaceVertexCountsAttr().Get(time) or []
-        indices = mesh.GetFaceVertexIndicesAttr().Get(time) or []
+        points = _flat("f", mesh.GetPointsAttr().Get(time))
+        counts = _flat("i", mesh.GetFaceVertexCountsAttr().Get(time))
+        indices = _flat("i", mesh.GetFaceVertexIndicesAttr().Get(time))
         holes = set(mesh.GetHoleIndicesAttr().Get(time) or [])
-        faces, kept, at = [], [], 0
-        for f, n in enumerate(counts):
-            if f not in holes:
-                faces.append(tuple(indices[at:at + n]))
-                kept.append(f)
-            at += n
+        kept = [f for f in range(len(counts)) if f not in holes]
+        if holes:  # the loops of the faces kept
+            starts, at = [], 0
+            for n in counts:
+                starts.append(at)
+                at += n
+            indices = array("i", (v for f in kept
+                                  for v in indices[starts[f]:starts[f] + counts[f]]))
+            counts = array("i", (counts[f] for f in kept))
         self.face_maps[prim.GetPath().pathString] = kept
+        starts, at = array("i", bytes(4 * len(counts))), 0
+        for f, n in enumerate(counts):
+            starts[f] = at
+            at += n
         data = bpy.data.meshes.new(prim.GetName())
-        data.from_pydata([tuple(p) for p in points], [], faces)
+        data.vertices.add(len(points) // 3)
+        data.vertices.foreach_set("co", points)
+        data.loops.add(len(indices))
+        data.loops.foreach_set("vertex_index", indices)
+        data.polygons.add(len(counts))
+        data.polygons.foreach_set("loop_start", starts)
         data.update()
         return data
 
@@ -305,6 +320,14 @@ class _Importer:
         self.materials[path] = mat
         if not self.material_scope:
             self.material_scope = prim.GetPath().GetParentPath().pathString
+
+
+def _flat(typecode: str, values) -> array:
+    """A USD array (Vt, with the buffer protocol) as a flat ``array`` of ``typecode``."""
+    out = array(typecode)
+    if values is not None and len(values):
+        out.frombytes(memoryview(values).cast("B"))
+    return out
 
 
 def _bound(api, UsdShade):
