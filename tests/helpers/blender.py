@@ -12,7 +12,7 @@ import pytest
 
 from helpers.paths import ROOT
 
-SCRIPTS = ROOT / "tests" / "blender" / "scripts"
+SCRIPTS = ROOT / "tests" / "lumitrace_blender" / "scripts"
 TOOLS = ROOT / "tools"
 
 
@@ -28,7 +28,7 @@ def blender_python() -> Path:
 
 
 def run_bpy(script: str, *args, timeout: float = 300.0) -> dict:
-    """Run ``tests/blender/scripts/SCRIPT`` (or ``tools/SCRIPT``) in the bpy environment
+    """Run ``tests/lumitrace_blender/scripts/SCRIPT`` (or ``tools/SCRIPT``) in the bpy environment
     with the add-on on its path; returns the JSON object its last line prints."""
     env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
     path = SCRIPTS / script if (SCRIPTS / script).exists() else TOOLS / script

@@ -1,4 +1,4 @@
-"""Run in the bpy environment (``tests/blender``): the add-on's import and export.
+"""Run in the bpy environment (``tests/lumitrace_blender``): the add-on's import and export.
 
     python roundtrip.py demo STAGE OUT_DIR    the demo edited as the round-trip test asks
     python roundtrip.py many STAGE OUT_DIR    every kind of change, exported and as deltas
