@@ -20,6 +20,7 @@ Prints one JSON object as its last line: the batches sent, the revisions, the li
 import argparse
 import hashlib
 import json
+import math
 import os
 import sys
 
@@ -50,8 +51,8 @@ def by_prim(collection, path):
 
 
 def room(scene, size=(96, 72), samples=16, denoise=False):
-    """A white room 3 m x 3 m x 2.4 m (the stage's millimetres), the luminaire recessed
-    in the middle of its ceiling; a camera in a corner looking at the floor."""
+    """A white room 3 m x 3 m x 2.4 m (the stage's millimetres, open on one side), the
+    luminaire recessed in the middle of its ceiling; a camera at the open side."""
     mat = bpy.data.materials.new("room white")
     mat.use_nodes = True
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = \
@@ -68,10 +69,10 @@ def room(scene, size=(96, 72), samples=16, denoise=False):
         bpy.context.object.data.materials.append(mat)
     cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
     scene.collection.objects.link(cam)
-    cam.data.lens = 16
+    cam.data.lens = 12
     cam.data.clip_start, cam.data.clip_end = 10, 20000
-    cam.location = (0, -2900, -600)
-    cam.rotation_euler = (1.25, 0, 0)
+    cam.location = (0, -1450, -1500)  # at the open side, 0.9 m above the floor
+    cam.rotation_euler = (math.radians(98), 0, 0)  # the ceiling's luminaire in view
     scene.camera = cam
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
@@ -142,7 +143,8 @@ def main(url, stage, out, photons, size=None, samples=16, denoise=False):
     report["light_location"] = list(light.matrix_world.translation)
     report["light_energy"] = light.data.energy
     if do_render:
-        report["render_before"] = render(scene, os.path.join(out, "room_reflector_092.png"))
+        report["render_before"] = render(scene,
+                                         os.path.join(out, "blender_room_reflector_092.png"))
 
     # the reflector's specular reflectance: one set delta, a new result, a new light
     reflector = by_prim(bpy.data.materials, REFLECTOR)
@@ -161,7 +163,8 @@ def main(url, stage, out, photons, size=None, samples=16, denoise=False):
     with open(os.path.join(out, "light.ies"), "w") as f:
         f.write(text.as_string())
     if do_render:
-        report["render_after"] = render(scene, os.path.join(out, "room_reflector_050.png"))
+        report["render_after"] = render(scene,
+                                        os.path.join(out, "blender_room_reflector_050.png"))
     report["error"] = link.error
     live.disconnect(scene)
     return report

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import shlex
 import subprocess
@@ -268,7 +267,8 @@ def traced_table(rows: list[dict], originals: dict) -> str:
         for r in (r for r in rows if r["stage"] == stage):
             e = r["traced"]
             if "refused" in e:
-                note = "refused: " + e["refused"].replace("lumitrace: error: ", "").replace("|", "/")
+                why = e["refused"].replace("lumitrace: error: ", "").replace("|", "/")
+                note = "refused: " + why
             else:
                 note = "same counts" if e["counts"] == t.get("counts") else "differs"
             lines.append(f"| | {r['path']} | {_fig(e, 'flux', 1)} | {_fig(e, 'lor', 4)} | "

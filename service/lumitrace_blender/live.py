@@ -3,9 +3,10 @@
 Every tick (a Blender timer, 10 times a second) the link compares what Blender shows of
 the imported stage with what it last sent; once the state has held still for
 ``debounce`` seconds (a drag has ended) the difference goes to the service as one batch
-of scene deltas. A thread reads the service's events (its kept history, after the last one
-seen); the tick takes them on Blender's main thread, and when a newer result is written it loads the service's IES
-file into the photometric light (:mod:`.ies_light`) at the luminaire's place.
+of scene deltas. A thread reads the service's events (its kept history, after the last
+one seen); the tick takes them on Blender's main thread, and when a newer result is
+written it loads the service's IES file into the photometric light (:mod:`.ies_light`)
+at the luminaire's place.
 
 Nothing here waits on the service inside a tick longer than one HTTP request.
 """
@@ -137,14 +138,17 @@ class LiveLink:
             self.error = str(exc)
             self.sent = current  # not sent again until it changes
             return None
-        self.sent = current
         if not deltas:
+            self.sent = current
             return None
         try:
             answer = self.service.send(deltas)
         except ServiceError as exc:
             self.error = str(exc)
-            return None
+            if exc.status:  # refused: not sent again until it changes
+                self.sent = current
+            return None  # unreachable: sent again at the next tick
+        self.sent = current
         self.error = ""
         self.batches.append(deltas)
         self.revision = int(answer.get("revision", self.revision))

@@ -1,6 +1,5 @@
 """The add-on's operators: ``bpy.ops.lumitrace.import_stage``, ``export_stage``,
 ``connect``, ``disconnect``, ``add_attribute``."""
-from __future__ import annotations
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty

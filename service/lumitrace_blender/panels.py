@@ -101,7 +101,8 @@ def draw_link(layout, context) -> None:
     col.label(text=f"revision {s.get('revision', link.revision)} ({s.get('state', '?')}), "
                    f"light from {link.light_revision}")
     if s.get("photons") is not None:
-        col.label(text=f"{s['photons']:,} photons, error {100 * (s.get('relative_error') or 0):.2f}%")
+        error = 100 * (s.get("relative_error") or 0)
+        col.label(text=f"{s['photons']:,} photons, error {error:.2f}%")
     if photometry:
         col.label(text=f"flux {photometry['luminous_flux']:.1f} "
                        f"± {photometry['luminous_flux_error']:.1f} lm")

@@ -9,7 +9,7 @@ import sys
 def pxr_modules():
     """``(Usd, Sdf, UsdGeom, UsdLux, UsdShade, Gf, Vt)`` of the USD that Blender ships."""
     try:
-        import pxr  # noqa: F401
+        import pxr  # noqa: F401  (present: Blender's own Python has it on its path)
     except ImportError:
         import bpy
         folder = os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib",

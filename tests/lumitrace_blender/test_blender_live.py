@@ -3,7 +3,6 @@ its IES light rendered by Cycles on the CPU."""
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import shutil
 import subprocess

@@ -126,8 +126,9 @@ def test_the_demo_edited_in_blender_traces_as_the_same_edits_sent_as_deltas(
 
 def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_path):
     """A flux, a light's size, a mesh edit, a preview-surface colour, another material
-    bound, a part turned and moved, a new part with a new material: the export and the
-    live link's deltas (applied as the service applies them) give lumitrace one scene."""
+    bound, a part turned and moved, a value removed, a part hidden, a part deleted, a new
+    part with a new material: the export and the live link's deltas (applied as the
+    service applies them) give lumitrace one scene."""
     stage = tmp_path / "downlight.usda"
     shutil.copy(DEMO, stage)
     report = run_bpy("roundtrip.py", "many", stage, tmp_path)
@@ -135,7 +136,8 @@ def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_
     assert {("set", "/Luminaire/LED"), ("set", "/Luminaire/Board"),
             ("set", "/Luminaire/Materials/HousingPaint/PreviewSurface"),
             ("bind", "/Luminaire/Housing"), ("transform", "/Luminaire/Diffuser"),
-            ("define", "/Luminaire/Baffle"),
+            ("define", "/Luminaire/Baffle"), ("block", "/Luminaire/Materials/ReflectorAluminium"),
+            ("visibility", "/Luminaire/Board"), ("active", "/Luminaire/Reflector"),
             ("define", "/Luminaire/Materials/BaffleBlack")} <= ops
     assert not any("Plane" in path for _, path in ops)  # the room is not the luminaire's
     exported = read_stage(report["exported"])
@@ -151,8 +153,10 @@ def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_
     original = read_stage(DEMO)
     assert [e.flux for e in exported.emitters] == [1500.0]
     assert exported.emitters[0].width == pytest.approx(25.0)  # mm, the stage's unit
-    assert len(exported.parts) == len(original.parts) + 1
-    assert "/Luminaire/Baffle" in exported.parts
+    # the board hidden and the reflector deleted are not traced; the baffle is
+    assert set(exported.parts) == set(original.parts) - {"/Luminaire/Board",
+                                                         "/Luminaire/Reflector"} \
+        | {"/Luminaire/Baffle"}
     assert exported.content_hash() != original.content_hash()
     # the panels show the schema's values and offer the missing ones
     material = report["panels"]["material"]

@@ -116,6 +116,9 @@ def many(stage, out):
     black["lumitrace:scattering"] = "diffuse"
     black["lumitrace:reflectance"] = 0.05
     mesh.materials.append(black)
+    del reflector["lumitrace:roughness"]  # a value removed: blocked (the fallback)
+    board.hide_render = True  # hidden from renders: invisible
+    bpy.data.objects.remove(by_prim(bpy.data.objects, "/Luminaire/Reflector"))  # inactive
     # a room object beside the luminaire: not the luminaire's, never exported
     bpy.ops.mesh.primitive_plane_add(size=3000, location=(0, 0, -2400))
     entry = records.stage_entry(scene)
