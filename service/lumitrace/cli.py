@@ -23,22 +23,31 @@ from .trace.job import MAX_DEPTH
 def _positive_int(text: str) -> int:
     try:
         v = int(float(text))
-    except OverflowError:
-        raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text}")
+    except (ValueError, OverflowError):
+        raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text!r}")
     if v <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return v
 
 
+def _number(text: str) -> float:
+    """``text`` as a float; an ArgumentTypeError that says so where it is not one (argparse
+    would name this module's function in its message)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
 def _positive_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return v
 
 
 def _non_negative_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v >= 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be zero or a positive number, got {text}")
     return v
