@@ -38,7 +38,6 @@ RANKS = {
     "cli": 7, "api": 7, "__main__": 8,
     "client": 0,  # the standard library only: it runs in a DCC's own Python
     "quick_exit": 0,  # the standard library only: how a command's process ends
-    "loading": 0,  # the standard library only: modules loaded with the collector paused
 }
 
 

@@ -13,7 +13,6 @@ import warnings
 from pathlib import Path
 
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
-from .loading import collector_paused
 from .pyplot import short_setter_docs
 from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
@@ -22,25 +21,30 @@ from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_addre
 from .trace.job import MAX_DEPTH
 
 
-def _positive_int(text: str) -> int:
+def _number(text: str) -> float:
+    """``text`` as a float (argparse's own error would name our type function)."""
     try:
-        v = int(float(text))
-    except OverflowError:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
+def _positive_int(text: str) -> int:
+    v = _number(text)
+    if not (math.isfinite(v) and int(v) > 0):
         raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text}")
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return v
+    return int(v)
 
 
 def _positive_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return v
 
 
 def _non_negative_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v >= 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be zero or a positive number, got {text}")
     return v
@@ -284,13 +288,12 @@ _QUIET = False
 def cmd_trace(args) -> int:
     global _QUIET
     _QUIET = bool(args.quiet)
-    with collector_paused():  # the command's modules, at once
-        from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
-        from .publish.outputs import claim_planned_outputs, write_outputs
-        from .run.session import run
-        from .run.settings import TraceSettings, default_threads
-        from .stage.scene_cache import read_stage
-        from .trace.compiled import note
+    from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
+    from .publish.outputs import claim_planned_outputs, write_outputs
+    from .run.session import run
+    from .run.settings import TraceSettings, default_threads
+    from .stage.scene_cache import read_stage
+    from .trace.compiled import note
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
