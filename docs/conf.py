@@ -72,6 +72,7 @@ NAV: dict[str, list[str]] = {
     ],
     "Explanation": [
         "explanation/measurement",
+        "explanation/files-you-ship",
         "explanation/accuracy",
         "explanation/performance",
         "explanation/architecture",
