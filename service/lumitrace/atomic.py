@@ -9,6 +9,8 @@ from typing import Iterator
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)  # read once: os.umask is process-wide and not thread-safe
+#: The process's umask (read once, at import).
+UMASK = _UMASK
 
 
 @contextlib.contextmanager

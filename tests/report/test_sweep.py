@@ -86,7 +86,8 @@ def test_a_sweep_writes_the_table_the_overview_and_each_variants_outputs(swept):
     assert float(iso["luminous_flux"]) == pytest.approx(1000.0)  # all of it leaves
     assert float(iso["light_output_ratio"]) == 1.0 and iso["light_output_ratio_error"]
     page = (out / "index.html").read_text()
-    assert page.count("<svg") == 5 and page.count("<polyline") == 10  # two planes each
+    # each case drawn on the common scale and on its own, two planes each
+    assert page.count("<svg") == 10 and page.count("<polyline") == 20
     assert "finish=polished" in page
 
 

@@ -15,10 +15,12 @@ from typing import Any, Callable
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdUtils
 
-from ..schema import MATERIAL_RANGES
+from ..errors import StageError
+from ..schema import MATERIAL_RANGES, PROFILE_ATTRIBUTES
 from ..stage.diagnostics import tf_message
 from ..stage.luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .assets import AssetRefused, check_asset, layer_problems, stage_variables
+from .profile import write_profile_mesh
 from .protocol import DeltaError, Problem
 
 
@@ -214,7 +216,8 @@ def _attribute(ctx: _Context, prim: Usd.Prim, name: str, type_hint: str | None,
 
 
 #: The API schemas whose attributes a delta may set (they are applied for it).
-_DELTA_APIS = ("LumitraceMaterialAPI", "LumitraceEmitterAPI", "LumitraceLuminaireAPI")
+_DELTA_APIS = ("LumitraceMaterialAPI", "LumitraceEmitterAPI", "LumitraceLuminaireAPI",
+               "LumitraceProfileAPI")
 
 
 def _api_names(api: str) -> list[str]:
@@ -278,7 +281,26 @@ def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
 # ------------------------------------------------------------------------------------------
 
 def _op_set(ctx: _Context, d: dict) -> None:
-    _set_value(ctx, ctx.prim(d["path"]), d["property"], d["value"], d.get("type"))
+    prim = ctx.prim(d["path"])
+    _set_value(ctx, prim, d["property"], d["value"], d.get("type"))
+    if d["property"] in PROFILE_ATTRIBUTES:
+        _profile_mesh(prim, d["property"])
+
+
+def _profile_mesh(prim: Usd.Prim, prop: str) -> None:
+    """A profile changed: the mesh's points and faces made from it, in the edits layer
+    (a bad profile is the delta's problem, naming the property)."""
+    where = f"{prim.GetPath()}.{prop}"
+    if not prim.IsA(UsdGeom.Mesh):
+        raise _Bad(f"a profile makes a Mesh's points; this is a "
+                   f"{prim.GetTypeName() or 'typeless'} prim", where)
+    if not prim.GetAttribute(PROFILE_ATTRIBUTES[0]).HasAuthoredValue():
+        return  # its points come with a later delta of the batch, or never
+    try:
+        write_profile_mesh(prim)
+    except StageError as exc:
+        raise _Bad(exc.message, f"{prim.GetPath()}.{exc.prop}" if exc.prop else where) \
+            from None
 
 
 def transform_matrix(d: dict) -> Gf.Matrix4d:
@@ -342,6 +364,8 @@ def _op_add(ctx: _Context, d: dict) -> None:
         prim.ApplyAPI(api)
     for name, value in d.get("properties", {}).items():
         _set_value(ctx, prim, name, value, None)
+    if any(name in PROFILE_ATTRIBUTES for name in d.get("properties", {})):
+        _profile_mesh(prim, PROFILE_ATTRIBUTES[0])
 
 
 def _op_remove(ctx: _Context, d: dict) -> None:

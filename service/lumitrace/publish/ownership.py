@@ -89,6 +89,18 @@ def _recorded(layer: Path) -> tuple[str | None, dict[str, str] | None]:
     return data.get(STAGE_KEY), {str(k): str(v) for k, v in files.items()}
 
 
+def _readable(path: Path) -> None:
+    """Raise :class:`OutputError` saying so where ``path`` cannot be read: whether
+    lumitrace wrote it cannot be told then (its record or its digest is unread)."""
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise OutputError(f"cannot be read ({exc.strerror or exc}), so whether lumitrace "
+                          "wrote it cannot be told: make it readable and writable by you "
+                          "(chmod u+rw), or move it away", str(path)) from None
+
+
 def _not_ours(path: Path, why: str) -> OutputError:
     return OutputError(f"{why}: lumitrace replaces only the files it wrote for this stage; "
                        "move it away, or write the outputs to a folder of their own (--out)",
@@ -128,6 +140,7 @@ def claim_files(stage_path: Path | None, record: Path, read_record, paths: Itera
     for path in existing:
         if path.is_symlink() or not path.is_file():
             raise _not_ours(path, "is not a regular file")
+        _readable(path)
     if not os.path.lexists(record):
         if existing:
             raise _not_ours(existing[0], f"exists, and no {what} of this stage "

@@ -183,6 +183,41 @@ class TraceSettings:
 
 #: The settings a service's client may change while it runs.
 KNOBS = ("threshold", "target_error", "photons", "paused")
+#: The largest photon budget and the smallest target error a service's client may ask
+#: for by default (``serve --max-photons``, ``--min-target-error``): about half an hour of
+#: tracing on a laptop's cores, and a grid error ten times below the default target.
+SERVICE_MAX_PHOTONS = 10_000_000_000
+SERVICE_MIN_TARGET_ERROR = 0.002
+
+
+@dataclass(frozen=True)
+class ServiceLimits:
+    """The work a client of a service may ask for through ``/settings``, as the command
+    line that started it allows: a photon budget of at most ``max_photons``, a target
+    error of at least ``min_target_error``."""
+
+    max_photons: int = SERVICE_MAX_PHOTONS
+    min_target_error: float = SERVICE_MIN_TARGET_ERROR
+
+    def __post_init__(self) -> None:
+        put = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731 (frozen)
+        put("max_photons", _integer("max_photons", self.max_photons, 1, MAX_PHOTONS))
+        put("min_target_error", _real("min_target_error", self.min_target_error, 0.0, 1.0,
+                                      lo_open=True))
+
+    def check(self, settings: TraceSettings, options: bool = False) -> None:
+        """Raise :class:`SettingsError` naming ``photons`` or ``target_error`` (or, with
+        ``options``, the command line's option) where ``settings`` asks for more work."""
+        if settings.photons is not None and settings.photons > self.max_photons:
+            raise SettingsError(f"must be at most {self.max_photons:,} (the service's "
+                                f"--max-photons), got {settings.photons:,}",
+                                prop="--photons" if options else "photons")
+        if settings.target_error is not None and \
+                settings.target_error < self.min_target_error:
+            raise SettingsError(f"must be at least {self.min_target_error:g} (the "
+                                f"service's --min-target-error), got "
+                                f"{settings.target_error:g}",
+                                prop="--target-error" if options else "target_error")
 
 
 def with_knobs(settings: TraceSettings, changes: dict) -> tuple[TraceSettings, bool | None]:
