@@ -144,10 +144,9 @@ def _add_trace(sub) -> None:
 
 
 def _add_check(sub) -> None:
-    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
+    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 "
                                      "current and converged, 1 stale or missing, 3 not "
-                                     "converged, 4 a publishing interrupted that it could "
-                                     "not finish)",
+                                     "converged, 4 a publishing interrupted, unfinished)",
                        description="Compose the stage and compare its lumitrace:result:* "
                                    "attributes with the scene as it is now: a pipeline gate; "
                                    "a killed run's half-done publishing is finished first.")
