@@ -162,6 +162,7 @@ def test_the_polar_curve_is_labelled_as_a_datasheet_and_nothing_is_cut(page):
 
 
 def test_a_picked_part_is_highlighted(page):
+    assert page.execute_script("return lumitrace.picked") is None  # none until one is picked
     housing = _select_part(page, "Housing")
     # the middle of the luminaire's underside as the camera sees it: what a click there hits
     x, y = page.execute_script("""
