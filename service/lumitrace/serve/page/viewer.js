@@ -604,7 +604,7 @@ function upload(positions, normals, colours) {
   return { vao, count: positions.length / 3 };
 }
 
-const PART_COLOURS = [[0.85, 0.85, 0.82], [0.65, 0.72, 0.85], [0.9, 0.75, 0.55], [0.6, 0.8, 0.65],
+const PART_COLOURS = [[0.85, 0.85, 0.82], [0.65, 0.72, 0.85], [0.80, 0.84, 0.90], [0.6, 0.8, 0.65],  // no orange: that is the pick's
                       [0.8, 0.6, 0.75], [0.7, 0.7, 0.7]];
 
 function buildParts() {
