@@ -326,27 +326,31 @@ def test_the_transform_fields_show_the_parts_transform(page, served):
                                "&& document.getElementById('sx').disabled")
 
 
-def test_a_pause_shows_and_the_first_frame_is_awaited_quietly(page, served):
+def test_a_pause_shows(page, served):
     pause = page.find_element("id", "pause")
     assert pause.text == "Pause"
     pause.click()
     until(page, "document.getElementById('pause').textContent === 'Resume'")
     assert page.find_element("id", "paused").is_displayed()  # the header says so too
     assert served.client._json("GET", "/settings")["paused"] is True
+    page.find_element("id", "pause").click()
+    until(page, "document.getElementById('pause').textContent === 'Pause'")
+    assert not page.find_element("id", "paused").is_displayed()
+    assert served.client._json("GET", "/settings")["paused"] is False
+
+
+def test_the_first_frame_is_awaited_quietly(page, served):
     # paused, an edit that restarts the trace leaves no frame to show: a page loading now
     # waits for the first one without an error in its console
+    served.client._json("POST", "/settings", {"paused": True})
     revision = served.client.set(REFLECTOR, "lumitrace:roughness", 0.05)["revision"]
     served.wait_status(lambda s: s["traced_revision"] == revision and s["photons"] == 0)
     fresh = browser()
     try:
         fresh.get(served.url)
-        until(fresh, f"lumitrace.status && lumitrace.status.traced_revision === {revision} "
-                     "&& lumitrace.paused")
-        assert fresh.find_element("id", "pause").text == "Resume"
-        fresh.find_element("id", "pause").click()  # resumed from the new page
+        until(fresh, f"lumitrace.status && lumitrace.status.traced_revision === {revision}")
+        served.client._json("POST", "/settings", {"paused": False})
         until(fresh, f"lumitrace.preview && lumitrace.preview.header.revision === {revision}")
-        until(page, "document.getElementById('pause').textContent === 'Pause'")
-        assert not page.find_element("id", "paused").is_displayed()
         assert severe(fresh) == [] and fresh.execute_script("return lumitrace.errors") == []
     finally:
         fresh.quit()
