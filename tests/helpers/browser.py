@@ -1,5 +1,6 @@
-"""The system's headless Chromium driven by its chromedriver (WebGL2 by SwiftShader), for
-the live view's tests: start it, poll the page for a condition, read an element's pixels."""
+"""The system's headless Chromium driven by its chromedriver (never a downloaded browser),
+for tests of pages: WebGL2 by SwiftShader, the browser's log kept; poll a page for a
+condition, read an element's pixels."""
 from __future__ import annotations
 
 import io
@@ -7,26 +8,36 @@ import shutil
 import time
 
 import numpy as np
+import pytest
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
-SKIP_WHY = ("no system Chromium and chromedriver (Debian: apt-get install chromium "
-            "chromium-driver; tools/setup.sh --test installs them as root)")
+NO_BROWSER = SKIP_WHY = ("no system Chromium and chromedriver (Debian: apt-get install "
+                         "chromium chromium-driver; tools/setup.sh --test installs them as "
+                         "root)")
 
 
-def browser(width: int = 1400, height: int = 1500):
-    """A headless Chromium (its console kept, every level)."""
-    from selenium import webdriver
+def chromium(*extra: str, width: int = 1400, height: int = 1500):
+    """A new headless Chromium (``extra``: more command-line switches), its console kept
+    at every level; skips the test where selenium or the system browser is missing."""
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
     from selenium.webdriver.chrome.service import Service as DriverService
 
+    if not (CHROMIUM and DRIVER):
+        pytest.skip(NO_BROWSER)
     options = webdriver.ChromeOptions()
     for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
                 "--enable-unsafe-swiftshader", f"--window-size={width},{height}",
-                "--disable-dev-shm-usage"):
+                "--disable-dev-shm-usage", *extra):
         options.add_argument(arg)
     options.binary_location = CHROMIUM
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=DriverService(DRIVER), options=options)
+
+
+def browser(width: int = 1400, height: int = 1500):
+    """A headless Chromium of that window size (its console kept, every level)."""
+    return chromium(width=width, height=height)
 
 
 def until(driver, script: str, timeout: float = 60.0, step: float = 0.1):

@@ -18,7 +18,7 @@ CSV, JSON, HTML = "sweep.csv", "sweep.json", "index.html"
 FIGURES = ("luminous_flux", "light_output_ratio", "peak_intensity", "beam_angle_c0_c180",
            "beam_angle_c90_c270", "field_angle_c0_c180", "field_angle_c90_c270")
 COLUMNS = ("stage", "variant", *[k for f in FIGURES for k in (f, f + "_error")],
-           "photons", "seconds", "relative_error_bound", "converged", "folder")
+           "photons", "seconds", "relative_error_bound", "converged", "folder", "error")
 
 
 def row(case, record, input_hash: str, request: dict, complete: bool, wall: float) -> dict:
@@ -38,13 +38,11 @@ def row(case, record, input_hash: str, request: dict, complete: bool, wall: floa
     return out
 
 
-def read_rows(out: Path) -> list[dict]:
-    """The rows of the sweep table in ``out`` (none when there is none or it is unreadable:
-    every case is then traced)."""
-    try:
-        return list(json.loads((out / JSON).read_text())["rows"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return []
+def failed_row(case, reason: str) -> dict:
+    """The table's row of a case that failed: the case and why (no figures)."""
+    return {"key": case.key, "stage": str(case.stage), "variant": case.label,
+            "variants": dict(case.variants), "folder": str(case.folder), "error": reason,
+            "complete": False}
 
 
 def write(out: Path, rows: list[dict]) -> None:
@@ -195,14 +193,21 @@ def overview(rows: list[dict], out: Path) -> str:
     grids = []
     for r in rows:
         try:
-            grid = json.loads(Path(r["photometry_data"]).read_text())
-            grid_peak(grid)
+            grid = None if r.get("error") else \
+                json.loads(Path(r["photometry_data"]).read_text())
+            if grid is not None:
+                grid_peak(grid)
             grids.append(grid)
         except (OSError, ValueError, KeyError, TypeError, IndexError):
             grids.append(None)
     common = max((grid_peak(g) for g in grids if g is not None), default=0.0) or None
     cards = []
     for r, grid in zip(rows, grids):
+        if r.get("error"):
+            cards.append(f'<div class="card failed"><h2>{html.escape(Path(r["stage"]).name)}'
+                         f'</h2><h3>{html.escape(r["variant"] or "as composed")}</h3>'
+                         f'<p>failed: {html.escape(r["error"])}</p></div>')
+            continue
         svg = "<p>(no photometry file)</p>" if grid is None else \
             polar_svg(grid, peak=common, css=' class="common"') + \
             polar_svg(grid, css=' class="own"')
@@ -230,7 +235,8 @@ def overview(rows: list[dict], out: Path) -> str:
     return ("<!doctype html><html><head><meta charset='utf-8'><title>lumitrace sweep"
             "</title><style>body{font-family:sans-serif}.card{display:inline-block;"
             "vertical-align:top;margin:8px;padding:8px;border:1px solid #ccc;width:240px;"
-            "font-size:12px}h2,h3{font-size:13px;margin:2px 0}svg.own{display:none}"
+            "font-size:12px}.failed{border-color:#c00}h2,h3{font-size:13px;margin:2px 0}"
+            "svg.own{display:none}"
             "body.own svg.own{display:inline}body.own svg.common{display:none}"
             "table{border-collapse:collapse;font-size:12px}td,th{padding:2px 8px;"
             "border-bottom:1px solid #ddd;text-align:right;white-space:nowrap}"

@@ -257,6 +257,7 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
         "relative_error": defined(est.error), "relative_error_bound": defined(est.error_bound),
         "raw_relative_error": defined(est.raw_error), "stepped_back": bool(est.stepped_back),
         "converged": converged, "lamp_lumens": ph.lamp_flux, "symmetry": ph.grid.symmetry,
+        "symmetry_source": ph.symmetry.source,
         "c": full.c.tolist(), "gamma": full.gamma.tolist(),
         "latlong": {"c": LATLONG_C.tolist(), "gamma": LATLONG_GAMMA.tolist()},
         "figures": {k: _plain(v) for k, v in fig.items()},

@@ -4,6 +4,10 @@
 // Every request the page makes goes through request() below.
 "use strict";
 
+// the service's key for this page (in the page itself, which no other origin can read):
+// every request carries it, so that the service tells the page from a forged request
+const KEY = document.querySelector('meta[name="lumitrace-key"]').content;
+
 const LT = (window.lumitrace = {
   token: sessionStorage.getItem("lumitrace-token") || null,
   status: null, scene: null, geometry: null, preview: null, results: null, settings: null,
@@ -16,10 +20,10 @@ window.addEventListener("error", (e) => LT.errors.push(String(e.message)));
 
 // ---- HTTP -------------------------------------------------------------------------------
 
-// The one function that sends a request: the token (where the service has one) and a JSON
-// body's content type are added here, and nowhere else.
+// The one function that sends a request: the page's key, the token (where the service has
+// one) and a JSON body's content type are added here, and nowhere else.
 async function request(path, { method = "GET", json, headers } = {}) {
-  const h = Object.assign({}, headers || {});
+  const h = Object.assign({ "X-Lumitrace-Key": KEY }, headers || {});
   if (LT.token) h.Authorization = "Bearer " + LT.token;
   const opts = { method, headers: h };
   if (json !== undefined) {
