@@ -104,6 +104,20 @@ def test_a_reference_that_is_not_a_file_is_refused_saying_why(served, body, stat
     assert code == status and said in json.loads(answer)["error"]
 
 
+def test_a_reference_follows_the_services_rules_for_what_changes_state(served):
+    """POST /reference changes nothing, but is a POST: JSON only, and from a web page only
+    with the page's key (the guard's rules for every unsafe request)."""
+    text = json.dumps({"name": "a.ies", "text": "x"}).encode()
+    for headers, status in (({"Content-Type": "text/plain"}, 415),
+                            ({"Content-Type": "application/json",
+                              "Origin": served.url.rstrip("/")}, 403)):
+        req = urllib.request.Request(served.url + "reference", text, method="POST",
+                                     headers=headers)
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(req)
+        assert err.value.code == status
+
+
 def test_the_scene_has_each_parts_local_transform(served):
     scene = json.loads(_get(served.url + "scene")[1])
     for part in scene["parts"]:
