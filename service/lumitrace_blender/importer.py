@@ -46,6 +46,7 @@ def import_stage(context, filepath: str, set_units: bool = True) -> dict:
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     up = str(UsdGeom.GetStageUpAxis(stage))
     scene = context.scene
+    earlier = _forget(file)
     importer = _Importer(scene, stage, file, luminaire, mpu)
     axes = None
     if up == "Y":  # Blender is Z-up: an unexported parent stands the Y-up stage upright
@@ -63,7 +64,23 @@ def import_stage(context, filepath: str, set_units: bool = True) -> dict:
              "objects": sorted(importer.objects), "materials": sorted(importer.materials),
              "material_scope": importer.material_scope}
     records.add_stage(scene, entry)
+    if earlier:
+        importer.warnings.append(f"{earlier} objects and materials of an earlier import of "
+                                 "this stage are plain Blender data now (not exported)")
     return {**entry, "warnings": importer.warnings}
+
+
+def _forget(file: str) -> int:
+    """Unlink what an earlier import of ``file`` made from the stage (a second import
+    would otherwise have two objects for one prim); returns how many."""
+    count = 0
+    for collection in (bpy.data.objects, bpy.data.materials, bpy.data.lights):
+        for block in collection:
+            rec = records.record(block)
+            if rec is not None and rec.get("stage") == file:
+                del block[records.KEY]
+                count += 1
+    return count
 
 
 class _Importer:

@@ -34,9 +34,10 @@ def run_bpy(script: str, *args, timeout: float = 300.0) -> dict:
     so a stall says where it is."""
     env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
     path = SCRIPTS / script if (SCRIPTS / script).exists() else TOOLS / script
-    runner = ("import faulthandler, runpy, sys; "
+    runner = ("import faulthandler, os, runpy, sys; "
               f"faulthandler.dump_traceback_later({max(1.0, timeout - 10.0)}, exit=True); "
-              "sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')")
+              "sys.argv = sys.argv[1:]; sys.path.insert(0, os.path.dirname(sys.argv[0])); "
+              "runpy.run_path(sys.argv[0], run_name='__main__')")
     p = subprocess.run([str(blender_python()), "-c", runner, str(path), "--",
                         *map(str, args)],
                        capture_output=True, text=True, timeout=timeout, env=env)

@@ -96,6 +96,11 @@ def test_the_demo_edited_in_blender_traces_as_the_same_edits_sent_as_deltas(
     assert "did you mean lumitrace:reflectance" in refusals["lumitrace:diffuseReflectance"]
     assert "must be one of diffuse" in refusals["lumitrace:scattering"]
     assert Path(report["exported"]).read_text() == text
+    assert report["asset_line"] == ["asset lumitrace:rayFile = @../rays/led.tm25@"]
+    assert report["asset_delta"] == [{"op": "set", "path": "/Luminaire/LED",
+                                      "property": "lumitrace:rayFile",
+                                      "value": "rays/led.tm25"}]
+    assert report["after_reimport"] == 0  # the edited first import is not the stage's now
 
     # the scene lumitrace reads from the export is the one the deltas give, bit for bit
     delta_stage, edits = _deltas_applied(tmp_path)
