@@ -13,6 +13,7 @@ Nothing here waits on the service inside a tick longer than one HTTP request.
 from __future__ import annotations
 
 import atexit
+import math
 import os
 import queue
 import threading
@@ -107,6 +108,7 @@ class LiveLink:
         self.sent = state.recorded_state(self.entry)
         self.seen = self.sent
         self.changed_at = self.clock()
+        self.next_poll = -math.inf
         self.events: queue.Queue = queue.Queue()
         kept = self.service.history(0)  # what happened before the link is not its news
         self.last_event_id = max((int(e["id"]) for e in kept), default=0)
@@ -128,7 +130,7 @@ class LiveLink:
         """Send what changed once it has held still for ``debounce`` s; returns the
         service's answer to the batch sent (None: nothing sent)."""
         now = self.clock() if now is None else now
-        current = state.state_of_stage(self.entry)
+        current = state.state_of_stage(self.entry, cached=True)
         if not _same_state(current, self.seen):
             self.seen, self.changed_at = current, now
             return None
@@ -251,8 +253,15 @@ class LiveLink:
         return world @ local
 
     def tick(self, now: float | None = None) -> None:
-        """One step of the link, as the timer runs it."""
-        self.poll(now)
+        """One step of the link, as the timer runs it. Reading Blender's state costs time
+        on Blender's own thread (a mesh of a million triangles is hashed in tens of ms):
+        the next read waits ten times what the last one took, so it never takes more than
+        a tenth of that thread."""
+        now = self.clock() if now is None else now
+        if now >= self.next_poll:
+            started = time.perf_counter()
+            self.poll(now)
+            self.next_poll = now + 10.0 * (time.perf_counter() - started)
         self.take_events()
 
     def close(self, restore: bool = True) -> None:

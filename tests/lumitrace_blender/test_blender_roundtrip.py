@@ -137,6 +137,8 @@ def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_
     stage = tmp_path / "downlight.usda"
     shutil.copy(DEMO, stage)
     report = run_bpy("roundtrip.py", "many", stage, tmp_path)
+    # the live link's mesh digests are kept until Blender's depsgraph updates the mesh
+    assert report["digest_kept_until_update"] and report["digest_after_update"]
     ops = {(op, path) for op, path, _ in report["edits"]}
     assert {("set", "/Luminaire/LED"), ("set", "/Luminaire/Board"),
             ("set", "/Luminaire/Materials/HousingPaint/PreviewSurface"),

@@ -105,9 +105,15 @@ def many(stage, out):
     led.data["lumitrace:luminousFlux"] = 1500.0  # a flux
     led.data.size = 25.0  # the rect light's width
     board = by_prim(bpy.data.objects, "/Luminaire/Board")
+    kept = state.cached_digest(board.data)
     for v in board.data.vertices:  # a mesh edit: the board 10% smaller across
         v.co.x *= 0.9
         v.co.y *= 0.9
+    report["digest_kept_until_update"] = state.cached_digest(board.data) == kept
+    board.data.update()
+    bpy.context.view_layer.update()  # the depsgraph tells the add-on the mesh changed
+    report["digest_after_update"] = state.cached_digest(board.data) == \
+        state.mesh_digest(board.data) != kept
     housing_paint = by_prim(bpy.data.materials, "/Luminaire/Materials/HousingPaint")
     state.principled(housing_paint).inputs["Base Color"].default_value = (0.2, 0.2, 0.2, 1)
     housing = by_prim(bpy.data.objects, "/Luminaire/Housing")  # another material bound
