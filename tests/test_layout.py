@@ -34,10 +34,10 @@ RANKS = {
     "run": 4,
     "publish": 5,
     "report": 6, "serve": 6,
+    "fit": 6,  # parameters, objectives, the optimiser over traced candidates: above run/
     "cli": 7, "api": 7, "__main__": 8,
     "client": 0,  # the standard library only: it runs in a DCC's own Python
     "quick_exit": 0,  # the standard library only: how a command's process ends
-    "loading": 0,  # the standard library only: modules loaded with the collector paused
 }
 
 

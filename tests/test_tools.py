@@ -27,6 +27,7 @@ QUICK = ("--target-error", 0.3, "--resolution", 8, "--threads", 1, "--quiet")
 #: minutes long or needs a browser; they are exercised by their own tests where there are.
 RUNS: dict[str, tuple[str, ...]] = {
     "application_cost.py": ("--photons", "20000", "--repeats", "1"),
+    "beam_angle_seeds.py": ("--seeds", "2", "--photons", "20000", "--only", "disc"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
     "dask_bench.py": ("--photons", "100000", "--resolution", "8", "--small-batches", "10"),
@@ -34,6 +35,10 @@ RUNS: dict[str, tuple[str, ...]] = {
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
                               "--reference-photons", "20000", "--thresholds", "1"),
     "files_error_seeds.py": ("--seeds", "2", "--photons", "20000", "--scenes", "lambertian"),
+    "fit_design.py": ("--evaluations", "6", "--photons", "4096"),
+    "fit_speed.py": ("--evaluations", "6", "--photons", "4096", "--max-photons", "8192",
+                     "--naive", "schedule", "--target-photons", "100000",
+                     "--confirm-photons", "16384"),
     "generate_schema.py": ("--check",),
     "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
                          "--resolution", "8", "--threads", "1"),
@@ -51,6 +56,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "solid_bench.py": ("--solids", "1"),
     "startup.py": ("--photons", "10000", "--repeats", "1"),
     "stress.py": ("--photons", "20000", "--fuzz-seconds", "0.5", "--only", "furnace"),
+    "symmetry_seeds.py": ("stages/reference/lambertian_disc.usda", "--seeds", "1",
+                          "--target", "0.2", "--reference-photons", "20000"),
     "viewer_bench.py": ("--help",),  # drives headless Chromium for minutes
 }
 #: Checks that say nothing when all is well (their exit status says it).

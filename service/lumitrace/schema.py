@@ -1,7 +1,7 @@
 """The lumitrace codeless USD schema: registration with usd-core, names, allowed values.
 
 The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` and
-``schemas/generatedSchema.usda``) defines three single-apply API schemas:
+``schemas/generatedSchema.usda``) defines four single-apply API schemas:
 
 - ``LumitraceMaterialAPI`` on a UsdShade Material or a gprim: ``lumitrace:scattering``,
   ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
@@ -12,7 +12,10 @@ The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` an
   ``lumitrace:body`` (the light's surface is geometry too), ``lumitrace:rayFile`` (a
   TM-25 ray file the light emits) and its colour, ``lumitrace:spectrum`` or
   ``lumitrace:illuminant``;
-- ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``.
+- ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``;
+- ``LumitraceProfileAPI`` on a mesh: the profile it is made from
+  (``lumitrace:profile:points``, ``:kind``, ``:segments``, ``:length``; see
+  :mod:`lumitrace.stage.profile`).
 
 Regenerate the generated files after editing ``schema.usda`` with::
 
@@ -44,7 +47,8 @@ SCHEMA_DIR = _schema_dir()
 MATERIAL_API = "LumitraceMaterialAPI"
 EMITTER_API = "LumitraceEmitterAPI"
 LUMINAIRE_API = "LumitraceLuminaireAPI"
-API_SCHEMAS = (MATERIAL_API, EMITTER_API, LUMINAIRE_API)
+PROFILE_API = "LumitraceProfileAPI"
+API_SCHEMAS = (MATERIAL_API, EMITTER_API, LUMINAIRE_API, PROFILE_API)
 
 # -- LumitraceMaterialAPI -------------------------------------------------------------
 SCATTERING = "lumitrace:scattering"
@@ -102,6 +106,19 @@ SPECTRUM = "lumitrace:spectrum"
 ILLUMINANT = "lumitrace:illuminant"
 BODY = "lumitrace:body"
 
+# -- LumitraceProfileAPI --------------------------------------------------------------
+#: A mesh's generating profile: (r, z) points, how it is made, segments, an extrusion's
+#: length (local units).
+PROFILE_POINTS = "lumitrace:profile:points"
+PROFILE_KIND = "lumitrace:profile:kind"
+PROFILE_SEGMENTS = "lumitrace:profile:segments"
+PROFILE_LENGTH = "lumitrace:profile:length"
+PROFILE_ATTRIBUTES = (PROFILE_POINTS, PROFILE_KIND, PROFILE_SEGMENTS, PROFILE_LENGTH)
+#: Allowed values of ``lumitrace:profile:kind``.
+PROFILE_KINDS = ("revolve", "extrude")
+#: Schema fallbacks (mirrors ``schemas/schema.usda``).
+PROFILE_FALLBACKS = {PROFILE_KIND: "revolve", PROFILE_SEGMENTS: 64, PROFILE_LENGTH: 1.0}
+
 # -- LumitraceLuminaireAPI and the result record ---------------------------------------
 #: The luminaire's own data, written into the photometric files: text attributes, and the
 #: input power (W, at least 0) and colour rendering index (Ra, at most 100).
@@ -112,6 +129,14 @@ LAMP_DESCRIPTION = "lumitrace:lampDescription"
 INPUT_POWER = "lumitrace:inputPower"
 COLOUR_RENDERING_INDEX = "lumitrace:colourRenderingIndex"
 LUMINAIRE_TEXT = (MANUFACTURER, LUMINAIRE_NAME, CATALOGUE_NUMBER, LAMP_DESCRIPTION)
+#: A declared symmetry of the distribution ("auto": shown by lumitrace, see
+#: :mod:`lumitrace.scene.symmetry`), and a declared luminous opening (shape, and size in
+#: stage units: length along C0, width along C90, height).
+SYMMETRY = "lumitrace:symmetry"
+SYMMETRY_TOKENS = ("auto", "none", "rotational", "quadrant", "C0-C180", "C90-C270")
+OPENING_SHAPE = "lumitrace:luminousOpeningShape"
+OPENING_SHAPES = ("measured", "rectangular", "round")
+OPENING_SIZE = "lumitrace:luminousOpening"
 RESULT_PREFIX = "lumitrace:result:"
 
 
@@ -241,6 +266,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "nadir (negative toward C180): more than two where the profile has a shoulder"),
     _f("beam_crossings_c90_c270", "list", "deg", group="photometry",
        doc="every crossing of the beam's 50% level in the C90-C270 plane"),
+    _f("spread_notes", "table", "", group="photometry",
+       doc="why a beam or field angle is undefined, by its key (absent: all defined)"),
     _f("cie_flux_code", "string", "", "cieFluxCode", group="photometry",
        doc="CIE flux code N1 N2 N3 N4 N5"),
     _f("cie_flux_code_values", "list", "%", group="photometry",
@@ -256,7 +283,13 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "or more), poles included"),
     _f("photometry_worst_at", "list", "deg", group="photometry",
        doc="C and gamma of that value"),
-    _f("symmetry", "string", "", group="photometry", doc="symmetry used in the files"),
+    _f("symmetry", "string", "", "symmetry", group="photometry",
+       doc="symmetry the files are averaged over: none, rotational, quadrant, C0-C180 or "
+           "C90-C270"),
+    _f("symmetry_source", "string", "", "symmetrySource", group="photometry",
+       doc="why that symmetry: declared (lumitrace:symmetry on the stage), geometry (the "
+           "parts, materials and emitters map onto themselves), measured (the counts' "
+           "departure from it within 1% RMS at its upper bound) or none (none shown)"),
     _f("luminous_opening", "vector", "m", group="photometry",
        doc="luminous length (C0), width (C90) and height of the opening"),
     _f("colour_data", "asset", attribute="colourData", group="outputs",
@@ -413,7 +446,7 @@ def _build_in_background(build) -> None:
 
 
 def is_registered() -> bool:
-    """Whether USD's schema registry knows all three lumitrace API schemas."""
+    """Whether USD's schema registry knows all the lumitrace API schemas."""
     from pxr import Usd
 
     registry = Usd.SchemaRegistry()
