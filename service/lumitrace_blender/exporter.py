@@ -130,6 +130,8 @@ def usd_value(value, type_name: str, Sdf, Gf, Vt):
         return Vt.FloatArray([float(v) for v in value])
     if type_name == "color3f":
         return Gf.Vec3f(*map(float, value))
+    if type_name == "double3":
+        return Gf.Vec3d(*map(float, value))
     if type_name == "asset":
         return Sdf.AssetPath(value)
     return value

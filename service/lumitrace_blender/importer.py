@@ -372,7 +372,8 @@ def set_property(target, name: str, value) -> None:
     """Set ``target[name]`` and, for a schema attribute, its limits and description."""
     target[name] = value
     attr = schema.BY_NAME.get(name)
-    if attr is None or attr.usd_type not in ("float", "double") or isinstance(value, bool):
+    if attr is None or attr.usd_type not in ("float", "double", "int") or \
+            isinstance(value, bool):
         return
     ui = target.id_properties_ui(name)
     limits = {}
@@ -380,4 +381,7 @@ def set_property(target, name: str, value) -> None:
         limits["min"] = limits["soft_min"] = attr.low
     if attr.high is not None:
         limits["max"] = limits["soft_max"] = attr.high
-    ui.update(description=attr.doc, precision=4, **limits)
+    if attr.usd_type == "int":
+        ui.update(description=attr.doc, **{k: int(v) for k, v in limits.items()})
+    else:
+        ui.update(description=attr.doc, precision=4, **limits)

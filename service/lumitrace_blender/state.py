@@ -358,6 +358,10 @@ def value_edits(path: str, before: dict, after: dict, where: str) -> list[Edit]:
         if attr.usd_type in ("float", "double") and isinstance(new, int) \
                 and not isinstance(new, bool):
             new = float(new)
+        if attr.usd_type == "int" and isinstance(new, float) and new == int(new):
+            new = int(new)
+        if attr.usd_type == "double3" and isinstance(new, list):
+            new = tuple(float(v) for v in new)
         if attr.usd_type == "bool":
             new = bool(new)
         why = attr.check(new)

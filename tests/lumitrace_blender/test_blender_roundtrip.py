@@ -220,3 +220,57 @@ def test_the_addon_imports_nothing_of_lumitrace_nor_numpy():
             for name in names:
                 top = name.split(".")[0]
                 assert top in allowed or top in stdlib, f"{module.name} imports {name}"
+
+
+def test_the_addons_schema_table_is_lumitraces_schema():
+    """Every attribute of lumitrace's API schemas, as USD's schema registry reads
+    schemas/, is in the add-on's table with its API, type, fallback, tokens and
+    variability (the add-on keeps them as data: Blender's USD knows nothing of them), and
+    its ranges are the ones the stage reader validates."""
+    import importlib.util
+
+    from pxr import Sdf, Usd
+
+    import lumitrace.schema as ours
+    spec = importlib.util.spec_from_file_location(
+        "addon_schema", ROOT / "service" / "lumitrace_blender" / "schema.py")
+    table = importlib.util.module_from_spec(spec)
+    sys.modules["addon_schema"] = table  # (dataclasses look their module up)
+    try:
+        spec.loader.exec_module(table)  # no bpy needed: the module is data
+    finally:
+        del sys.modules["addon_schema"]
+    registry = Usd.SchemaRegistry()
+    seen = set()
+    for api in ours.API_SCHEMAS:
+        definition = registry.FindAppliedAPIPrimDefinition(api)
+        assert definition is not None, api
+        for name in definition.GetPropertyNames():
+            if name.startswith(table.RESULT_PREFIX):
+                assert table.is_result(name)
+                continue
+            prop = definition.GetAttributeDefinition(name)
+            mine = table.BY_NAME.get(name)
+            assert mine is not None, f"{name} of {api} is missing from the add-on's table"
+            seen.add(name)
+            assert mine.api == api, name
+            assert mine.usd_type == str(prop.GetTypeName()), name
+            assert mine.uniform == (prop.GetVariability() == Sdf.VariabilityUniform), name
+            fallback = prop.GetFallbackValue()
+            if fallback is None:
+                assert mine.fallback is None, name
+            elif hasattr(fallback, "__len__") and not isinstance(fallback, str):
+                assert tuple(mine.fallback) == pytest.approx(tuple(fallback)), name
+            else:
+                assert mine.fallback == pytest.approx(fallback), name
+            tokens = prop.GetMetadata("allowedTokens")
+            assert tuple(mine.tokens) == tuple(tokens or ()), name
+    assert seen == set(table.BY_NAME)  # and nothing the schema lacks
+    for name, (low, high) in ours.MATERIAL_RANGES.items():
+        assert (table.BY_NAME[name].low, table.BY_NAME[name].high) == (low, high), name
+    assert table.SCATTERING_TOKENS == tuple(ours.SCATTERING_TOKENS)
+    assert table.SYMMETRY_TOKENS == tuple(ours.SYMMETRY_TOKENS)
+    assert table.OPENING_SHAPES == tuple(ours.OPENING_SHAPES)
+    assert table.PROFILE_KINDS == tuple(ours.PROFILE_KINDS)
+    from lumitrace.stage.validate import MAX_LUMINOUS_FLUX
+    assert table.MAX_LUMINOUS_FLUX == MAX_LUMINOUS_FLUX
