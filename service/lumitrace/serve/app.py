@@ -8,7 +8,6 @@ page's key) and, with a token, the bearer check, before its handler runs.
 from __future__ import annotations
 
 import asyncio
-import hmac
 import json
 from typing import Any
 
@@ -18,7 +17,7 @@ from ..delta.protocol import DeltaError, delta_schema, parse_json_object, parse_
 from ..errors import LumitraceError
 from .engine import Engine
 from .events import EventLog
-from .guard import Guard, header_bytes
+from .guard import Guard
 from .live import LiveStage
 from .viewer import PAGE_DIR, PAGE_FILES, PreviewCache, editable_scene, geometry_frame
 
@@ -49,15 +48,18 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     """The aiohttp application of a running service (with the live view page unless
     ``viewer`` is False); ``guard`` holds its Host names and the page's key (a service
     bound to 127.0.0.1 when None)."""
-    guard = guard if guard is not None else Guard()
+    if guard is None:
+        guard = Guard(token=token)
+    elif guard.token != token:
+        raise ValueError("the guard's token is not the service's")
     previews = PreviewCache()
     if viewer:  # an edit's first preview is made as soon as its map is, before its files
         engine.refreshed = lambda: previews.get(engine, hold=False)
 
     @web.middleware
     async def checks(request: web.Request, handler):
-        # the page's own files hold no data: they load without the token, and the page
-        # then sends it with every request it makes
+        # the page's own files hold no data: they load from a link anywhere and without
+        # the token, and the page then sends its key and the token with every request
         public = viewer and request.method in ("GET", "HEAD") and (
             request.path == "/" or request.path.startswith("/page/"))
         refusal = guard.check(request.method, request.headers,
@@ -65,11 +67,6 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
                               else "", page_file=public)
         if refusal is not None:
             return _problem(refusal.status, refusal.message)
-        if token is not None and not public:
-            given = header_bytes(request.headers.get("Authorization", ""))
-            if not hmac.compare_digest(given, f"Bearer {token}".encode()):
-                return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
-                                     "TOKEN)")
         try:
             return await handler(request)
         except web.HTTPException as exc:

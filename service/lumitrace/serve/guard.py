@@ -21,7 +21,8 @@ own name. The rules, as the best local development servers have them:
 
 A program's request (the stdlib client, a DCC's Python, curl) carries neither ``Origin``
 nor ``Sec-Fetch-*``: it needs no key. With ``--token`` every request but the page's files
-also needs ``Authorization: Bearer TOKEN`` (checked by the app).
+also needs ``Authorization: Bearer TOKEN`` (401), checked after the origin and before the
+body.
 """
 from __future__ import annotations
 
@@ -93,15 +94,16 @@ def _address(name: str):
 @dataclass(frozen=True)
 class Guard:
     """The rules of one service: ``bound`` is the address (or name) it listens on,
-    ``allowed`` the extra host names (``--allow-host``); ``key`` is the page's secret,
-    new for every process."""
+    ``allowed`` the extra host names (``--allow-host``), ``token`` the bearer token (None:
+    none needed); ``key`` is the page's secret, new for every process."""
 
     bound: str = "127.0.0.1"
     allowed: frozenset[str] = frozenset()
+    token: str | None = field(default=None, repr=False)
     key: str = field(default_factory=lambda: secrets.token_urlsafe(32), repr=False)
 
     @classmethod
-    def of(cls, bound: str, allow_hosts=()) -> "Guard":
+    def of(cls, bound: str, allow_hosts=(), token: str | None = None) -> "Guard":
         names = set()
         for given in allow_hosts:
             parts = split_host(given)
@@ -109,7 +111,7 @@ class Guard:
                 raise ValueError(f"--allow-host takes a host name or address without a "
                                  f"port, got {given!r}")
             names.add(parts[0])
-        return cls(bound.strip("[]").lower(), frozenset(names))
+        return cls(bound.strip("[]").lower(), frozenset(names), token)
 
     def host_allowed(self, name: str) -> bool:
         """Whether ``name`` (from :func:`split_host`) names this service."""
@@ -140,6 +142,11 @@ class Guard:
             refusal = self._same_origin(headers, host)
             if refusal is not None:
                 return refusal
+        if self.token is not None and not page_file:
+            given = header_bytes(headers.get("Authorization", ""))
+            if not hmac.compare_digest(given, f"Bearer {self.token}".encode()):
+                return Refusal(401, "missing or wrong bearer token (Authorization: Bearer "
+                                    "TOKEN)")
         if method in SAFE_METHODS:
             return None
         if content_type != "application/json":

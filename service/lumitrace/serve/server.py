@@ -58,7 +58,7 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
     give as their ``Host``; ``limits`` bound what a client may set through /settings."""
     check_binding(host, token)
     try:
-        guard = Guard.of(host, allow_hosts)
+        guard = Guard.of(host, allow_hosts, token)
     except ValueError as exc:
         raise LumitraceError(str(exc)) from None
     limits = limits if limits is not None else ServiceLimits()
