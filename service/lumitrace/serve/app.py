@@ -15,6 +15,7 @@ from aiohttp import web
 
 from ..delta.protocol import DeltaError, delta_schema, parse_json_object, parse_request
 from ..errors import LumitraceError
+from ..run.settings import ServiceLimits, with_knobs
 from .engine import Engine
 from .events import EventLog
 from .guard import Guard
@@ -44,10 +45,12 @@ def _problem(status: int, message: str, problems=()) -> web.Response:
 
 def make_app(live: LiveStage, engine: Engine, events: EventLog,
              token: str | None = None, viewer: bool = True,
-             guard: Guard | None = None) -> web.Application:
+             guard: Guard | None = None,
+             limits: ServiceLimits | None = None) -> web.Application:
     """The aiohttp application of a running service (with the live view page unless
-    ``viewer`` is False); ``guard`` holds its Host names and the page's key (a service
-    bound to 127.0.0.1 when None)."""
+    ``viewer`` is False); ``guard`` holds its Host names, token and page key (a service
+    bound to 127.0.0.1 when None); ``limits`` bound the work /settings may ask for."""
+    limits = limits if limits is not None else ServiceLimits()
     if guard is None:
         guard = Guard(token=token)
     elif guard.token != token:
@@ -178,6 +181,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             return _json(engine.session_settings())
         try:
             body = parse_json_object(await request.read())
+            limits.check(with_knobs(engine.settings, body)[0])  # the command line's ranges
             return _json(engine.update_settings(body))
         except DeltaError as exc:
             return _problem(exc.status, str(exc), exc.problems)

@@ -28,9 +28,14 @@ from __future__ import annotations
 
 import hmac
 import ipaddress
+import os
+import re
 import secrets
 from dataclasses import dataclass, field
+from pathlib import Path
 from urllib.parse import urlsplit
+
+from ..errors import LumitraceError, warn
 
 #: Host names that always mean this machine (loopback addresses are taken as addresses).
 LOOPBACK_NAMES = frozenset({"localhost"})
@@ -175,3 +180,27 @@ class Guard:
         if theirs is None or theirs[0] != host[0] or port(theirs[1]) != port(host[1]):
             return Refusal(403, f"cross-origin request refused (Origin: {origin})")
         return None
+
+
+def read_token(given: str | None, path: Path | None) -> str | None:
+    """The service's bearer token: ``--token``, the first line of ``--token-file``, or
+    the environment's ``LUMITRACE_TOKEN`` (None: no token); one a header can carry."""
+    where = "--token"
+    if path is not None:
+        where = f"--token-file {path}"
+        try:
+            lines = Path(path).read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            raise LumitraceError(f"cannot read the token: {why}", str(path)) from None
+        given = lines[0].strip() if lines else ""
+        if not given:
+            raise LumitraceError("the token file is empty", str(path))
+    elif given is None:
+        given, where = os.environ.get("LUMITRACE_TOKEN") or None, "LUMITRACE_TOKEN"
+    else:
+        warn("--token is visible to every user of this machine in the process list: give "
+             "it with --token-file FILE or the environment's LUMITRACE_TOKEN")
+    if given is not None and not re.fullmatch(r"[\x21-\x7e]+", given):
+        raise LumitraceError(f"{where}: a token is printable ASCII without spaces")
+    return given
