@@ -173,11 +173,13 @@ class Guard:
         origin = headers.get("Origin")
         if origin is None:
             return None
+        # the same name and port as the Host the browser sent (https: through a TLS
+        # proxy, whose name --allow-host gives)
         parts = urlsplit(origin.strip().lower())
-        theirs = split_host(parts.netloc) if parts.scheme == "http" and parts.netloc \
-            else None
-        port = lambda p: 80 if p is None else p  # noqa: E731
-        if theirs is None or theirs[0] != host[0] or port(theirs[1]) != port(host[1]):
+        default = {"http": 80, "https": 443}.get(parts.scheme)
+        theirs = split_host(parts.netloc) if default and parts.netloc else None
+        if theirs is None or theirs[0] != host[0] or \
+                (theirs[1] or default) != (host[1] or default):
             return Refusal(403, f"cross-origin request refused (Origin: {origin})")
         return None
 
