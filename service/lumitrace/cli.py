@@ -6,7 +6,6 @@ import contextlib
 import json
 import math
 import os
-import re
 import signal
 import sys
 import warnings
@@ -16,6 +15,7 @@ from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
 from .pyplot import short_setter_docs
 from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
+from .serve.options import add_access_options
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
 from .trace.job import MAX_DEPTH
@@ -181,19 +181,7 @@ def _add_serve(sub) -> None:
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
-    vtoken = v.add_mutually_exclusive_group()
-    vtoken.add_argument("--token", default=None,
-                        help="bearer token every request must carry (visible in the process "
-                             "list: prefer --token-file or env LUMITRACE_TOKEN)")
-    vtoken.add_argument("--token-file", type=Path, default=None, metavar="FILE",
-                        help="read the bearer token from FILE (its first line)")
-    v.add_argument("--allow-host", action="append", default=[], metavar="NAME",
-                   help="a host name requests may address the service by, besides "
-                        "localhost, loopback addresses and --host (repeatable)")
-    v.add_argument("--max-photons", type=_positive_int, default=None, metavar="N",
-                   help="the largest photon budget a client may set (default 1e10)")
-    v.add_argument("--min-target-error", type=_positive_float, default=None, metavar="E",
-                   help="the smallest target error a client may set (default 0.002)")
+    add_access_options(v, _positive_int, _positive_float)
     v.add_argument("--out", type=Path, default=None,
                    help="output folder (default: beside the stage)")
     v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
@@ -430,12 +418,9 @@ def cmd_serve(args) -> int:
     preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
-    token = service_token(args.token, args.token_file)
-    from .run.settings import ServiceLimits
+    from .serve.guard import read_token
 
-    limits = ServiceLimits(**{k: v for k, v in (("max_photons", args.max_photons),
-                                                ("min_target_error", args.min_target_error))
-                              if v is not None})
+    token = read_token(args.token, args.token_file)
     from .photometry.solid_render import start_renderer
 
     # the solids drawn off this process's interpreter, which edits need, in a window
@@ -443,33 +428,8 @@ def cmd_serve(args) -> int:
     start_renderer(warm_up=True, fork=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
-                 deliverables=args.deliverables, allow_hosts=args.allow_host, limits=limits)
-
-
-def service_token(given: str | None, path: Path | None) -> str | None:
-    """The service's bearer token: ``--token``, the first line of ``--token-file``, or
-    the environment's ``LUMITRACE_TOKEN`` (None: no token). One a header can carry."""
-    where = "--token"
-    if path is not None:
-        where = f"--token-file {path}"
-        try:
-            lines = path.read_text(encoding="utf-8").splitlines()
-        except (OSError, UnicodeDecodeError) as exc:
-            why = getattr(exc, "strerror", None) or exc
-            raise LumitraceError(f"cannot read the token: {why}", str(path)) from None
-        given = lines[0].strip() if lines else ""
-        if not given:
-            raise LumitraceError("the token file is empty", str(path))
-    elif given is None:
-        given, where = os.environ.get("LUMITRACE_TOKEN") or None, "LUMITRACE_TOKEN"
-    else:
-        from .errors import warn
-
-        warn("--token is visible to every user of this machine in the process list: give "
-             "it with --token-file FILE or the environment's LUMITRACE_TOKEN")
-    if given is not None and not re.fullmatch(r"[\x21-\x7e]+", given):
-        raise LumitraceError(f"{where}: a token is printable ASCII without spaces")
-    return given
+                 deliverables=args.deliverables, allow_hosts=args.allow_host,
+                 limits=(args.max_photons, args.min_target_error))
 
 
 def cmd_edits(args) -> int:
