@@ -65,7 +65,7 @@ RUNS: dict[str, tuple[str, ...]] = {
 #: Checks that say nothing when all is well (their exit status says it).
 SILENT = ("generate_schema.py", "make_stages.py")
 #: Modules other scripts and the tests import: importing them is their run.
-MODULES = ("service_process.py", "stress_cases.py")
+MODULES = ("headless_browser.py", "service_process.py", "stress_cases.py")
 #: Run against a live service below (it needs one), or with its output checked below.
 SERVED = ("edit_reflector.py", "service_load.py")
 #: Not run here, with the reason.
@@ -73,6 +73,9 @@ SKIPPED = {
     "peer": "a C++/Rust peer tracer built with an external toolchain (side_by_side.py "
             "runs it where built; --peer none here)",
     "setup.sh": "installs packages into the environment; only its syntax is checked",
+    **{name: "runs in Blender's own Python (.venv-blender): tests/lumitrace_blender runs "
+             "it, and skips saying why where that environment is missing"
+       for name in ("blender_install.py", "blender_live_session.py", "blender_roundtrip.py")},
 }
 
 

@@ -23,9 +23,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
 
-from helpers.browser import browser, until  # noqa: E402
+from headless_browser import browser, until  # noqa: E402
 from service_process import Service  # noqa: E402
 
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
