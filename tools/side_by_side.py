@@ -70,8 +70,7 @@ import make_stages as ms  # noqa: E402  (the reference stages' builders)
 from lumitrace.film.cubemap import texel_directions, texel_solid_angles  # noqa: E402
 from lumitrace.film.texel_quadrature import texel_integrals  # noqa: E402
 from lumitrace.photometry import frame  # noqa: E402
-from lumitrace.film.goniometer import GAMMA_EDGES  # noqa: E402
-from lumitrace.photometry.measured import cell_solid_angle_grid, plane_bins  # noqa: E402
+from lumitrace.photometry.measured import cell_fluxes, cell_solid_angle_grid  # noqa: E402
 from lumitrace.report.convergence_report import crossing_time  # noqa: E402
 from lumitrace.report.references import expected_intensity, read_expectation  # noqa: E402
 from lumitrace.run.session import TraceSettings, run  # noqa: E402
@@ -223,15 +222,9 @@ def time_to_levels(t: dict) -> dict:
 def _raw_grid(acc) -> tuple[np.ndarray, np.ndarray]:
     """The goniophotometer's cell means (cd) and their variances on the grid."""
     omega = cell_solid_angle_grid(GAMMAS, C_STEP)
-    flux = np.zeros_like(omega)
-    var = np.zeros_like(omega)
-    mids = np.concatenate([[0.0], 0.5 * (GAMMAS[1:] + GAMMAS[:-1])])
-    starts = np.searchsorted(GAMMA_EDGES, mids - 1e-9)  # each zone's first gamma bin
-    for w, _, values, idx in acc.emitter_cells():
-        n = np.add.reduceat(plane_bins(values, idx, C_STEP), starts, axis=1)
-        flux += w * n
-        var += w * w * n  # Poisson: analog photons of one weight
-    return flux / omega, var / omega**2
+    flux = cell_fluxes(acc, GAMMAS, C_STEP)
+    w = acc.emitters[0].photon_flux  # Poisson: analog photons of one weight
+    return flux / omega, w * flux / omega**2
 
 
 class _MapCells:

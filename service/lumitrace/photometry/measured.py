@@ -118,6 +118,22 @@ def plane_bins(values: np.ndarray, idx: np.ndarray | None, c_step: float) -> np.
                        minlength=n * N_GAMMA).reshape(n, N_GAMMA)
 
 
+def cell_fluxes(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0) -> np.ndarray:
+    """The photon flux (lm) through every cell of a C-gamma grid: C cells of ``c_step``
+    around each plane by gamma zones between the midpoints of ``gammas`` (0.5 deg raster),
+    (planes, gammas). The raw counts a cell's mean would be made of (what a test of the
+    tracer or a peer's grid compares), not the files' values."""
+    g = np.asarray(gammas, np.float64)
+    mids = np.concatenate([[0.0], 0.5 * (g[1:] + g[:-1])])
+    starts = np.searchsorted(GAMMA_EDGES, mids - 1e-9)
+    if not np.allclose(GAMMA_EDGES[starts], mids, atol=1e-9):
+        raise LumitraceError("grid gammas must lie on a 0.5 deg raster")
+    out = 0.0
+    for w, _, values, idx in acc.emitter_cells():
+        out = out + w * np.add.reduceat(plane_bins(values, idx, c_step), starts, axis=1)
+    return np.asarray(out, np.float64) * np.ones((int(round(360.0 / c_step)), len(g)))
+
+
 #: Gauss-Legendre nodes and weights on [0, 1] (3 points): a bin's moments.
 _GL_X = 0.5 + 0.5 * np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)])
 _GL_W = np.array([5.0, 8.0, 5.0]) / 18.0
