@@ -191,8 +191,9 @@ class _Hostile:
         if rcvbuf:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         sock.connect(self.address)
-        sock.sendall(b"GET /events HTTP/1.1\r\nHost: load\r\nAccept: text/event-stream"
-                     b"\r\n\r\n")
+        host = f"{self.address[0]}:{self.address[1]}".encode()
+        sock.sendall(b"GET /events HTTP/1.1\r\nHost: " + host + b"\r\nAccept: "
+                     b"text/event-stream\r\n\r\n")
         return sock
 
     def _streams(self) -> None:
@@ -304,7 +305,7 @@ def measure_events(count: int) -> dict:
 
     async def main():
         events.bind(asyncio.get_running_loop())
-        runner = web.AppRunner(make_app(None, None, events), access_log=None)
+        runner = web.AppRunner(make_app(None, None, events, viewer=False), access_log=None)
         await runner.setup()
         site = web.TCPSite(runner, "127.0.0.1", 0)
         await site.start()

@@ -12,33 +12,40 @@ import warnings
 from pathlib import Path
 
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
-from .loading import collector_paused
+from .publish.preflight import preflight, refuse_hidden_results
 from .pyplot import short_setter_docs
+from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
+from .serve.options import add_access_options
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
-from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
+from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
 from .trace.job import MAX_DEPTH
 
 
-def _positive_int(text: str) -> int:
+def _number(text: str) -> float:
+    """``text`` as a float (argparse's own error would name our type function)."""
     try:
-        v = int(float(text))
-    except OverflowError:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
+def _positive_int(text: str) -> int:
+    v = _number(text)
+    if not (math.isfinite(v) and int(v) > 0):
         raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text}")
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return v
+    return int(v)
 
 
 def _positive_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return v
 
 
 def _non_negative_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v >= 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be zero or a positive number, got {text}")
     return v
@@ -101,7 +108,7 @@ def _add_trace(sub) -> None:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
-    t.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    t.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
                         "the map does not depend on it); exit 4 if it goes away mid-run")
     t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
@@ -140,11 +147,12 @@ def _add_trace(sub) -> None:
 
 
 def _add_check(sub) -> None:
-    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
+    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 "
                                      "current and converged, 1 stale or missing, 3 not "
-                                     "converged)",
+                                     "converged, 4 a publishing interrupted, unfinished)",
                        description="Compose the stage and compare its lumitrace:result:* "
-                                   "attributes with the scene as it is now: a pipeline gate.")
+                                   "attributes with the scene as it is now: a pipeline gate; "
+                                   "a killed run's half-done publishing is finished first.")
     c.add_argument("stage", type=Path)
     c.add_argument("--out", type=Path, default=None,
                    help="the folder a trace wrote the results to (trace --out DIR, with or "
@@ -172,12 +180,11 @@ def _add_serve(sub) -> None:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
-    v.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    v.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
-    v.add_argument("--token", default=None,
-                   help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
+    add_access_options(v, _positive_int, _positive_float)
     v.add_argument("--out", type=Path, default=None,
                    help="output folder (default: beside the stage)")
     v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
@@ -194,6 +201,9 @@ def _add_edits(sub) -> None:
                                    "it. Stop the service first.")
     e.add_argument("action", choices=("merge", "discard"))
     e.add_argument("stage", type=Path)
+    e.add_argument("--layer", type=Path, default=None,
+                   help="the edits layer (default NAME.lumitrace-edits.usda beside the stage; "
+                        "a fit's NAME.lumitrace-fit.usda to keep its best)")
 
 
 def _add_report(sub) -> None:
@@ -259,7 +269,7 @@ def _add_rays(sub) -> None:
 _COMMANDS = {"trace": _add_trace, "check": _add_check, "serve": _add_serve,
              "edits": _add_edits, "report": _add_report, "bench": _add_bench,
              "rays": _add_rays, "sweep": sweep.add_parser,
-             "datasheet": datasheet_command.add_parser}
+             "datasheet": datasheet_command.add_parser, "fit": fit.add_parser}
 
 
 _QUIET = False
@@ -268,14 +278,13 @@ _QUIET = False
 def cmd_trace(args) -> int:
     global _QUIET
     _QUIET = bool(args.quiet)
-    with collector_paused():  # the command's modules, at once
-        from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
-        from .publish.outputs import claim_planned_outputs, write_outputs
-        from .run.session import run
-        from .run.settings import TraceSettings, default_threads
-        from .stage.scene_cache import read_stage
-        from .trace.compiled import note
-        from .photometry.bug import facing
+    from .photometry.bug import facing
+    from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
+    from .publish.outputs import claim_planned_outputs, write_outputs
+    from .run.session import run
+    from .run.settings import TraceSettings, default_threads
+    from .stage.scene_cache import read_stage
+    from .trace.compiled import note
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
@@ -394,6 +403,8 @@ def cmd_check(args) -> int:
     from .publish.check import check_stage
 
     verdict = check_stage(args.stage, args.out)
+    for note in verdict.values.get("recovered", ()):
+        print(f"warning: {note}", file=sys.stderr)
     print(json.dumps(verdict.as_dict()) if args.json else f"{args.stage}: {verdict.status}: "
           f"{verdict.message}")
     return verdict.exit_status
@@ -412,7 +423,9 @@ def cmd_serve(args) -> int:
     preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
-    token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
+    from .serve.guard import read_token
+
+    token = read_token(args.token, args.token_file)
     from .photometry.solid_render import start_renderer
 
     # the solids drawn off this process's interpreter, which edits need, in a window
@@ -420,19 +433,20 @@ def cmd_serve(args) -> int:
     start_renderer(warm_up=True, fork=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
-                 deliverables=args.deliverables)
+                 deliverables=args.deliverables, allow_hosts=args.allow_host,
+                 limits=(args.max_photons, args.min_target_error))
 
 
 def cmd_edits(args) -> int:
     from .delta.edits import discard_edits, merge_edits
     from .filenames import edits_layer_path
 
-    path = edits_layer_path(args.stage)
+    path = args.layer or edits_layer_path(args.stage)
     if args.action == "merge":
-        merge_edits(args.stage)
+        merge_edits(args.stage, args.layer)
         print(f"merged {path.name} into {args.stage} and removed it")
     else:
-        print(f"removed {path.name}" if discard_edits(args.stage) else
+        print(f"removed {path.name}" if discard_edits(args.stage, args.layer) else
               f"no edits layer ({path.name}) to discard")
     return 0
 
@@ -553,81 +567,13 @@ def _interrupted_message(exc: Interrupted) -> str:
     return f"lumitrace: {name}: interrupted; nothing was written, earlier outputs are unchanged"
 
 
-def refuse_hidden_results(stage: Path) -> None:
-    """Stop before tracing when the stage's root layer, which is stronger than the result
-    layer sublayered into it, holds result opinions (a stage flattened with its results):
-    the new results would compose hidden under them. Reads the root layer alone (no
-    composition: a stage with other problems is the reader's to report)."""
-    from .publish.check import may_hold_results, result_opinion_prims
-
-    if not may_hold_results(stage):
-        return
-    from pxr import Sdf
-
-    try:
-        layer = Sdf.Layer.OpenAsAnonymous(str(stage), metadataOnly=False)
-    except Exception:  # noqa: BLE001 - the stage reader reports what is wrong, clearly
-        return
-    prims = result_opinion_prims(layer) if layer is not None else []
-    if prims:
-        raise LumitraceError(
-            f"holds lumitrace:result:* opinions on {prims[0]} that are stronger than the "
-            "result layer (left by flattening a stage with results?): the new results "
-            "would be hidden under them. Trace with --replace-results to remove them, or "
-            "with --no-sublayer",
-            str(stage))
-
-
-def preflight(stage: Path, out: Path | None, stage_folder_written: bool = False) -> None:
-    """What can be checked before a long trace: the stage is a regular file, the output
-    folder (``out``, else the stage's) exists or can be made, and can be written to, as
-    can the stage's own folder where ``stage_folder_written`` (the service's edits
-    layer lives there)."""
-    import stat as st
-
-    try:
-        mode = os.stat(stage).st_mode
-    except FileNotFoundError:
-        raise LumitraceError("stage file not found", str(stage)) from None
-    except OSError as exc:
-        raise LumitraceError(f"cannot open the stage: {exc.strerror}", str(stage)) from None
-    if not st.S_ISREG(mode):
-        raise LumitraceError("the stage is not a regular file", str(stage))
-    folders = [out.absolute() if out is not None else stage.absolute().parent]
-    if stage_folder_written and out is not None:
-        folders.append(stage.absolute().parent)
-    for folder in folders:
-        _writable_folder(folder, out is None)
-
-
-def _writable_folder(folder: Path, hint_out: bool) -> None:
-    """Make ``folder`` if missing and prove it writable by writing in it."""
-    if folder.exists() and not folder.is_dir():
-        raise LumitraceError("the output folder is a file, not a folder", str(folder))
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise LumitraceError(f"cannot create the output folder: {exc.strerror}",
-                             str(folder)) from None
-    try:  # a real write: permissions, read-only mounts and ACLs all answer it
-        import tempfile
-
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        hint = "" if not hint_out else \
-            " (results go to the stage's folder unless --out names another)"
-        raise LumitraceError(f"the output folder is not writable: {exc.strerror}{hint}",
-                             str(folder)) from None
-
-
 def _dispatch(args) -> int:
     if args.command == "trace":
         return cmd_trace(args)
     check_interrupted()  # the others have no USD-loading phase of their own
     return {"report": cmd_report, "bench": cmd_bench, "serve": cmd_serve, "edits": cmd_edits,
             "check": cmd_check, "rays": cmd_rays, "sweep": sweep.command,
-            "datasheet": datasheet_command.command}[args.command](args)
+            "datasheet": datasheet_command.command, "fit": fit.command}[args.command](args)
 
 
 def _failure(exc: BaseException) -> tuple[int, str]:

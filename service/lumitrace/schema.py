@@ -1,7 +1,7 @@
 """The lumitrace codeless USD schema: registration with usd-core, names, allowed values.
 
 The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` and
-``schemas/generatedSchema.usda``) defines three single-apply API schemas:
+``schemas/generatedSchema.usda``) defines four single-apply API schemas:
 
 - ``LumitraceMaterialAPI`` on a UsdShade Material or a gprim: ``lumitrace:scattering``,
   ``lumitrace:reflectance``, ``lumitrace:specularReflectance``, ``lumitrace:transmittance``,
@@ -12,7 +12,10 @@ The schema (``schemas/schema.usda``, generated into ``schemas/plugInfo.json`` an
   ``lumitrace:body`` (the light's surface is geometry too), ``lumitrace:rayFile`` (a
   TM-25 ray file the light emits) and its colour, ``lumitrace:spectrum`` or
   ``lumitrace:illuminant``;
-- ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``.
+- ``LumitraceLuminaireAPI`` on the luminaire (default) prim: ``lumitrace:result:*``;
+- ``LumitraceProfileAPI`` on a mesh: the profile it is made from
+  (``lumitrace:profile:points``, ``:kind``, ``:segments``, ``:length``; see
+  :mod:`lumitrace.stage.profile`).
 
 Regenerate the generated files after editing ``schema.usda`` with::
 
@@ -44,7 +47,8 @@ SCHEMA_DIR = _schema_dir()
 MATERIAL_API = "LumitraceMaterialAPI"
 EMITTER_API = "LumitraceEmitterAPI"
 LUMINAIRE_API = "LumitraceLuminaireAPI"
-API_SCHEMAS = (MATERIAL_API, EMITTER_API, LUMINAIRE_API)
+PROFILE_API = "LumitraceProfileAPI"
+API_SCHEMAS = (MATERIAL_API, EMITTER_API, LUMINAIRE_API, PROFILE_API)
 
 # -- LumitraceMaterialAPI -------------------------------------------------------------
 SCATTERING = "lumitrace:scattering"
@@ -101,6 +105,19 @@ RAY_FILE = "lumitrace:rayFile"
 SPECTRUM = "lumitrace:spectrum"
 ILLUMINANT = "lumitrace:illuminant"
 BODY = "lumitrace:body"
+
+# -- LumitraceProfileAPI --------------------------------------------------------------
+#: A mesh's generating profile: (r, z) points, how it is made, segments, an extrusion's
+#: length (local units).
+PROFILE_POINTS = "lumitrace:profile:points"
+PROFILE_KIND = "lumitrace:profile:kind"
+PROFILE_SEGMENTS = "lumitrace:profile:segments"
+PROFILE_LENGTH = "lumitrace:profile:length"
+PROFILE_ATTRIBUTES = (PROFILE_POINTS, PROFILE_KIND, PROFILE_SEGMENTS, PROFILE_LENGTH)
+#: Allowed values of ``lumitrace:profile:kind``.
+PROFILE_KINDS = ("revolve", "extrude")
+#: Schema fallbacks (mirrors ``schemas/schema.usda``).
+PROFILE_FALLBACKS = {PROFILE_KIND: "revolve", PROFILE_SEGMENTS: 64, PROFILE_LENGTH: 1.0}
 
 # -- LumitraceLuminaireAPI and the result record ---------------------------------------
 #: The luminaire's own data, written into the photometric files: text attributes, and the
@@ -461,7 +478,7 @@ def _build_in_background(build) -> None:
 
 
 def is_registered() -> bool:
-    """Whether USD's schema registry knows all three lumitrace API schemas."""
+    """Whether USD's schema registry knows all the lumitrace API schemas."""
     from pxr import Usd
 
     registry = Usd.SchemaRegistry()

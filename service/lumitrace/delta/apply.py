@@ -15,9 +15,12 @@ from typing import Any, Callable
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdUtils
 
-from ..schema import MATERIAL_RANGES
+from ..errors import StageError
+from ..schema import MATERIAL_RANGES, PROFILE_ATTRIBUTES
 from ..stage.diagnostics import tf_message
+from ..stage.luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .assets import AssetRefused, check_asset, layer_problems, stage_variables
+from .profile import write_profile_mesh
 from .protocol import DeltaError, Problem
 
 
@@ -213,7 +216,8 @@ def _attribute(ctx: _Context, prim: Usd.Prim, name: str, type_hint: str | None,
 
 
 #: The API schemas whose attributes a delta may set (they are applied for it).
-_DELTA_APIS = ("LumitraceMaterialAPI", "LumitraceEmitterAPI", "LumitraceLuminaireAPI")
+_DELTA_APIS = ("LumitraceMaterialAPI", "LumitraceEmitterAPI", "LumitraceLuminaireAPI",
+               "LumitraceProfileAPI")
 
 
 def _api_names(api: str) -> list[str]:
@@ -252,6 +256,9 @@ def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
     if attr.GetVariability() == Sdf.VariabilityUniform and name.startswith("xformOp"):
         raise _Bad("set transforms with 'transform'", where)
     typed = _typed_value(value, attr.GetTypeName(), ctx, where)
+    problem = luminaire_data_problem(name, typed)  # what reaches the files, as the reader
+    if problem is not None:
+        raise _Bad(problem, where)
     bounds = MATERIAL_RANGES.get(name)
     if bounds is not None and isinstance(typed, (int, float)) and not isinstance(typed, bool):
         lo, hi = bounds
@@ -274,7 +281,26 @@ def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
 # ------------------------------------------------------------------------------------------
 
 def _op_set(ctx: _Context, d: dict) -> None:
-    _set_value(ctx, ctx.prim(d["path"]), d["property"], d["value"], d.get("type"))
+    prim = ctx.prim(d["path"])
+    _set_value(ctx, prim, d["property"], d["value"], d.get("type"))
+    if d["property"] in PROFILE_ATTRIBUTES:
+        _profile_mesh(prim, d["property"])
+
+
+def _profile_mesh(prim: Usd.Prim, prop: str) -> None:
+    """A profile changed: the mesh's points and faces made from it, in the edits layer
+    (a bad profile is the delta's problem, naming the property)."""
+    where = f"{prim.GetPath()}.{prop}"
+    if not prim.IsA(UsdGeom.Mesh):
+        raise _Bad(f"a profile makes a Mesh's points; this is a "
+                   f"{prim.GetTypeName() or 'typeless'} prim", where)
+    if not prim.GetAttribute(PROFILE_ATTRIBUTES[0]).HasAuthoredValue():
+        return  # its points come with a later delta of the batch, or never
+    try:
+        write_profile_mesh(prim)
+    except StageError as exc:
+        raise _Bad(exc.message, f"{prim.GetPath()}.{exc.prop}" if exc.prop else where) \
+            from None
 
 
 def transform_matrix(d: dict) -> Gf.Matrix4d:
@@ -338,6 +364,8 @@ def _op_add(ctx: _Context, d: dict) -> None:
         prim.ApplyAPI(api)
     for name, value in d.get("properties", {}).items():
         _set_value(ctx, prim, name, value, None)
+    if any(name in PROFILE_ATTRIBUTES for name in d.get("properties", {})):
+        _profile_mesh(prim, PROFILE_ATTRIBUTES[0])
 
 
 def _op_remove(ctx: _Context, d: dict) -> None:
@@ -378,7 +406,7 @@ def _op_layer(ctx: _Context, d: dict) -> None:
         raise _Bad(f"not a valid USDA layer: {tf_message(exc)}") from None
     if not ok:
         raise _Bad("not a valid USDA layer")
-    bad = layer_problems(fragment, ctx.stage_dir, ctx.variables)
+    bad = layer_problems(fragment, ctx.stage_dir, ctx.variables) + _data_problems(fragment)
     if bad:  # checked before the fragment is composed: no file outside is ever opened
         raise _Bad("; ".join(f"{where}: {why}" for where, why in bad))
     merged = Sdf.Layer.CreateAnonymous(".usda")
@@ -386,6 +414,29 @@ def _op_layer(ctx: _Context, d: dict) -> None:
     UsdUtils.StitchLayers(merged, ctx.edits)  # the fragment's opinions win
     merged.customLayerData = dict(ctx.edits.customLayerData)
     ctx.edits.TransferContent(merged)
+
+
+def _data_problems(layer: Sdf.Layer) -> list[tuple[str, str]]:
+    """(where, why) of every value of the luminaire's own data in ``layer`` (defaults and
+    time samples) that the stage reader would refuse (:mod:`~lumitrace.stage.luminaire_data`)."""
+    found: list[tuple[str, str]] = []
+
+    def visit(path: Sdf.Path) -> None:
+        if not path.IsPropertyPath() or path.name not in LUMINAIRE_DATA:
+            return
+        spec = layer.GetAttributeAtPath(path)
+        if not spec:
+            return
+        values = [spec.default] if spec.HasDefaultValue() else []
+        values += [layer.QueryTimeSample(path, t) for t in layer.ListTimeSamplesForPath(path)]
+        for value in values:
+            problem = luminaire_data_problem(path.name, value)
+            if problem is not None:
+                found.append((f"{path.GetPrimPath()}.{path.name}", problem))
+                return
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    return found
 
 
 _OPS: dict[str, Callable[[_Context, dict], None]] = {

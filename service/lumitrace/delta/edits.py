@@ -92,19 +92,21 @@ def save_edits(layer: Sdf.Layer, revision: int) -> None:
     write_text_durably(layer.realPath or layer.identifier, layer.ExportToString())
 
 
-def merge_edits(stage_path: str | os.PathLike) -> Path:
-    """Fold the stage's edits layer into its root layer (the edits win), then remove the
+def merge_edits(stage_path: str | os.PathLike,
+                layer: str | os.PathLike | None = None) -> Path:
+    """Fold the stage's edits layer (``layer``: another one, a fit's
+    ``NAME.lumitrace-fit.usda``) into its root layer (the edits win), then remove the
     edits layer. Returns the root layer's path. Refused (:class:`LumitraceError` naming
     it) while a service holds the stage: it would write its edits back."""
     lock = StageLock.acquire(stage_path, "merging its edits")
     try:
-        return _merge_edits(Path(stage_path).absolute())
+        return _merge_edits(Path(stage_path).absolute(), layer)
     finally:
         lock.release()
 
 
-def _merge_edits(stage_path: Path) -> Path:
-    path = edits_layer_path(stage_path)
+def _merge_edits(stage_path: Path, layer: str | os.PathLike | None = None) -> Path:
+    path = Path(layer).absolute() if layer is not None else edits_layer_path(stage_path)
     if not path.exists():
         raise StageError("no edits layer to merge", str(path))
     root = _open_layer(stage_path, "the stage")
@@ -123,7 +125,7 @@ def _merge_edits(stage_path: Path) -> Path:
             strong.pseudoRoot.SetInfo(key, root.pseudoRoot.GetInfo(key))
     if _merge_as_text(stage_path, edits, strong):
         root.Reload(force=True)
-        _discard_edits(stage_path)
+        _discard_edits(stage_path, layer)
         return stage_path
     _keep_child_order(strong, root, Sdf.Path.absoluteRootPath)
     with atomic_path(stage_path) as tmp:  # keeps the suffix: .usda text, .usdc binary
@@ -132,7 +134,7 @@ def _merge_edits(stage_path: Path) -> Path:
         fsync_path(tmp)
     fsync_path(stage_path.parent)
     root.Reload(force=True)
-    _discard_edits(stage_path)
+    _discard_edits(stage_path, layer)
     return stage_path
 
 
@@ -174,19 +176,21 @@ def _keep_child_order(layer: Sdf.Layer, like: Sdf.Layer, parent: Sdf.Path) -> No
         _keep_child_order(layer, like, parent.AppendChild(name))
 
 
-def discard_edits(stage_path: str | os.PathLike) -> bool:
-    """Remove the stage's edits layer; True when there was one. Refused
-    (:class:`LumitraceError` naming it) while a service holds the stage: it would write
-    its edits back with the next delta."""
+def discard_edits(stage_path: str | os.PathLike,
+                  layer: str | os.PathLike | None = None) -> bool:
+    """Remove the stage's edits layer (``layer``: another one); True when there was one.
+    Refused (:class:`LumitraceError` naming it) while a service holds the stage: it would
+    write its edits back with the next delta."""
     lock = StageLock.acquire(stage_path, "discarding its edits")
     try:
-        return _discard_edits(stage_path)
+        return _discard_edits(stage_path, layer)
     finally:
         lock.release()
 
 
-def _discard_edits(stage_path: str | os.PathLike) -> bool:
-    path = edits_layer_path(stage_path)
+def _discard_edits(stage_path: str | os.PathLike,
+                   layer: str | os.PathLike | None = None) -> bool:
+    path = Path(layer).absolute() if layer is not None else edits_layer_path(stage_path)
     try:
         path.unlink()
     except FileNotFoundError:

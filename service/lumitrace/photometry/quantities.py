@@ -267,8 +267,12 @@ def _fitted_crossing(ang, profs, levels, i, half):
                         -c0 / c1)
     r = rows[:, 0]
     pi, pj = profs[r, i], profs[r, np.minimum(i + 1, n - 1)]
-    linear = ang[i] + step * (pi - levels) / (pi - pj)
-    good = (c1 + 2.0 * c2 * root < 0) & (disc >= 0) & (np.abs(root) <= half - 0.5)
+    with np.errstate(invalid="ignore", divide="ignore"):  # (not falling there: midway)
+        linear = ang[i] + step * np.where(pi > pj, np.clip((pi - levels) / (pi - pj), 0, 1),
+                                          0.5)
+    # falling through the level, clearly not a tangent (the nearer root's slope is c1's
+    # sign): a decision that floating rounding at another scale of the counts cannot flip
+    good = (c1 < 0) & (disc > 1e-8 * c1 * c1) & (np.abs(root) <= half - 0.5)
     return np.where(good, ang[i] + step * (0.5 + root), linear)
 
 
@@ -457,7 +461,7 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             got = spread_angles(x, np.tile(profs, (len(wanted), 1)),
                                 np.concatenate([f * top for f in wanted]), sigma, half)
             for f, row in zip(wanted, got.reshape(len(wanted), d)):
-                draws[c, f] += row[~np.isnan(row)].tolist()
+                draws[c, f] += row[np.isfinite(row)].tolist()
     for key, (angle, _, cross, why) in out.items():
         if angle is not None:
             d = draws[key]

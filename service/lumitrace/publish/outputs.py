@@ -297,7 +297,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                                          layer_dir,
                                          {**(extra or {}), "runId": tx.run_id, **owned},
                                          (scene.up_axis, scene.meters_per_unit))
-                write_layer_file(stage_path, staged["result_layer"], text)
+                write_layer_file(stage_path, staged["result_layer"], text,
+                                 replaces=paths["result_layer"])
                 layer_digest = written_layer and file_digest(staged["result_layer"])
                 tx.commit(last=paths["result_layer"])
             except Interrupted as exc:

@@ -36,11 +36,13 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
     figures with theirs and the luminous opening, as JSON text."""
     g = ph.grid
     doc = {
-        "definition": "each intensity is the photon flux through its cell (C +- half the C "
-                      "step, gamma between the midpoints to its neighbours; at gamma 0 and "
-                      "180 the polar cap of poleCaps_deg, all C) over the cell's solid "
-                      "angle: an unbiased estimate of the cell's mean intensity; sigma is "
-                      "its standard error (binomial, analog photons)",
+        "definition": "each intensity is a point value at its gamma: the value there of a "
+                      "parabola fitted to the photon flux per solid angle in 0.25 deg gamma "
+                      "bins around it (to its nearer neighbour, at least three bins each "
+                      "side), within its C cell (C +- half the C step, whose mean it is); "
+                      "at gamma 0 and 180 an even parabola's over the polar cap of "
+                      "poleCaps_deg, all C; sigma is its standard error (binomial, analog "
+                      "photons, exact for the fit's fixed weights)",
         "frame": "type C: gamma from nadir (the luminaire's -up), C counter-clockwise from "
                  "its +X seen from above",
         "runId": run_id,
@@ -84,8 +86,10 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
                 "LUMCAT": info.catalogue_number or name,
                 "LUMINAIRE": info.name or f"{luminaire} ({Path(scene.stage_path).name})",
                 "LAMP": lamps,
-                "FILEGENINFO": "computed by photon tracing from the USD stage; cell means "
-                               "from photon counts, relative RMS standard error "
+                "FILEGENINFO": "computed by photon tracing from the USD stage; point values "
+                               "in gamma (parabolas fitted to 0.25 deg bins of photon "
+                               "counts), means over each C plane's cell; relative RMS "
+                               "standard error "
                                f"{'n/a' if err is None else f'{err:.2%}'} (per value in "
                                f"{paths['photometry_data'].name}); "
                                f"symmetry {ph.symmetry.describe()}",
@@ -111,12 +115,13 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
               fig.downward_flux_fraction, fig.light_output_ratio,
               company=info.manufacturer or "lumitrace",
-              report=f"lumitrace {name} run {run_id}; symmetry {ph.symmetry.source}",
+              # the run id first: the field is cut at 78 characters
+              report=f"lumitrace run {run_id}: {name}; symmetry {ph.symmetry.source}",
               number=info.catalogue_number, file_name=paths["ldt"].name,
               lamp_type=info.lamp or "lumitrace emitters",
               colour="" if cct_K is None else f"{cct_K:.0f} K",
-              cri="" if info.colour_rendering_index is None
-              else f"{info.colour_rendering_index:g}",
+              cri="" if info.colour_rendering_index is None  # its 6 characters
+              else f"{round(info.colour_rendering_index, 2):g}",
               watts=info.input_power_w or 0.0, linear=bool(long_axis(opening)))
     if pictures:
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \

@@ -3,10 +3,9 @@
 A new revision abandons the round in flight (its photons are dropped, never mixed into the
 new revision's map); a burst of revisions coalesces into the newest. A flux-only edit
 rescales the counts and traces nothing. Results are written after a revision's first
-iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the
-pictures once the revision is done (converged or its photon budget spent) or the service
-stops; a done revision's are drawn by the writer thread, so an edit made meanwhile is traced
-at once.
+iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the pictures once
+the revision is done (converged or its photon budget spent) or the service stops; a done
+revision's are drawn by the writer thread, so an edit made meanwhile is traced at once.
 """
 from __future__ import annotations
 
@@ -262,6 +261,7 @@ class Engine:
                 "relative_error": defined(est.error) if est else None,
                 "relative_error_bound": defined(est.error_bound) if est else None,
                 **self._judged(r),
+                "target_error": self.settings.convergence_target,
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
                 "written_photons": self.written.get("photons"),

@@ -60,7 +60,9 @@ from ..scene.groups import group_emitters
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
+from .luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
+from .profile import has_profile, mesh_agrees, read_profile
 from .materials import BoundMaterials
 from .reuse import ReadCache
 from .representation import is_stand_in_light, modelled_luminaire
@@ -181,6 +183,7 @@ class _Reader:
         #: the world (None for a part placed more than once, or a light's body)
         self.part_frames: dict[int, PartFrame | None] = {}
         self.meters_per_unit = 1.0
+        self.up_axis = "Z"
 
     # -- top level ----------------------------------------------------------------------
 
@@ -209,6 +212,7 @@ class _Reader:
         validate.check_stage_units(self.meters_per_unit, layer_where)
         up_axis = str(UsdGeom.GetStageUpAxis(self.stage))
         validate.check_up_axis(up_axis, layer_where)
+        self.up_axis = up_axis
         check_composition(self.stage, root, layer_where, self._warn)
 
         if self._visible_and_rendered(root, computed=True):
@@ -300,36 +304,30 @@ class _Reader:
 
     def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
         """The luminaire's own data (manufacturer, names, lamp, author, power, colour
-        rendering, the BUG rating's forward direction), checked: text must be text without
-        NUL, the power finite and at least 0, the colour rendering index finite and at most
-        100, the forward direction one of the C planes C0, C90, C180, C270."""
+        rendering, the BUG rating's forward direction), checked as :mod:`.luminaire_data`
+        says: one line of printable text, the power finite and at least 0, the colour
+        rendering index finite in [0, 100]; the forward direction one of C0, C90, C180,
+        C270."""
         where = str(root.GetPath())
-
-        def authored(name: str):
+        values = {}
+        for name in LUMINAIRE_DATA:
             attr = root.GetAttribute(name)
-            return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
-
-        text = {}
-        for name in schema.LUMINAIRE_TEXT:
-            value = authored(name)
-            if value is not None and (not isinstance(value, str) or "\x00" in value):
-                raise StageError(f"must be text, got {value!r}", where, name)
-            text[name] = (value or "").strip()
-        power = authored(schema.INPUT_POWER)
-        power = None if power is None else validate.check_non_negative(
-            power, where, schema.INPUT_POWER)
-        cri = authored(schema.COLOUR_RENDERING_INDEX)
-        if cri is not None:
-            cri = validate.check_finite(cri, where, schema.COLOUR_RENDERING_INDEX)
-            if cri > 100.0:
-                raise StageError(f"must be at most 100, got {cri:g}", where,
-                                 schema.COLOUR_RENDERING_INDEX)
-        forward = authored(schema.BUG_FORWARD)
+            value = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+            if value is None:
+                continue
+            problem = luminaire_data_problem(name, value)
+            if problem is not None:
+                raise StageError(problem, where, name)
+            values[name] = value.strip() if isinstance(value, str) else float(value)
+        text = {name: values.get(name, "") for name in schema.LUMINAIRE_TEXT}
+        forward = self._authored(root, schema.BUG_FORWARD)
         forward = "C0" if forward is None else validate.check_token(
             forward, schema.BUG_FORWARD_TOKENS, where, schema.BUG_FORWARD)
         return LuminaireInfo(text[schema.MANUFACTURER], text[schema.LUMINAIRE_NAME],
                              text[schema.CATALOGUE_NUMBER], text[schema.LAMP_DESCRIPTION],
-                             power, cri, forward, text[schema.AUTHOR])
+                             values.get(schema.INPUT_POWER),
+                             values.get(schema.COLOUR_RENDERING_INDEX), forward,
+                             text[schema.AUTHOR])
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
         """The luminaire prim's local-to-world transform (local stage units to world m),
@@ -468,6 +466,8 @@ class _Reader:
         """Place a gprim's triangles (read once, see :func:`.geometry.local_mesh`) in the
         world, at every placement of ``frame``."""
         path = str(prim.GetPath())
+        if path not in self.local_meshes and has_profile(prim) and prim.IsA(UsdGeom.Mesh):
+            self._check_profile(prim)
         if path not in self.local_meshes:
             self.local_meshes[path] = local_mesh(prim, self.time, self.materials, self._warn,
                                                  self.cache)
@@ -507,6 +507,23 @@ class _Reader:
             self.part_frames[part] = None if part in self.part_frames or own is None else \
                 PartFrame(own, matrix[:3, :3] * self.meters_per_unit,
                           matrix[3, :3] * self.meters_per_unit)
+
+    def _check_profile(self, prim: Usd.Prim) -> None:
+        """Validate a mesh's generating profile (a bad value is an error naming it) and
+        warn where its points and faces are not the profile's: the mesh is traced as
+        authored, which is what every DCC shows."""
+        profile = read_profile(prim, self.time, self.up_axis)
+        mesh = UsdGeom.Mesh(prim)
+        path = str(prim.GetPath())
+        points = check_array(mesh.GetPointsAttr().Get(self.time), path, "points", width=3)
+        counts = check_array(mesh.GetFaceVertexCountsAttr().Get(self.time), path,
+                             "faceVertexCounts", np.int64)
+        indices = check_array(mesh.GetFaceVertexIndicesAttr().Get(self.time), path,
+                              "faceVertexIndices", np.int64)
+        if not mesh_agrees(profile, points, counts, indices):
+            self._warn(f"{path}: its points and faces are not those of its profile "
+                       "(lumitrace:profile:*): traced as authored; a scene delta or a fit "
+                       "that changes the profile writes them anew")
 
     def _light_body(self, prim: Usd.Prim, kind: str, emitters: list[Emitter]) -> None:
         """The light's own surface as a part of the material bound to the light, at each of
