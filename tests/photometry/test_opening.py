@@ -263,3 +263,11 @@ def test_the_datasheet_says_the_tables_are_not_applicable():
                 "luminous_opening_source": "declared", "luminous_opening_shape": "round"}
     assert opening_cell(declared).text == "100.00 x 100.00 x 0.00 (round, declared)"
     assert ugr_section({}) is None  # no opening said, no table: nothing to show
+
+
+def test_a_point_source_has_no_opening():
+    """All exits at one point (a light treated as a point, its box of no extent): no
+    luminous area, no opening, said."""
+    p = np.zeros((5000, 3))
+    o = opening_of_exits(p, np.ones(5000), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert o.source == "none" and not o.meaningful and "a point or a line" in o.note

@@ -228,6 +228,8 @@ def _edges(v: np.ndarray, w: np.ndarray, lo: float, hi: float,
     n = _bins(len(v))
     h = _histogram(v, w, lo, hi, n)
     lit = h > 0
+    if hi <= lo or not lit.any():  # a point (a box of no extent), or no light here
+        return lo, hi, 0.0, 0.0, lo, hi
     above = np.nonzero(h >= level * _typical(h[lit], h[lit]))[0]
     d = (hi - lo) / n
     a0, b0 = lo + above[0] * d, lo + (above[-1] + 1) * d
@@ -396,6 +398,12 @@ def opening_of_exits(positions: np.ndarray, flux: np.ndarray, lo, hi,
                               f"the light leaving the box's {name} face",
                               float(flat["outside"]), photons)
     why = None
+    if not (opening.area > 0 or opening.height > 0):
+        return replace(opening, length=0.0, width=0.0, height=0.0, error=(0.0, 0.0, 0.0),
+                       round=False, source="none",
+                       note="no luminous opening: the light leaves from a point or a line "
+                            "(no luminous area); declare one with "
+                            "lumitrace:luminousOpeningShape and lumitrace:luminousOpening")
     if flat["outside"] > STRAY_LIMIT:
         why = f"{flat['outside']:.1%} of it leaves outside its outline"
     elif flat["rim"] < RIM_LEVEL:
