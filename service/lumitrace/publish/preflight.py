@@ -13,7 +13,7 @@ def refuse_hidden_results(stage: Path) -> None:
     layer sublayered into it, holds result opinions (a stage flattened with its results):
     the new results would compose hidden under them. Reads the root layer alone (no
     composition: a stage with other problems is the reader's to report)."""
-    from .publish.check import may_hold_results, result_opinion_prims
+    from .check import may_hold_results, result_opinion_prims
 
     if not may_hold_results(stage):
         return
