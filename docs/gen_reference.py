@@ -189,8 +189,13 @@ def _describe(spec: dict, defs: dict) -> str:
         items = _describe(spec.get("items", {}), defs)
         lo, hi = spec.get("minItems"), spec.get("maxItems")
         count = f"{lo}" if lo == hi and lo is not None else \
-            f"{lo or 0} to {hi}" if hi else f"at least {lo}" if lo else ""
-        return f"array of {count} {items}".replace("  ", " ").strip()
+            f"{lo or 0} to {hi:,}" if hi else f"at least {lo}" if lo else "any number of"
+        if spec.get("items", {}).get("type") == "array":
+            return f"{count} arrays of {items}"
+        head, sep, rest = items.partition(", ") if items.startswith("string") else \
+            items.partition(" (")
+        many = head if head.endswith("s") else head + "s"
+        return f"{count} {many}" + (f"{sep}{rest}" if rest else "")
     if kind == "object":
         if "additionalProperties" in spec and isinstance(spec["additionalProperties"], dict):
             value = _describe(spec["additionalProperties"], defs)
