@@ -169,9 +169,10 @@ def run_page(page: Path, work: Path) -> int:
 
 
 def _work(tmp_path: Path) -> Path:
-    """A fresh copy of what the examples read: the stages."""
+    """A fresh copy of what the examples read: the stages and the schema."""
     work = tmp_path / "work"
     work.mkdir()
+    shutil.copytree(ROOT / "schemas", work / "schemas")
     shutil.copytree(ROOT / "stages", work / "stages",
                     ignore=shutil.ignore_patterns("*.ies", "*.ldt", "*.exr", "*.png",
                                                   "*.lumitrace.usda", ".*"))
