@@ -163,11 +163,12 @@ def measure(pairs: int, bench_seconds: float, command=DEMO, photons: float = 4e6
     return rows
 
 
-def page_text(rows: list[list[str]], pairs: int) -> str:
+def page_text(rows: list[list[str]], pairs: int, load: float) -> str:
     when = datetime.date.today().isoformat()
     lines = [f"Measured by `python tools/performance_page.py --pairs {pairs}` on {when}, on "
-             f"{machine()}. Ratios are comparable within one run only: the same machine "
-             "drifts from one hour to the next.\n", "| figure | value |", "| --- | --- |"]
+             f"{machine()}, the load average {load:.1f} as it started. Ratios are comparable "
+             "within one run only: the same machine drifts from one hour to the next.\n",
+             "| figure | value |", "| --- | --- |"]
     lines += [f"| {a} | {b} |" for a, b in rows]
     return "\n".join(lines) + "\n"
 
@@ -181,12 +182,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="every step in seconds: a check that "
                                                          "the tool runs (implies --dry-run)")
     args = ap.parse_args(argv)
+    load = os.getloadavg()[0]
     if args.quick:
         args.dry_run = True
         rows = measure(1, 0.2, QUICK, 1e5, warm=False)
     else:
         rows = measure(args.pairs, args.bench_seconds)
-    text = page_text(rows, args.pairs)
+    text = page_text(rows, args.pairs, load)
     print(text)
     if not args.dry_run:
         page = args.page.read_text()
