@@ -1,12 +1,16 @@
 #!/bin/sh
-# Install lumitrace into ./.venv (created if missing). With --test, also the test
-# dependencies: the Python ones, the OpenEXR C++ headers the cube-map tests compile
+# Install lumitrace into ./.venv (created if missing). With --docs, also the documentation
+# tools (then: .venv/bin/sphinx-build -W -q docs site). With --test, also the test
+# dependencies (the documentation tools among them): the Python ones, the OpenEXR C++ headers the cube-map tests compile
 # OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
 # the headless Chromium the live view tests drive (chromium, chromium-driver), and
 # pdftoppm (poppler-utils), which renders the datasheet's PDF in its tests.
 set -e
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
+# setuptools notes at every editable install of a package mapped as this one (schemas/ is
+# lumitrace.schemas) that a folder named like the package could shadow it: none does here
+export PYTHONWARNINGS="${PYTHONWARNINGS:+$PYTHONWARNINGS,}ignore:Editable installation"
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 if [ "$1" = "--test" ]; then
@@ -37,6 +41,8 @@ if [ "$1" = "--test" ]; then
                  "LUMITRACE_SKIP_NATIVE=1 skips the OpenEXR oracle)" >&2
         fi
     fi
+elif [ "$1" = "--docs" ]; then
+    .venv/bin/python -m pip install -q -e '.[plot,docs]'
 else
     .venv/bin/python -m pip install -q -e '.[plot]'
 fi
