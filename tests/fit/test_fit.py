@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers.fit_stages import PROFILE_POINTS, mirror_cup, profile_reflector
+from helpers.fit_stages import PROFILE_POINTS, finished_cup, mirror_cup, profile_reflector
 
 from lumitrace.fit.candidates import CandidateStage
 from lumitrace.fit.measure import Plan, measurement, trace_counts
@@ -142,6 +142,27 @@ def test_four_points_of_a_profile_are_recovered(tmp_path):
     m_best, m_true = _merits(stage, [f"{POINTS}=+-0.003"], target, [best, truth],
                              summary["search_photons"])
     assert m_best <= 1.5 * m_true, (m_best, m_true)
+
+
+def test_a_variant_set_is_a_discrete_parameter(tmp_path):
+    """The wall's finish, a variant set of three, found among them (white, where the
+    stage says mirror)."""
+    target = _target(finished_cup(tmp_path / "true.usda", "white"), tmp_path / "target")
+    stage = finished_cup(tmp_path / "cup.usda", "mirror")
+    summary = _fit(stage, target, ["/Luminaire{finish}"], tmp_path / "fit", 16)
+    assert summary["best"] == {"/Luminaire{finish}": "white"}
+    assert summary["parameters"]["/Luminaire{finish}"]["choices"] == ["black", "mirror",
+                                                                     "white"]
+
+
+def test_a_lights_flux_is_recovered_in_candela(tmp_path):
+    """--absolute: the light's flux scales every candela; with the shape alone it would
+    change nothing the merit sees."""
+    target = _target(finished_cup(tmp_path / "true.usda", flux=1000.0), tmp_path / "target")
+    stage = finished_cup(tmp_path / "cup.usda", flux=700.0)
+    flux = "/Luminaire/Source.lumitrace:luminousFlux=400:2000"
+    summary = _fit(stage, target, [flux], tmp_path / "fit", 40, absolute=True)
+    assert summary["best"][flux.split("=")[0]] == pytest.approx(1000.0, rel=0.02)
 
 
 def _cli(*args) -> subprocess.Popen:
