@@ -114,8 +114,9 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
         gens = sorted({e.generation for e in evs})
         floor = [float(np.median([e.noise for e in evs if e.generation == g])) for g in gens]
         last = [max(x_of(e) for e in evs if e.generation == g) for g in gens]
-        ax.step(last, floor, where="pre", lw=1, ls=":", color="#555555",
-                label="noise floor (a perfect candidate)")
+        if any(f > 0 for f in floor):  # (no target: no floor)
+            ax.step(last, floor, where="pre", lw=1, ls=":", color="#555555",
+                    label="noise floor (a perfect candidate)")
         best = np.minimum.accumulate([e.merit for e in evs])
         ax.plot([x_of(e) for e in evs], best, "-", lw=1, color="black", label="lowest so far")
         ax.axhline(summary["merit"], color="#c0392b", lw=1, ls="--",
