@@ -4,8 +4,9 @@ Continuous parameters are searched in [0, 1] over their ranges, discrete ones (v
 sets, whole numbers) by the index of their choice, rounded (``cma``'s integer handling
 keeps its steps from shrinking below one choice). Every candidate of a generation is traced
 with the same photons; the photons double for the next generation whenever the spread of
-the generation's merits is no longer above their typical standard error (the differences
-being judged are drowning in noise), up to a most. The search ends at the evaluations or
+the generation's merits is less than twice the noise of comparing them
+(:func:`comparison_noise`, from the photons' two halves: the differences being judged are
+drowning in it), up to a most. The search ends at the evaluations or
 time given, or when ``cma`` says it has converged. The best is the lowest merit measured
 at the last photon count, the optimiser's mean among the candidates.
 """
