@@ -165,6 +165,31 @@ def test_a_lights_flux_is_recovered_in_candela(tmp_path):
     assert summary["best"][flux.split("=")[0]] == pytest.approx(1000.0, rel=0.02)
 
 
+def test_a_candidate_the_stage_cannot_take_is_set_aside_and_the_search_goes_on(
+        cup, tmp_path, monkeypatch):
+    """Values within the ranges that still make the stage unreadable (here: a mirror
+    reflecting more than 0.97, refused as a stand-in for such a value) are not traced; the
+    candidate gets the worst merit with its reason, and the fit ends with a valid best."""
+    from lumitrace.errors import StageError
+    from lumitrace.fit import candidates
+    from lumitrace.fit.search import FAILED_MERIT
+
+    stage, target, _, _ = cup
+    scene = candidates.CandidateStage.scene
+
+    def refusing(self, params, values):
+        if values[0] > 0.97:
+            raise StageError("refused for the test", "/Luminaire/Materials/Mirror")
+        return scene(self, params, values)
+
+    monkeypatch.setattr(candidates.CandidateStage, "scene", refusing)
+    summary = _fit(stage, target, [f"{REFLECTANCE}=0.5:1"], tmp_path / "fit", 40)
+    data = json.loads(Path(summary["report_json"]).read_text())
+    failed = [e for e in data["evaluations_list"] if e["merit"] == FAILED_MERIT]
+    assert failed and all("refused for the test" in e["terms"][0]["failed"] for e in failed)
+    assert summary["best"][REFLECTANCE] <= 0.97 and summary["merit"] < 1.0
+
+
 def _cli(*args) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "lumitrace.cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -219,6 +244,7 @@ def test_a_fit_stopped_by_sigint_resumes_to_the_uninterrupted_result(cup, tmp_pa
     (f"{REFLECTANCE}=0.5:1.5", (), "leaves the attribute's own [0, 1]"),
     ("/Luminaire/Source.inputs:radius", (), "has no range of its own"),
     ("/Luminaire/Wall.points[99999][0]=0:1", (), "index 99999 is out of range"),
+    ("/Luminaire/Materials/Mirror.lumitrace:ior=0:2", (), "at 0 the stage cannot be read"),
     (REFLECTANCE, ("--objective", "beam_width = 30"), "no figure 'beam_width'"),
     (REFLECTANCE, ("--constrain", "light_output_ratio = 0.8"), "a constraint is NAME <="),
 ])

@@ -15,6 +15,7 @@ import numpy as np
 from ..atomic import write_text
 from ..photometry.curves import PLANES, plane_curve
 from ..photometry.distribution import photometry_of
+from .search import FAILED_MERIT
 
 MERIT_PNG = "fit.merit.png"
 POLAR_PNG = "fit.polar.png"
@@ -99,7 +100,7 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
 
     plt = pyplot()
     out = {}
-    evs = result.evaluations
+    evs = [e for e in result.evaluations if e.merit < FAILED_MERIT]  # traced ones
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
     photons = np.array([e.photons for e in evs])
     levels = sorted(set(photons.tolist()))
