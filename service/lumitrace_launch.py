@@ -5,7 +5,6 @@ KeyboardInterrupt raised meanwhile (the run would then go on and publish). So th
 module, which imports only the standard library, records SIGINT, SIGTERM and SIGHUP before
 lumitrace is imported, and hands them to :func:`lumitrace.cli.main`.
 """
-import contextlib
 import functools
 import os
 import signal
@@ -26,29 +25,13 @@ def main() -> int:
     # inherit it). A value the user set wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     _start_renderer(sys.argv)
-    with _collector_paused():  # from the first lumitrace module to the command line
-        method_cache = _load_early("method_cache")
-        if method_cache is not None:
-            method_cache.install()
-        cli_main, finish = _load_cli()
+    method_cache = _load_early("method_cache")
+    if method_cache is not None:
+        method_cache.install()
+    from lumitrace.cli import main as cli_main
+    from lumitrace.quick_exit import finish
+
     return finish(cli_main(early_signals=_early))
-
-
-def _collector_paused():
-    """:func:`lumitrace.loading.collector_paused` (standard library only), loaded early."""
-    loading = _load_early("loading")
-    return loading.collector_paused() if loading is not None else contextlib.nullcontext()
-
-
-def _load_cli():
-    """lumitrace's command line and its exit, loaded with the cyclic garbage collector
-    paused: loading USD and lumitrace makes some 40,000 objects that live as long as
-    the process, and the collections they set off (some 80, 15-25 ms) find no garbage.
-    They are then frozen (left out of later collections) and the collector resumes."""
-    with _collector_paused():
-        from lumitrace.cli import main as cli_main
-        from lumitrace.quick_exit import finish
-    return cli_main, finish
 
 
 def _start_renderer(argv: list[str]) -> None:

@@ -339,3 +339,29 @@ def test_a_signal_a_library_wraps_is_still_the_signal():
     p = subprocess.run([sys.executable, "-c", code, "other"], capture_output=True, text=True,
                        timeout=60, env=env)
     assert p.returncode == 1 and "RuntimeError: not a signal" in p.stderr
+
+
+def test_an_argument_of_the_wrong_kind_is_said_in_the_users_words(capsys):
+    """Every option of every command that takes a value, given one that is not a value of
+    its kind, exits 2 with a line naming the option, never a function of ours."""
+    import argparse
+
+    from lumitrace.cli import build_parser
+
+    top = build_parser()
+    commands = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
+    checked = 0
+    for name, parser in commands.choices.items():
+        for action in parser._actions:
+            if not action.option_strings or action.nargs == 0 or action.choices \
+                    or action.type in (None, str, Path):
+                continue
+            with pytest.raises(SystemExit) as stop:
+                parser.parse_args(["a.usda", action.option_strings[0], "zz"]
+                                  if name not in ("bench",) else
+                                  [action.option_strings[0], "zz"])
+            line = capsys.readouterr().err.strip().splitlines()[-1]
+            assert stop.value.code == 2 and action.option_strings[0] in line, line
+            assert "invalid _" not in line and "function" not in line, line
+            checked += 1
+    assert checked > 20

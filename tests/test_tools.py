@@ -27,6 +27,7 @@ QUICK = ("--target-error", 0.3, "--resolution", 8, "--threads", 1, "--quiet")
 #: minutes long or needs a browser; they are exercised by their own tests where there are.
 RUNS: dict[str, tuple[str, ...]] = {
     "application_cost.py": ("--photons", "20000", "--repeats", "1"),
+    "beam_angle_seeds.py": ("--seeds", "2", "--photons", "20000", "--only", "disc"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
     "dask_bench.py": ("--photons", "100000", "--resolution", "8", "--small-batches", "10"),
@@ -55,6 +56,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "solid_bench.py": ("--solids", "1"),
     "startup.py": ("--photons", "10000", "--repeats", "1"),
     "stress.py": ("--photons", "20000", "--fuzz-seconds", "0.5", "--only", "furnace"),
+    "symmetry_seeds.py": ("stages/reference/lambertian_disc.usda", "--seeds", "1",
+                          "--target", "0.2", "--reference-photons", "20000"),
     "viewer_bench.py": ("--help",),  # drives headless Chromium for minutes
 }
 #: Checks that say nothing when all is well (their exit status says it).

@@ -46,6 +46,8 @@ SOURCE = "/Luminaire/LED"
 def _preview_revision(url: str) -> int | None:
     try:
         with urllib.request.urlopen(url + "preview", timeout=5) as r:
+            if r.status == 204:  # no frame yet (a restarted trace before its first round)
+                return None
             return read_frame(r.read())[0].get("revision")
     except OSError:
         return None

@@ -191,8 +191,9 @@ class _Hostile:
         if rcvbuf:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         sock.connect(self.address)
-        sock.sendall(b"GET /events HTTP/1.1\r\nHost: load\r\nAccept: text/event-stream"
-                     b"\r\n\r\n")
+        host = f"{self.address[0]}:{self.address[1]}".encode()
+        sock.sendall(b"GET /events HTTP/1.1\r\nHost: " + host + b"\r\nAccept: "
+                     b"text/event-stream\r\n\r\n")
         return sock
 
     def _streams(self) -> None:

@@ -20,9 +20,10 @@ class Service:
         self.stage = Path(stage)
         cmd = [sys.executable, "-m", "lumitrace.cli", "serve", str(stage), "--port", "0",
                *map(str, args)]
-        if token:
-            cmd += ["--token", token]
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env.pop("LUMITRACE_TOKEN", None)
+        if token:  # as a user should: never on the command line, where ps shows it
+            env["LUMITRACE_TOKEN"] = token
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, env=env)
         self.lines: queue.Queue[str] = queue.Queue()

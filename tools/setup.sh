@@ -3,10 +3,50 @@
 # dependencies: the Python ones, the OpenEXR C++ headers the cube-map tests compile
 # OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
 # the headless Chromium the live view tests drive (chromium, chromium-driver), and
-# pdftoppm (poppler-utils), which renders the datasheet's PDF in its tests.
+# pdftoppm (poppler-utils), which renders the datasheet's PDF in its tests, and the
+# Blender environment below.
+# With --blender, only the Blender environment: ./.venv-blender, Blender 4.5 LTS as a
+# Python module (bpy, Python 3.11 only; it pins numpy below 2, hence a venv of its own),
+# which the Blender add-on's tests and tools/blender_roundtrip.py run in (about 1 GB).
 set -e
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
+
+# The bpy environment: Python 3.11 (BLENDER_PYTHON, else python3.11 on the PATH, else
+# PYTHON where it is 3.11). Where there is none, or bpy does not install, the Blender
+# tests are skipped and say why.
+blender_env() {
+    if [ -x .venv-blender/bin/python ] &&
+            .venv-blender/bin/python -c "import bpy" >/dev/null 2>&1; then
+        return 0
+    fi
+    py311=${BLENDER_PYTHON:-}
+    if [ -z "$py311" ]; then
+        for candidate in python3.11 "$PY"; do
+            if command -v "$candidate" >/dev/null 2>&1 &&
+                    "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+                py311=$candidate
+                break
+            fi
+        done
+    fi
+    if [ -z "$py311" ]; then
+        echo "note: no Python 3.11 for the Blender environment (bpy 4.5 needs it; set" \
+             "BLENDER_PYTHON): the Blender tests are skipped" >&2
+        return 0
+    fi
+    rm -rf .venv-blender
+    "$py311" -m venv .venv-blender
+    if ! .venv-blender/bin/python -m pip install -q 'bpy==4.5.*'; then
+        rm -rf .venv-blender
+        echo "note: bpy 4.5 did not install: the Blender tests are skipped" >&2
+    fi
+}
+
+if [ "$1" = "--blender" ]; then
+    blender_env
+    exit 0
+fi
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 if [ "$1" = "--test" ]; then
@@ -37,6 +77,7 @@ if [ "$1" = "--test" ]; then
                  "LUMITRACE_SKIP_NATIVE=1 skips the OpenEXR oracle)" >&2
         fi
     fi
+    blender_env
 else
     .venv/bin/python -m pip install -q -e '.[plot]'
 fi

@@ -9,6 +9,8 @@ from typing import Iterator
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)  # read once: os.umask is process-wide and not thread-safe
+#: The process's umask (read once, at import).
+UMASK = _UMASK
 
 
 @contextlib.contextmanager
@@ -35,10 +37,10 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
-def write_text(path: str | os.PathLike, text: str) -> None:
-    """Write a text file atomically (UTF-8)."""
+def write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
+    """Write a text file atomically (UTF-8 unless ``encoding`` says otherwise)."""
     with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+        tmp.write_text(text, encoding=encoding)
 
 
 def fsync_path(path: str | os.PathLike) -> None:

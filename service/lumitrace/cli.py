@@ -6,40 +6,45 @@ import contextlib
 import json
 import math
 import os
+import re
 import signal
 import sys
 import warnings
 from pathlib import Path
 
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
-from .loading import collector_paused
 from .pyplot import short_setter_docs
 from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
-from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD
+from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
 from .trace.job import MAX_DEPTH
 
 
-def _positive_int(text: str) -> int:
+def _number(text: str) -> float:
+    """``text`` as a float (argparse's own error would name our type function)."""
     try:
-        v = int(float(text))
-    except OverflowError:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
+def _positive_int(text: str) -> int:
+    v = _number(text)
+    if not (math.isfinite(v) and int(v) > 0):
         raise argparse.ArgumentTypeError(f"must be a finite positive integer, got {text}")
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return v
+    return int(v)
 
 
 def _positive_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return v
 
 
 def _non_negative_float(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not (v >= 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be zero or a positive number, got {text}")
     return v
@@ -102,7 +107,8 @@ def _add_trace(sub) -> None:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
-    t.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    t.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
                         "the map does not depend on it); exit 4 if it goes away mid-run")
     t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
@@ -171,12 +177,24 @@ def _add_serve(sub) -> None:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
-    v.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    v.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
-    v.add_argument("--token", default=None,
-                   help="bearer token every request must carry (or env LUMITRACE_TOKEN)")
+    vtoken = v.add_mutually_exclusive_group()
+    vtoken.add_argument("--token", default=None,
+                        help="bearer token every request must carry (visible in the process "
+                             "list: prefer --token-file or env LUMITRACE_TOKEN)")
+    vtoken.add_argument("--token-file", type=Path, default=None, metavar="FILE",
+                        help="read the bearer token from FILE (its first line)")
+    v.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="a host name requests may address the service by, besides "
+                        "localhost, loopback addresses and --host (repeatable)")
+    v.add_argument("--max-photons", type=_positive_int, default=None, metavar="N",
+                   help="the largest photon budget a client may set (default 1e10)")
+    v.add_argument("--min-target-error", type=_positive_float, default=None, metavar="E",
+                   help="the smallest target error a client may set (default 0.002)")
     v.add_argument("--out", type=Path, default=None,
                    help="output folder (default: beside the stage)")
     v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
@@ -270,13 +288,12 @@ _QUIET = False
 def cmd_trace(args) -> int:
     global _QUIET
     _QUIET = bool(args.quiet)
-    with collector_paused():  # the command's modules, at once
-        from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
-        from .publish.outputs import claim_planned_outputs, write_outputs
-        from .run.session import run
-        from .run.settings import TraceSettings, default_threads
-        from .stage.scene_cache import read_stage
-        from .trace.compiled import note
+    from .publish.check import NOT_CONVERGED as NOT_CONVERGED_EXIT
+    from .publish.outputs import claim_planned_outputs, write_outputs
+    from .run.session import run
+    from .run.settings import TraceSettings, default_threads
+    from .stage.scene_cache import read_stage
+    from .trace.compiled import note
 
     settings = TraceSettings(photons=args.photons, seconds=args.time,
                              target_error=args.target_error, resolution=args.resolution,
@@ -412,7 +429,12 @@ def cmd_serve(args) -> int:
     preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
-    token = args.token or os.environ.get("LUMITRACE_TOKEN") or None
+    token = service_token(args.token, args.token_file)
+    from .run.settings import ServiceLimits
+
+    limits = ServiceLimits(**{k: v for k, v in (("max_photons", args.max_photons),
+                                                ("min_target_error", args.min_target_error))
+                              if v is not None})
     from .photometry.solid_render import start_renderer
 
     # the solids drawn off this process's interpreter, which edits need, in a window
@@ -420,7 +442,33 @@ def cmd_serve(args) -> int:
     start_renderer(warm_up=True, fork=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
-                 deliverables=args.deliverables)
+                 deliverables=args.deliverables, allow_hosts=args.allow_host, limits=limits)
+
+
+def service_token(given: str | None, path: Path | None) -> str | None:
+    """The service's bearer token: ``--token``, the first line of ``--token-file``, or
+    the environment's ``LUMITRACE_TOKEN`` (None: no token). One a header can carry."""
+    where = "--token"
+    if path is not None:
+        where = f"--token-file {path}"
+        try:
+            lines = path.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            raise LumitraceError(f"cannot read the token: {why}", str(path)) from None
+        given = lines[0].strip() if lines else ""
+        if not given:
+            raise LumitraceError("the token file is empty", str(path))
+    elif given is None:
+        given, where = os.environ.get("LUMITRACE_TOKEN") or None, "LUMITRACE_TOKEN"
+    else:
+        from .errors import warn
+
+        warn("--token is visible to every user of this machine in the process list: give "
+             "it with --token-file FILE or the environment's LUMITRACE_TOKEN")
+    if given is not None and not re.fullmatch(r"[\x21-\x7e]+", given):
+        raise LumitraceError(f"{where}: a token is printable ASCII without spaces")
+    return given
 
 
 def cmd_edits(args) -> int:

@@ -3,9 +3,15 @@ DCC's embedded Python: send scene deltas, read status and results, follow the ev
 
     from lumitrace.client import Client
     c = Client("http://127.0.0.1:8650")
-    c.set("/Luminaire/Materials/ReflectorAluminium", "lumitrace:specularReflectance", 0.8)
-    for event in c.events():
-        ...
+    answer = c.set("/Luminaire/Materials/ReflectorAluminium",
+                   "lumitrace:specularReflectance", 0.8)
+    for event in c.events(revision=answer["revision"]):  # this edit's events, not history
+        if event.kind == "done" and event.data["revision"] == answer["revision"]:
+            print(event.data["judged_error"], event.data["converged"])
+            break
+
+``c.events()`` alone replays every event the service keeps (from its start), then follows;
+``c.events(since="now")`` follows from now on.
 
 This module imports nothing of lumitrace: copy it where lumitrace is not installed.
 """
@@ -13,6 +19,7 @@ from __future__ import annotations
 
 import json
 import urllib.error
+import urllib.parse
 import urllib.request
 from dataclasses import dataclass
 from typing import Any, Iterator
@@ -88,14 +95,22 @@ class Client:
         data = self._json("GET", f"/events?format=json&last_id={int(last_id)}")
         return [Event(e["id"], e["event"], e["data"]) for e in data["events"]]
 
-    def events(self, last_id: int | None = None, timeout: float | None = None
-               ) -> Iterator[Event]:
-        """Follow the event stream (from after ``last_id``; reconnect with the last id seen
-        to resume). ``timeout`` bounds the wait for each line (s)."""
+    def events(self, last_id: int | None = None, timeout: float | None = None,
+               since: str | None = None, revision: int | None = None) -> Iterator[Event]:
+        """Follow the event stream: from the oldest event the service keeps, from after
+        ``last_id`` (reconnect with the last id seen to resume), from now on
+        (``since="now"``), or from the first event of ``revision`` or a later one.
+        ``timeout`` bounds the wait for each line (s)."""
         headers = {"Accept": "text/event-stream"}
+        query = ""
         if last_id is not None:
             headers["Last-Event-ID"] = str(last_id)
-        with self._request("GET", "/events", headers=headers, timeout=timeout) as response:
+        elif since is not None:
+            query = "?since=" + urllib.parse.quote(str(since))
+        elif revision is not None:
+            query = f"?revision={int(revision)}"
+        with self._request("GET", "/events" + query, headers=headers,
+                           timeout=timeout) as response:
             fields: dict[str, str] = {}
             for raw in response:
                 line = raw.decode("utf-8").rstrip("\r\n")
@@ -145,7 +160,7 @@ class Client:
                      timeout: float = 120.0) -> Event:
         """Follow events until a result of ``revision`` (or later) is written (with its
         pictures when ``pictures``); returns that event."""
-        for event in self.events(last_id=0, timeout=timeout):
+        for event in self.events(revision=revision, timeout=timeout):
             if event.kind == "written" and event.data.get("revision", -1) >= revision \
                     and (event.data.get("pictures") or not pictures):
                 return event

@@ -24,11 +24,15 @@ COLOUR_DIAGRAM_SUFFIX = ".colour.png"
 DATASHEET_HTML_SUFFIX = ".datasheet.html"
 DATASHEET_PDF_SUFFIX = ".datasheet.pdf"
 GLDF_SUFFIX = ".gldf"
-#: Every file a trace may write for ``NAME`` in its output folder: the only names an
-#: interrupted publishing may be completed onto, and the files a run may replace.
+#: The record of the datasheet ``lumitrace datasheet`` writes (its files, its stage).
+DATASHEET_RECORD_SUFFIX = ".datasheet.json"
+#: Every file a trace (or ``lumitrace datasheet``) may write for ``NAME`` in its output
+#: folder: the only names an interrupted publishing may be completed onto, and the files
+#: a run may replace.
 OUTPUT_SUFFIXES = (INTENSITY_SUFFIX, LATLONG_SUFFIX, IES_SUFFIX, LDT_SUFFIX, POLAR_SUFFIX,
                    SOLID_SUFFIX, PHOTOMETRY_SUFFIX, COLOUR_SUFFIX, COLOUR_DIAGRAM_SUFFIX,
-                   DATASHEET_HTML_SUFFIX, DATASHEET_PDF_SUFFIX, GLDF_SUFFIX, RESULT_LAYER_SUFFIX)
+                   DATASHEET_HTML_SUFFIX, DATASHEET_PDF_SUFFIX, GLDF_SUFFIX, RESULT_LAYER_SUFFIX,
+                   DATASHEET_RECORD_SUFFIX)
 
 
 def output_names(name: str) -> set[str]:

@@ -129,6 +129,14 @@ LAMP_DESCRIPTION = "lumitrace:lampDescription"
 INPUT_POWER = "lumitrace:inputPower"
 COLOUR_RENDERING_INDEX = "lumitrace:colourRenderingIndex"
 LUMINAIRE_TEXT = (MANUFACTURER, LUMINAIRE_NAME, CATALOGUE_NUMBER, LAMP_DESCRIPTION)
+#: A declared symmetry of the distribution ("auto": shown by lumitrace, see
+#: :mod:`lumitrace.scene.symmetry`), and a declared luminous opening (shape, and size in
+#: stage units: length along C0, width along C90, height).
+SYMMETRY = "lumitrace:symmetry"
+SYMMETRY_TOKENS = ("auto", "none", "rotational", "quadrant", "C0-C180", "C90-C270")
+OPENING_SHAPE = "lumitrace:luminousOpeningShape"
+OPENING_SHAPES = ("measured", "rectangular", "round")
+OPENING_SIZE = "lumitrace:luminousOpening"
 RESULT_PREFIX = "lumitrace:result:"
 
 
@@ -258,6 +266,8 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "nadir (negative toward C180): more than two where the profile has a shoulder"),
     _f("beam_crossings_c90_c270", "list", "deg", group="photometry",
        doc="every crossing of the beam's 50% level in the C90-C270 plane"),
+    _f("spread_notes", "table", "", group="photometry",
+       doc="why a beam or field angle is undefined, by its key (absent: all defined)"),
     _f("cie_flux_code", "string", "", "cieFluxCode", group="photometry",
        doc="CIE flux code N1 N2 N3 N4 N5"),
     _f("cie_flux_code_values", "list", "%", group="photometry",
@@ -273,7 +283,13 @@ RESULT_FIELDS: tuple[ResultField, ...] = (
            "or more), poles included"),
     _f("photometry_worst_at", "list", "deg", group="photometry",
        doc="C and gamma of that value"),
-    _f("symmetry", "string", "", group="photometry", doc="symmetry used in the files"),
+    _f("symmetry", "string", "", "symmetry", group="photometry",
+       doc="symmetry the files are averaged over: none, rotational, quadrant, C0-C180 or "
+           "C90-C270"),
+    _f("symmetry_source", "string", "", "symmetrySource", group="photometry",
+       doc="why that symmetry: declared (lumitrace:symmetry on the stage), geometry (the "
+           "parts, materials and emitters map onto themselves), measured (the counts' "
+           "departure from it within 1% RMS at its upper bound) or none (none shown)"),
     _f("luminous_opening", "vector", "m", group="photometry",
        doc="luminous length (C0), width (C90) and height of the opening"),
     _f("colour_data", "asset", attribute="colourData", group="outputs",

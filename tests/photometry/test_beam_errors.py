@@ -48,7 +48,7 @@ def test_stated_errors_match_the_spread_of_symmetric_grids(monkeypatch):
         top = Peak(PEAK + 0.5 * rng.standard_normal(), 0.5, 0.0, 0.0)
         spreads = plane_spreads(grid, (grid, grid), rng, top, planes=(0.0,))
         for f in (0.5, 0.1):
-            angle, err, _ = spreads[0.0, f]
+            angle, err, _, _ = spreads[0.0, f]
             angles[f].append(angle)
             errors[f].append(err)
     for f, want in ((0.5, 120.0), (0.1, 2.0 * np.degrees(np.arccos(0.1)))):
@@ -59,12 +59,12 @@ def test_stated_errors_match_the_spread_of_symmetric_grids(monkeypatch):
 
 
 def test_a_rotationally_symmetric_luminaire_has_one_beam_in_every_plane():
-    """The demo's peak lies off both planes (a flat top's fit wanders), but a rotational
-    luminaire's peak is a ring in every plane: both planes take it as their level, so their
-    angles and errors are the same numbers."""
-    _, _, ph, _ = traced("demo")
+    """A rotational luminaire's peak is a ring in every plane: both planes take it as their
+    level, so their angles and errors are the same numbers (the disc: rotational by its
+    geometry)."""
+    _, _, ph, _ = traced("disc")
     f = ph.figures
-    assert ph.grid.symmetry == "rotational"
+    assert (ph.grid.symmetry, ph.symmetry.source) == ("rotational", "geometry")
     assert (f.beam_angle_c0_c180, f.beam_angle_c0_c180_error) == \
         (f.beam_angle_c90_c270, f.beam_angle_c90_c270_error)
     assert (f.field_angle_c0_c180, f.field_angle_c0_c180_error) == \

@@ -59,6 +59,8 @@ def full_results(folder: Path, photons: int = 1_000_000) -> dict:
         "fieldAngleC0": 100.25,
         "fieldAngleC90": 101.0,
         "cieFluxCode": "44 75 94 75 99",
+        "symmetry": "quadrant",
+        "symmetrySource": "geometry",
         "polarDiagram": out / "stage.polar.png",
         "photometricSolid": out / "stage.solid.png",
         "colourData": out / "stage.colour.json",

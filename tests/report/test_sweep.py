@@ -86,7 +86,8 @@ def test_a_sweep_writes_the_table_the_overview_and_each_variants_outputs(swept):
     assert float(iso["luminous_flux"]) == pytest.approx(1000.0)  # all of it leaves
     assert float(iso["light_output_ratio"]) == 1.0 and iso["light_output_ratio_error"]
     page = (out / "index.html").read_text()
-    assert page.count("<svg") == 5 and page.count("<polyline") == 10  # two planes each
+    # each case drawn on the common scale and on its own, two planes each
+    assert page.count("<svg") == 10 and page.count("<polyline") == 20
     assert "finish=polished" in page
 
 
@@ -154,3 +155,89 @@ def test_a_sweep_interrupted_picks_up_where_it_stopped(tmp_path):
     rows = json.loads(again.stdout.splitlines()[-1])["rows"]
     assert [(os.path.basename(r["stage"]), r["traced"]) for r in rows] == [
         ("a.usda", False), ("b.usda", True)]
+
+
+def _flux_variants(path, fluxes: dict):
+    """A copy of the Lambertian disc with a variant set "output" of the source's flux."""
+    import lumitrace  # noqa: F401
+    from pxr import Sdf, Usd
+
+    shutil.copy(REFERENCE / "lambertian_disc.usda", path)
+    stage = Usd.Stage.Open(str(path))
+    vs = stage.GetDefaultPrim().GetVariantSets().AddVariantSet("output")
+    for name, flux in fluxes.items():
+        vs.AddVariant(name)
+        vs.SetVariantSelection(name)
+        with vs.GetVariantEditContext():
+            stage.GetPrimAtPath("/Luminaire/Source").CreateAttribute(
+                "lumitrace:luminousFlux", Sdf.ValueTypeNames.Float).Set(flux)
+    stage.GetPrimAtPath("/Luminaire/Source").GetAttribute("lumitrace:luminousFlux").Clear()
+    stage.GetRootLayer().Save()
+
+
+def test_a_bad_variant_is_one_failed_case_and_the_others_run(tmp_path):
+    """A variant whose flux the stage reader refuses: that case fails, named with its stage,
+    variant and reason, in the table and on stderr; the other cases are traced; exit 1."""
+    _flux_variants(tmp_path / "lamps.usda", {"broken": -1.0, "good": 500.0})
+    shutil.copy(REFERENCE / "isotropic.usda", tmp_path / "iso.usda")
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "lumitrace", "sweep", str(tmp_path), *ARGS,
+                        "--out", str(out)], capture_output=True, text=True, cwd=ROOT,
+                       timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT / "service")})
+    assert r.returncode == 1, r.stderr
+    said = json.loads(r.stdout.splitlines()[-1])
+    rows = {(os.path.basename(x["stage"]), x["variant"]): x for x in said["rows"]}
+    assert set(rows) == {("lamps.usda", "output=broken"), ("lamps.usda", "output=good"),
+                         ("iso.usda", "")} and said["failed"] == 1
+    broken = rows["lamps.usda", "output=broken"]
+    assert broken["error"].startswith("lamps.usda [output=broken]: ")
+    assert "/Luminaire/Source.lumitrace:luminousFlux" in broken["error"]
+    assert not broken["traced"]
+    assert rows["lamps.usda", "output=good"]["luminous_flux"] == pytest.approx(500.0)
+    assert rows["iso.usda", ""]["photons"] == 20_000
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("lumitrace: error")]
+    assert errors == [f"lumitrace: error: {broken['error']}"]
+    with open(out / "sweep.csv") as f:
+        table = {(os.path.basename(x["stage"]), x["variant"]): x for x in csv.DictReader(f)}
+    assert table["lamps.usda", "output=broken"]["error"] == broken["error"]
+    assert table["lamps.usda", "output=good"]["error"] == ""
+    assert "failed: lamps.usda [output=broken]" in (out / "index.html").read_text()
+
+
+def test_a_second_sweep_into_the_folder_is_refused_and_the_table_is_every_cases_record(
+        tmp_path):
+    """While a sweep writes into OUT, another is refused at once naming it (exit 2); once
+    the first has ended, the second runs, and the table holds the cases both recorded."""
+    import signal
+
+    shutil.copy(REFERENCE / "isotropic.usda", tmp_path / "a.usda")  # quick
+    shutil.copy(REFERENCE / "integrating_sphere.usda", tmp_path / "b.usda")  # long paths
+    shutil.copy(REFERENCE / "lambertian_disc.usda", tmp_path / "c.usda")
+    out = tmp_path / "out"
+    base = [sys.executable, "-m", "lumitrace", "sweep", "--resolution", "8", "--threads",
+            "1", "--out", str(out)]
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "service")}
+    first = subprocess.Popen([*base, str(tmp_path / "a.usda"), str(tmp_path / "b.usda"),
+                              "--photons", "4e7"], stderr=subprocess.PIPE, text=True,
+                             cwd=ROOT, env=env)
+    for line in first.stderr:  # a line per case: a is recorded, b is being traced
+        if line.startswith("[1/2] a.usda"):
+            break
+    second = subprocess.run([*base, str(tmp_path / "c.usda"), "--photons", "20000"],
+                            capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    still = first.poll() is None
+    first.send_signal(signal.SIGINT)
+    first.communicate(timeout=120)
+    assert still, "the first sweep ended before the second started"
+    assert second.returncode == 2, second.stderr
+    assert f"another sweep is writing into this folder (pid {first.pid}," in second.stderr
+    assert "lumitrace sweep" in second.stderr and "c.usda" not in os.listdir(out)
+    again = subprocess.run([*base, str(tmp_path / "c.usda"), "--photons", "20000", "--json"],
+                           capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert [os.path.basename(r["stage"]) for r in json.loads(
+        again.stdout.splitlines()[-1])["rows"]] == ["c.usda"]
+    with open(out / "sweep.csv") as f:
+        assert sorted(os.path.basename(r["stage"]) for r in csv.DictReader(f)) == \
+            ["a.usda", "c.usda"]
+    assert not (out / ".lumitrace-sweep.lock").exists()

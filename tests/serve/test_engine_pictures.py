@@ -1,7 +1,8 @@
 """The engine in process: a done revision's pictures are drawn by the writer, so an edit
-made while they are drawn is traced at once (its preview does not wait seconds behind
-them); the old revision's are given up at the next picture (its set left as it was), and
-the edit gets pictures of its own, not those of the revision it replaced."""
+made while they are drawn is traced at once (its preview does not wait behind them); the
+old revision's are given up at the next picture (its set left as it was), and the edit
+gets pictures of its own, not those of the revision it replaced. The slow picture is held
+by an event the test lets go, so what comes first is an order of events, never a time."""
 from __future__ import annotations
 
 import threading
@@ -11,18 +12,19 @@ from lumitrace.publish import photometric
 from lumitrace.serve import engine as engine_module
 from helpers.engine import REFLECTOR, running_engine, set_delta
 
-DRAWING_S = 3.0
+#: Longest wait for anything (a bound on a failure, not a speed).
+WAIT_S = 120.0
 
 
 def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path,
                                                                         monkeypatch):
     monkeypatch.setattr(engine_module, "PICTURES_QUIET", 0.0)  # pictures as soon as done
-    drawing, drawn = threading.Event(), []
+    drawing, release, drawn = threading.Event(), threading.Event(), []
     real = photometric.polar_diagram
 
-    def slow_polar(path, *args, **kwargs):  # a slow picture (as the first, with imports)
+    def slow_polar(path, *args, **kwargs):  # a slow picture, held until let go
         drawing.set()
-        time.sleep(DRAWING_S)
+        assert release.wait(WAIT_S)
         drawn.append(path)
         return real(path, *args, **kwargs)
 
@@ -33,19 +35,23 @@ def test_an_edit_made_while_the_pictures_are_drawn_is_previewed_at_once(tmp_path
                         lambda path, *a, **k: solids.append(path) or real_solid(path, *a, **k))
     previews = []
     with running_engine(tmp_path, refreshed=lambda: previews.append(time.monotonic())) as (live, eng):
-        assert drawing.wait(120), eng.status()  # revision 0 done, its pictures being drawn
-        assert eng.status()["traced_revision"] == 0
-        edit = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance", 0.5))
-        sent, before = time.monotonic(), len(previews)
-        eng.submit(edit)
-        deadline = sent + 60
-        while not (len(previews) > before and eng.status()["traced_revision"] == 1):
-            assert time.monotonic() < deadline, eng.status()
-            time.sleep(0.005)
-        assert previews[before] - sent < 0.5 * DRAWING_S  # not behind the drawing
-        assert not drawn or drawn == [drawn[0]]  # revision 0's still being drawn meanwhile
+        try:
+            assert drawing.wait(WAIT_S), eng.status()  # revision 0 done, its pictures held
+            assert eng.status()["traced_revision"] == 0
+            edit = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance",
+                                                   0.5))
+            before = len(previews)
+            eng.submit(edit)
+            deadline = time.monotonic() + WAIT_S
+            # revision 1 previewed while revision 0's picture is still held: not behind it
+            while not (len(previews) > before and eng.status()["traced_revision"] == 1):
+                assert time.monotonic() < deadline, eng.status()
+                time.sleep(0.005)
+            assert drawn == [] and not release.is_set()
+        finally:
+            release.set()
         # revision 1's own pictures follow (the slow picture twice: 0's, then 1's)
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + WAIT_S
         while not (len(drawn) == 2 and eng.status()["written_revision"] == 1
                    and eng.status()["written_pictures"]):
             assert time.monotonic() < deadline, (eng.status(), drawn)
@@ -70,13 +76,13 @@ def test_a_renderers_solid_given_up_by_an_edit_never_lands_and_the_renderer_goes
         pytest.skip("no renderer on one core")
     try:
         monkeypatch.setattr(engine_module, "PICTURES_QUIET", 0.0)
-        drawing, submitted = threading.Event(), []
+        drawing, edited, submitted = threading.Event(), threading.Event(), []
         real_polar, real_submit = photometric.polar_diagram, photometric.submit_solid
 
         def slow_polar(path, *args, **kwargs):
-            if len(submitted) == 1:  # revision 0's: the edit comes meanwhile
+            if len(submitted) == 1:  # revision 0's: held until the edit has come
                 drawing.set()
-                time.sleep(DRAWING_S)
+                assert edited.wait(WAIT_S)
             return real_polar(path, *args, **kwargs)
 
         def submit(path, *args, **kwargs):
@@ -91,10 +97,13 @@ def test_a_renderers_solid_given_up_by_an_edit_never_lands_and_the_renderer_goes
         monkeypatch.setattr(photometric, "submit_solid", submit)
         monkeypatch.setattr(solid_render, "draw_solid", no_vtk_here)
         with running_engine(tmp_path) as (live, eng):
-            assert drawing.wait(120), eng.status()
-            edit = live.call(live.apply, set_delta(REFLECTOR, "lumitrace:specularReflectance",
-                                                   0.5))
-            eng.submit(edit)
+            try:
+                assert drawing.wait(WAIT_S), eng.status()
+                edit = live.call(live.apply, set_delta(
+                    REFLECTOR, "lumitrace:specularReflectance", 0.5))
+                eng.submit(edit)
+            finally:
+                edited.set()
             deadline = time.monotonic() + 120
             while not (eng.status()["written_revision"] == 1
                        and eng.status()["written_pictures"]):

@@ -404,16 +404,25 @@ def test_sigterm_while_tracing_writes_a_final_result(stage):
 
 
 def test_a_burst_of_deltas_coalesces(stage):
+    """100 deltas posted one after another while the service traces: each is accepted
+    with the next revision, the engine takes revisions in increasing order only (never one
+    older than one it took), and the last one is traced and written. How many of the burst
+    it takes depends on how fast the client is against the engine (a loaded machine spaces
+    the deltas out): that it takes only the newest of those accepted while it was busy is
+    shown by events in test_engine_superseded's
+    test_edits_that_come_while_the_engine_is_busy_coalesce_into_the_newest."""
     with Service(stage, "--photons", 2_000_000, "--resolution", 16, "--threads", 2) as s:
         s.wait_status(lambda st: st["photons"] > 0)
         for i in range(100):
-            s.client.set(REFLECTOR, SPEC, 0.5 + i * 0.004)
+            assert s.client.set(REFLECTOR, SPEC, 0.5 + i * 0.004)["revision"] == i + 1
         status = s.wait_status(lambda st: st["traced_revision"] == 100
-                               and st["written_revision"] == 100, timeout=180)
+                               and st["written_revision"] == 100, timeout=300)
+        taken = [e.data["revision"] for e in _events(s, {"revision"})]
         traced = {e.data["revision"] for e in _events(s, {"iteration"})}
     assert status["revision"] == 100
     print("revisions traced in the burst:", len(traced))
-    assert len(traced) <= 25, sorted(traced)  # far fewer restarts than deltas
+    assert taken == sorted(set(taken)) and taken[0] == 0 and taken[-1] == 100, taken
+    assert traced <= set(taken) and 100 in traced
 
 
 def test_concurrent_clients_lose_nothing(stage):

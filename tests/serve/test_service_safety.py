@@ -282,6 +282,45 @@ def test_a_second_service_on_a_stage_refuses_and_a_killed_ones_lock_is_stale(sta
         assert rc == 0
 
 
+def test_a_hard_link_to_a_served_stage_is_the_same_stage(stage, tmp_path):
+    """The lock is on the file, not its path: a second `lumitrace serve`, and `lumitrace
+    edits discard`, of a hard link to the served stage (in its folder and in another one,
+    made after the first service rewrote the stage to sublayer its results) exit 2 naming
+    the first service; the edits layer stays."""
+    with Service(stage, *FAST) as first:
+        first.wait_done(0)
+        assert "isotropic.lumitrace.usda" in stage.read_text()  # rewritten: sublayered
+        assert first.client.send([_set_ies("./good.ies")])["revision"] == 1
+        edits = stage.parent / "isotropic.lumitrace-edits.usda"
+        kept = edits.read_bytes()
+        port = first.url.rstrip("/").rsplit(":", 1)[1]
+        elsewhere = tmp_path / "elsewhere"
+        elsewhere.mkdir()
+        links = (stage.parent / "alias.usda", elsewhere / "isotropic.usda")
+        for link in links:
+            os.link(stage, link)
+            assert os.path.samefile(link, stage)
+            second = _serve(link)
+            try:
+                out, err = second.communicate(timeout=60)
+            except subprocess.TimeoutExpired:
+                second.kill()
+                second.communicate()
+                pytest.fail(f"a second service of the hard link {link} started")
+            lines = err.strip().splitlines()
+            assert second.returncode == 2 and len(lines) == 1, (second.returncode, err)
+            assert f"port {port}" in lines[0] and f"process {first.proc.pid}" in lines[0], \
+                lines[0]
+            assert "same file" in lines[0], lines[0]
+            discard = subprocess.run([sys.executable, "-m", "lumitrace.cli", "edits",
+                                      "discard", str(link)], capture_output=True, text=True,
+                                     timeout=60)
+            assert discard.returncode == 2 and f"process {first.proc.pid}" in \
+                discard.stderr, discard.stderr
+        assert edits.read_bytes() == kept
+        assert first.client.status()["revision"] == 1  # the first one serves on
+
+
 # ------------------------------------------------------------------------------------------
 # The engine never dies silently
 # ------------------------------------------------------------------------------------------

@@ -5,7 +5,6 @@ whose effect shows, a refused value changes nothing, a DCC's save shows up, and 
 asked for and needed."""
 from __future__ import annotations
 
-import io
 import json
 import shutil
 import time
@@ -14,49 +13,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.browser import CHROMIUM, DRIVER, SKIP_WHY, browser, pixels, until
 from helpers.paths import ROOT
 from service_process import Service
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-DRIVER = shutil.which("chromedriver")
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
 if not (CHROMIUM and DRIVER):
-    pytest.skip("no system Chromium and chromedriver (Debian: apt-get install chromium "
-                "chromium-driver; tools/setup.sh --test installs them as root)",
-                allow_module_level=True)
+    pytest.skip(SKIP_WHY, allow_module_level=True)
 
 FAST = ("--photons", "120000", "--resolution", "32", "--threads", "2")
-
-
-def _browser():
-    from selenium.webdriver.chrome.service import Service as DriverService
-
-    options = webdriver.ChromeOptions()
-    for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", "--window-size=1400,1500",
-                "--disable-dev-shm-usage"):
-        options.add_argument(arg)
-    options.binary_location = CHROMIUM
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=DriverService(DRIVER), options=options)
-
-
-def until(driver, script: str, timeout: float = 60.0, step: float = 0.1):
-    """Poll a JavaScript expression in the page until it is truthy; return its value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = driver.execute_script(f"return ({script});")
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"never true in the page: {script}")
-        time.sleep(step)
-
-
-def pixels(element) -> np.ndarray:
-    import matplotlib.image as mpimg
-
-    return mpimg.imread(io.BytesIO(element.screenshot_as_png), format="png")[..., :3]
+_browser = browser
 
 
 @pytest.fixture(scope="module")

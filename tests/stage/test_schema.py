@@ -87,7 +87,9 @@ def test_emitter_and_luminaire_api_properties():
     luminaire = registry.FindAppliedAPIPrimDefinition(schema.LUMINAIRE_API)
     info = {schema.MANUFACTURER: "string", schema.LUMINAIRE_NAME: "string",
             schema.CATALOGUE_NUMBER: "string", schema.LAMP_DESCRIPTION: "string",
-            schema.INPUT_POWER: "double", schema.COLOUR_RENDERING_INDEX: "double"}
+            schema.INPUT_POWER: "double", schema.COLOUR_RENDERING_INDEX: "double",
+            schema.SYMMETRY: "token", schema.OPENING_SHAPE: "token",
+            schema.OPENING_SIZE: "double3"}
     assert set(luminaire.GetPropertyNames()) == set(schema.RESULT_ATTRIBUTES) | set(info)
     for name, type_name in info.items():
         assert luminaire.GetSchemaAttributeSpec(name).typeName == \

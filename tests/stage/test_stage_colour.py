@@ -205,3 +205,18 @@ def test_usdlux_light_colour_keeps_its_flux(tmp_path):
     light.CreateColorTemperatureAttr(2700.0)
     assert read(stage).emitters[0].flux == flux
     assert isinstance(light, UsdLux.DiskLight)
+
+
+def test_colour_science_loads_without_a_word_about_scipy(tmp_path):
+    """SciPy is not a dependency and lumitrace uses none of colour-science's SciPy-based
+    functions: a stage with colour traces without colour-science's note that it is absent."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['scipy'] = None\n"
+            "import warnings; warnings.simplefilter('always')\n"
+            "from lumitrace.scene import spectra\n"
+            "print(spectra.observer().shape)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, check=True)
+    assert p.stdout.strip() == "(401, 3)" and "SciPy" not in p.stderr, p.stderr

@@ -18,6 +18,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdUtils
 from ..errors import StageError
 from ..schema import MATERIAL_RANGES, PROFILE_ATTRIBUTES
 from ..stage.diagnostics import tf_message
+from ..stage.luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .assets import AssetRefused, check_asset, layer_problems, stage_variables
 from .profile import write_profile_mesh
 from .protocol import DeltaError, Problem
@@ -255,6 +256,9 @@ def _set_value(ctx: _Context, prim: Usd.Prim, name: str, value: Any,
     if attr.GetVariability() == Sdf.VariabilityUniform and name.startswith("xformOp"):
         raise _Bad("set transforms with 'transform'", where)
     typed = _typed_value(value, attr.GetTypeName(), ctx, where)
+    problem = luminaire_data_problem(name, typed)  # what reaches the files, as the reader
+    if problem is not None:
+        raise _Bad(problem, where)
     bounds = MATERIAL_RANGES.get(name)
     if bounds is not None and isinstance(typed, (int, float)) and not isinstance(typed, bool):
         lo, hi = bounds
@@ -402,7 +406,7 @@ def _op_layer(ctx: _Context, d: dict) -> None:
         raise _Bad(f"not a valid USDA layer: {tf_message(exc)}") from None
     if not ok:
         raise _Bad("not a valid USDA layer")
-    bad = layer_problems(fragment, ctx.stage_dir, ctx.variables)
+    bad = layer_problems(fragment, ctx.stage_dir, ctx.variables) + _data_problems(fragment)
     if bad:  # checked before the fragment is composed: no file outside is ever opened
         raise _Bad("; ".join(f"{where}: {why}" for where, why in bad))
     merged = Sdf.Layer.CreateAnonymous(".usda")
@@ -410,6 +414,29 @@ def _op_layer(ctx: _Context, d: dict) -> None:
     UsdUtils.StitchLayers(merged, ctx.edits)  # the fragment's opinions win
     merged.customLayerData = dict(ctx.edits.customLayerData)
     ctx.edits.TransferContent(merged)
+
+
+def _data_problems(layer: Sdf.Layer) -> list[tuple[str, str]]:
+    """(where, why) of every value of the luminaire's own data in ``layer`` (defaults and
+    time samples) that the stage reader would refuse (:mod:`~lumitrace.stage.luminaire_data`)."""
+    found: list[tuple[str, str]] = []
+
+    def visit(path: Sdf.Path) -> None:
+        if not path.IsPropertyPath() or path.name not in LUMINAIRE_DATA:
+            return
+        spec = layer.GetAttributeAtPath(path)
+        if not spec:
+            return
+        values = [spec.default] if spec.HasDefaultValue() else []
+        values += [layer.QueryTimeSample(path, t) for t in layer.ListTimeSamplesForPath(path)]
+        for value in values:
+            problem = luminaire_data_problem(path.name, value)
+            if problem is not None:
+                found.append((f"{path.GetPrimPath()}.{path.name}", problem))
+                return
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    return found
 
 
 _OPS: dict[str, Callable[[_Context, dict], None]] = {

@@ -33,11 +33,14 @@ class FilesAccuracy:
     bound: float | None
     worst: float | None
     worst_at: tuple[float, float] | None = None
+    #: whether the files' symmetry is settled (no stronger one could still be shown)
+    settled: bool = True
 
     def meets(self, target: float) -> bool:
-        """Whether the files are converged at ``target`` (relative)."""
-        return (self.bound is not None and self.worst is not None and self.bound <= target
-                and self.worst <= WORST_FACTOR * target)
+        """Whether the files are converged at ``target`` (relative): within it, and of a
+        symmetry more photons could not change."""
+        return (self.settled and self.bound is not None and self.worst is not None
+                and self.bound <= target and self.worst <= WORST_FACTOR * target)
 
     @property
     def error(self) -> float:

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..film.accumulate import Accumulator
 from ..film.goniometer import C_STEP, GAMMA_EDGES, N_C, cell_solid_angles
+from ..scene import spectra
 
 #: Cell size of the colour table (deg): C sectors and gamma zones.
 COLOUR_C_STEP = 15.0
@@ -59,6 +60,7 @@ def cct_duv(uvp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _planckian_table() -> np.ndarray:
     """colour-science's Planckian table for Ohno's method, rows (T K, u, v): its defaults
     (CIE 1931 2 deg observer, 1000 to 100000 K in steps of about 0.1%), made once."""
+    spectra.colour_science()  # imported quietly first
     from colour.colorimetry import handle_spectral_arguments
     from colour.temperature import ohno2013
 

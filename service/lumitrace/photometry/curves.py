@@ -98,7 +98,7 @@ def draw_polar(ax, grid: CGammaGrid, lamp_lumens: float, figures: Mapping | None
         ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: ""))
     ax.grid(True, lw=0.4, alpha=0.6)
     ax.set_title((title + "\n" if title else "") + "cd/klm; band: +-1 standard error; "
-                 "rays: beam (dashed), field (dotted)", fontsize=8)
+                 "rays: beam (dashed), field (dotted)", fontsize=8, parse_math=False)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.12, -0.14), fontsize=7, frameon=False)
 
 
@@ -131,4 +131,4 @@ def draw_cartesian(ax, grid: CGammaGrid, lamp_lumens: float, figures: Mapping | 
     ax.grid(True, lw=0.4, alpha=0.6)
     ax.legend(fontsize=7, frameon=False, loc="upper right")
     ax.set_title((title + "\n" if title else "") + "Cartesian diagram; band: +-1 standard "
-                 "error; lines: beam (dashed), field (dotted)", fontsize=8)
+                 "error; lines: beam (dashed), field (dotted)", fontsize=8, parse_math=False)

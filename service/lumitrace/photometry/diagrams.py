@@ -113,7 +113,7 @@ def _solid_matplotlib(path, pts, cd, tri, title) -> Path:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
         ax.add_collection3d(Poly3DCollection(tri, facecolor="#7f8c8d", edgecolor="none"))
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, parse_math=False)  # a name's "$" is no maths
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
@@ -180,7 +180,7 @@ def colour_diagram(path: str | os.PathLike, col, title: str = "") -> Path:
     right.set_title(f"CIE 1976 u'v' of every cell: CCT {cct:.0f} K, Duv {duv:+.4f}\n"
                     f"beam Delta u'v' {col.uniformity:.4f} (circle; noise {col.noise:.5f})",
                     fontsize=9)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title, fontsize=10, parse_math=False)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")

@@ -15,11 +15,12 @@ from ..film.goniometer import (EXIT_SIDE, FACE_AXES, FACES, GAMMA_EDGES, N_CELLS
 from ..scene import Scene
 from .grid import CGammaGrid, default_gammas
 from .accuracy import FilesAccuracy, grid_accuracy
-from .measured import emitter_rings, symmetric_grid
+from .measured import SymmetryChoice, emitter_rings, symmetric_grid
 from .quantities import PhotometricFigures, figures, scaled_figures
 
-#: Symmetry is used unless the counts show a departure from it larger than this (relative
-#: RMS, at a 3 sigma lower bound; see :func:`~lumitrace.photometry.measured.asymmetry`).
+#: A symmetry the geometry does not show is used where the counts show the departure from
+#: it within this (relative RMS, at its 3 sigma upper bound; see
+#: :func:`~lumitrace.photometry.measured.departure`).
 SYMMETRY_TOLERANCE = 0.01
 #: C step (deg) of the published grid.
 C_STEP = 5.0
@@ -163,7 +164,12 @@ class Photometry:
     figures: PhotometricFigures
     opening: LuminousOpening
     lamp_flux: float
-    departures: dict
+    symmetry: SymmetryChoice
+
+    @property
+    def departures(self) -> dict:
+        """Each stronger symmetry tried: its departure's estimate (relative RMS)."""
+        return {name: b[0] for name, b in self.symmetry.departures.items()}
 
 
 def beam_half_width(rings: list[tuple[float, float, np.ndarray]]) -> float | None:
@@ -238,21 +244,36 @@ def _scaled(ph: Photometry, k: float, lamp_flux: float) -> Photometry:
 def _measured(scene: Scene, acc: Accumulator) -> Photometry:
     rings = emitter_rings(acc)
     half_width = beam_half_width(rings)
-    grid, halves, departures = _files_grid(acc, default_gammas(half_width))
+    grid, halves, choice = _files_grid(scene, acc, default_gammas(half_width))
     fig = figures(acc, grid, halves, C_STEP, rings, half_width)
-    return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, departures)
+    return Photometry(grid, fig, luminous_opening(acc), scene.total_flux, choice)
 
 
-def files_accuracy(acc: Accumulator, grid: CGammaGrid | None = None) -> FilesAccuracy:
+def known_symmetry(scene: Scene) -> tuple[str, bool]:
+    """(the symmetry the files start from, whether it is declared): the stage's declared
+    ``lumitrace:symmetry``, else the one its geometry shows (none where it shows none)."""
+    if scene.declared_symmetry:
+        return scene.declared_symmetry, True
+    from ..scene.symmetry import geometric_symmetry
+
+    return geometric_symmetry(scene), False
+
+
+def files_accuracy(scene: Scene, acc: Accumulator, ph: Photometry | None = None
+                   ) -> FilesAccuracy:
     """The accuracy of the files :func:`photometry_of` would write from these counts (or
-    of their ``grid``, written already): the same grid (gammas, C step, symmetry), without
-    the figures (a few tens of ms: what a session judges its target on). None of it where
-    the counts cannot tell their spread (fewer than two photons a light)."""
+    of ``ph``'s, written already): the same grid (gammas, C step, symmetry), without the
+    figures (a few tens of ms: what a session judges its target on); not met while the
+    symmetry could still change. None of it where the counts cannot tell their spread
+    (fewer than two photons a light)."""
     if not acc.photons or not acc.spread_known:
         return FilesAccuracy(None, None, None)
-    if grid is None:
-        grid, _, _ = _files_grid(acc, default_gammas(beam_half_width(emitter_rings(acc))))
-    return grid_accuracy(grid, C_STEP)
+    if ph is None:
+        grid, _, choice = _files_grid(scene, acc,
+                                      default_gammas(beam_half_width(emitter_rings(acc))))
+    else:
+        grid, choice = ph.grid, ph.symmetry
+    return replace(grid_accuracy(grid, C_STEP), settled=choice.settled)
 
 
 #: The files' grids last measured, by counts and lights' fluxes: a session judges the
@@ -260,13 +281,17 @@ def files_accuracy(acc: Accumulator, grid: CGammaGrid | None = None) -> FilesAcc
 _GRIDS: dict[tuple, tuple] = {}
 
 
-def _files_grid(acc: Accumulator, gammas: np.ndarray) -> tuple:
-    """:func:`~lumitrace.photometry.measured.symmetric_grid` of the files' layout, made
-    once per counts (:attr:`~lumitrace.film.accumulate.Accumulator.version`) and fluxes."""
-    key = (acc.version, tuple(t.flux for t in acc.emitters), tuple(gammas.tolist()))
+def _files_grid(scene: Scene, acc: Accumulator, gammas: np.ndarray) -> tuple:
+    """:func:`~lumitrace.photometry.measured.symmetric_grid` of the files' layout, from
+    the scene's :func:`known_symmetry`, made once per counts
+    (:attr:`~lumitrace.film.accumulate.Accumulator.version`), fluxes and known symmetry."""
+    known, declared = known_symmetry(scene)
+    key = (acc.version, tuple(t.flux for t in acc.emitters), tuple(gammas.tolist()), known,
+           declared)
     got = _GRIDS.get(key)
     if got is None:
-        got = _GRIDS[key] = symmetric_grid(acc, gammas, C_STEP, SYMMETRY_TOLERANCE)
+        got = _GRIDS[key] = symmetric_grid(acc, gammas, C_STEP, SYMMETRY_TOLERANCE,
+                                           known, declared)
         for old in list(_GRIDS)[:-2]:
             _GRIDS.pop(old, None)
     return got

@@ -1,5 +1,9 @@
 """EULUMDAT (.ldt) photometric files: writer and reader.
 
+The files are ISO 8859-1 text, as EULUMDAT readers read them; each text field is one line
+of at most its field's length (78 characters, the lamp type 24, the colour appearance 16,
+the colour rendering group 6), cut there: see :func:`~.plain_text.one_line`.
+
 Intensities are stored in cd/klm of lamp flux. The symmetry indicator says which C planes
 hold data; for the C90-C270 symmetry (Isym 3) the planes run, as the standard's formula
 ``Mc1 = 3 Mc / 4 + 1, Mc2 = Mc1 + Mc / 2`` says, from C270 through C0 to C90.
@@ -16,6 +20,15 @@ import numpy as np
 from ..atomic import write_text
 from ..errors import LumitraceError
 from .grid import CGammaGrid
+from .plain_text import one_line
+
+#: The character set EULUMDAT files are written and read in.
+ENCODING = "latin-1"
+
+
+def field(text: str, width: int = 78) -> str:
+    """``text`` as an EULUMDAT text field of at most ``width`` characters."""
+    return one_line(text, ENCODING, width)
 
 ISYM = {"none": 0, "rotational": 1, "C0-C180": 2, "C90-C270": 3, "quadrant": 4}
 ROOM_INDICES = (0.6, 0.8, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0)
@@ -88,14 +101,15 @@ def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
     steps = np.diff(grid.gamma)
     dg = float(steps[0]) if steps.size and np.allclose(steps, steps[0]) else 0.0
     f = lambda x: f"{x:.6g}"  # noqa: E731
-    lines = [company[:78], "1" if isym == 1 else "3", str(isym), str(mc), f(dc), str(ng), f(dg),
-             report[:78], name[:78], number[:78], file_name[:78],
-             f"{_dt.date.today().isoformat()} lumitrace"[:78],
+    lines = [field(company), "1" if isym == 1 else "3", str(isym), str(mc), f(dc), str(ng),
+             f(dg), field(report), field(name), field(number), field(file_name),
+             field(f"{_dt.date.today().isoformat()} lumitrace"),
              f(dims_mm["length"]), f(dims_mm["width"]), f(dims_mm["height"]),
              f(dims_mm["lum_length"]), f(dims_mm["lum_width"])]
     lines += [f(dims_mm["lum_height"])] * 4
     lines += [f"{100.0 * dff:.2f}", f"{100.0 * lor:.2f}", "1", "0", "1", "1",
-              lamp_type[:24], f(lamp_lumens), colour[:16], cri[:6], f(watts)]
+              field(lamp_type, 24), f(lamp_lumens), field(colour, 16), field(cri, 6),
+              f(watts)]
     lines += [f"{v:.3f}" for v in direct_ratios(grid)]
     lines += [f(c) for c in np.arange(mc) * dc]
     lines += [f(g) for g in grid.gamma]
@@ -105,8 +119,8 @@ def format_ldt(grid: CGammaGrid, lamp_lumens: float, name: str, dims_mm: dict,
 
 def write_ldt(path: str | os.PathLike, grid: CGammaGrid, lamp_lumens: float, name: str,
               dims_mm: dict, dff: float, lor: float, **kw) -> Path:
-    """Write an EULUMDAT file atomically; see :func:`format_ldt`."""
-    write_text(path, format_ldt(grid, lamp_lumens, name, dims_mm, dff, lor, **kw))
+    """Write an EULUMDAT file atomically (ISO 8859-1); see :func:`format_ldt`."""
+    write_text(path, format_ldt(grid, lamp_lumens, name, dims_mm, dff, lor, **kw), ENCODING)
     return Path(path)
 
 
@@ -195,7 +209,7 @@ def read_ldt(path: str | os.PathLike) -> LDTFile:
     """Read an EULUMDAT file."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="latin-1")
+        text = p.read_text(encoding=ENCODING)
     except OSError as exc:
         raise LumitraceError(f"cannot read: {exc.strerror}", where=str(p)) from None
     return parse_ldt(text, where=str(p))

@@ -18,6 +18,7 @@ import numpy as np
 from ..atomic import write_text
 from ..errors import LumitraceError
 from .grid import CGammaGrid
+from .plain_text import one_line
 
 #: LM-63-2019 file generation type (Table 2, ``1.ABCDE``: A accredited lab, B interpolated
 #: angle set, C lumen scaled, D computer simulation, E undefined): 1.00010 is a computer
@@ -103,8 +104,23 @@ def _numbers(values, fmt: str) -> list[str]:
     return lines
 
 
-def _clean(text: str) -> str:
-    return " ".join(str(text).split())[:_LINE]
+def keyword_lines(key: str, value: str) -> list[str]:
+    """The lines of keyword ``key`` holding ``value``, as LM-63 defines them: one line of
+    ASCII text (:func:`~.plain_text.one_line`), continued on ``[MORE]`` lines where it is
+    longer than a line may be (cut between words, inside a word only where one word is
+    longer than a line); none for a value that is empty as one line."""
+    text = one_line(value, "ascii")
+    lines, prefix = [], f"[{key}] "
+    while text:
+        room = _LINE - len(prefix)
+        if len(text) <= room:
+            lines.append(prefix + text)
+            break
+        cut = text.rfind(" ", 0, room + 1)
+        cut = cut if cut > 0 else room
+        lines.append(prefix + text[:cut].rstrip())
+        text, prefix = text[cut:].lstrip(), "[MORE] "
+    return lines
 
 
 def format_ies(grid: CGammaGrid, lamp_lumens: float, width: float, length: float,
@@ -117,9 +133,9 @@ def format_ies(grid: CGammaGrid, lamp_lumens: float, width: float, length: float
     today = _dt.date.today().isoformat()
     kw = {"TEST": "lumitrace photon tracing", "TESTLAB": "lumitrace (computer simulation)",
           "ISSUEDATE": today, "MANUFAC": "unknown"}
-    kw.update({k: v for k, v in (keywords or {}).items() if v})
+    kw.update({k: v for k, v in (keywords or {}).items() if one_line(v or "")})
     out = ["IES:LM-63-2019"]
-    out += [f"[{k}] {_clean(v)}" for k, v in kw.items()]
+    out += [line for k, v in kw.items() for line in keyword_lines(k, v)]
     out.append("TILT=NONE")
     out.append(f"1 {lamp_lumens:.6g} 1 {len(grid.gamma)} {len(grid.c)} 1 2 "
                f"{width:.4f} {length:.4f} {height:.4f}")

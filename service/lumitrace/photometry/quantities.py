@@ -72,7 +72,8 @@ class PhotometricFigures:
     field_angle_c0_c180_error: float | None
     field_angle_c90_c270: float | None
     field_angle_c90_c270_error: float | None
-    #: every crossing of the beam's level (deg from nadir, negative toward C180 or C270)
+    #: every crossing of the beam's level (deg from nadir, or from the zenith for a beam
+    #: lighting upward; negative toward C180 or C270)
     beam_crossings_c0_c180: tuple[float, ...]
     beam_crossings_c90_c270: tuple[float, ...]
     cie_flux_code: str
@@ -83,6 +84,8 @@ class PhotometricFigures:
     #: and its (C, gamma) in degrees
     photometry_worst_error: float | None = None
     photometry_worst_at: tuple[float, float] | None = None
+    #: why a beam or field angle is undefined, by its name (none where all are defined)
+    spread_notes: dict | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -156,32 +159,121 @@ def _plane_profile(grid: CGammaGrid, c_deg: float, values=None):
 
 
 def spread_angles(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
-                  sigma: np.ndarray | None = None) -> np.ndarray:
+                  sigma: np.ndarray | None = None, half=None) -> np.ndarray:
     """Full angles (deg) between the outermost crossings of every row of ``profs`` (rows,
-    samples on a uniform raster symmetric about nadir) with its ``levels`` (rows,), NaN
-    where undefined: a noisy sample dipping below the level inside the beam (a tiny cell
-    next to nadir) does not cut it short; ``sigma``: the samples' standard errors, which
-    let a step at a crossing be read as one (:func:`_outer_crossing`)."""
-    left, right = outermost_crossings(ang, profs, levels, sigma)
+    samples on a uniform raster) with its ``levels`` (rows,), NaN where undefined, read
+    as :func:`outermost_crossings` reads them."""
+    left, right = outermost_crossings(ang, profs, levels, sigma, half)
     return right - left
 
 
-def outermost_crossings(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
-                        sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The outermost crossings (deg from nadir, negative toward the profile's start) of
-    every row of ``profs`` with its level, as :func:`spread_angles` reads them; NaN where
-    the profile does not fall below the level on both sides."""
+#: A crossing's local line is fitted over this share of its distance from the profile's
+#: axis (each side), in samples, between 1 and :data:`MOST_HALF` samples each side.
+FIT_SHARE = 0.1
+MOST_HALF = 6
+
+
+def fit_half_widths(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray
+                    ) -> np.ndarray:
+    """Samples each side of a crossing that its line is fitted over, per row and side
+    (rows, 2): :data:`FIT_SHARE` of the raw outermost crossing's distance from the axis,
+    at least 1 (two samples: the two around the crossing) and at most
+    :data:`MOST_HALF`."""
     above = profs >= levels[:, None]
     n = profs.shape[1]
     first = np.argmax(above, axis=1)
     last = n - 1 - np.argmax(above[:, ::-1], axis=1)
-    ok = above.any(axis=1) & (first > 0) & (last < n - 1) & (levels > 0)
-    first, last = np.where(ok, first, 1), np.where(ok, last, n - 2)
+    h = ang[1] - ang[0]
+    dist = np.stack([np.abs(ang[first]), np.abs(ang[last])], axis=1) / h
+    return np.clip(np.round(FIT_SHARE * dist), 1, MOST_HALF).astype(np.int64)
+
+
+def _smoothed(profs: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Each row's running mean over 2 ``half`` + 1 samples (fewer at the ends)."""
+    n = profs.shape[1]
+    cs = np.concatenate([np.zeros((len(profs), 1)), np.cumsum(profs, axis=1)], axis=1)
+    k = np.arange(n)[None, :]
+    lo = np.clip(k - half[:, None], 0, n)
+    hi = np.clip(k + half[:, None] + 1, 0, n)
+    rows = np.arange(len(profs))[:, None]
+    return (cs[rows, hi] - cs[rows, lo]) / (hi - lo)
+
+
+def outermost_crossings(ang: np.ndarray, profs: np.ndarray, levels: np.ndarray,
+                        sigma: np.ndarray | None = None, half=None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The outermost crossings (deg, negative toward the profile's start) of every row of
+    ``profs`` with its level; NaN where the profile does not fall below the level on both
+    sides. Read without the outward pull of noise: the outermost sample at or above the
+    level is, among noisy samples, further out the noisier they are. So each side's
+    crossing is found on the profile's running mean, then read off a line fitted to the
+    samples around it (``half`` samples each side, per row and side, (rows, 2); default
+    :func:`fit_half_widths`), which is unbiased to first order; where the profile steps at
+    the crossing (``sigma``, the samples' standard errors, tell), at the step
+    (:func:`_outer_crossing`)."""
+    n = profs.shape[1]
+    if half is None:
+        half = fit_half_widths(ang, profs, levels)
+    half = np.broadcast_to(np.asarray(half, np.int64), (len(profs), 2))
     back = None if sigma is None else sigma[::-1]
+    out = []
+    for side, (p, s) in enumerate(((profs[:, ::-1], back), (profs, sigma))):
+        smooth = _smoothed(p, half[:, side])
+        above = smooth >= levels[:, None]
+        last = n - 1 - np.argmax(above[:, ::-1], axis=1)
+        first = np.argmax(above, axis=1)
+        ok = above.any(axis=1) & (first > 0) & (last < n - 1) & (levels > 0)
+        last = np.where(ok, last, n // 2)
+        # the samples' own outermost crossing: where a step at the level is looked for
+        raw = p >= levels[:, None]
+        raw_last = np.where(raw.any(axis=1), n - 1 - np.argmax(raw[:, ::-1], axis=1), last)
+        raw_last = np.where(ok & (raw_last < n - 1), raw_last, last)
+        a = ang if side else -ang[::-1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            fitted = _fitted_crossing(a, p, levels, last, half[:, side])
+            x = _outer_crossing(a, p, levels, raw_last, s, fitted)
+        out.append(np.where(ok, x if side else -x, np.nan))
+    return out[0], out[1]
+
+
+def _fitted_crossing(ang, profs, levels, i, half):
+    """Where a curve fitted to the 2 ``half`` samples around the crossing between samples
+    ``i`` and ``i`` + 1 (rows; ``ang`` increasing outward) meets the level, within those
+    samples: a parabola (unbiased where the profile curves, as a beam's flank does), a line
+    where two samples each side are all there is; linear between the two samples where the
+    fit does not fall through the level there."""
+    n = profs.shape[1]
+    rows = np.arange(len(profs))[:, None]
+    offs = np.arange(-MOST_HALF + 1, MOST_HALF + 1)[None, :]
+    use = (offs > -half[:, None]) & (offs <= half[:, None])
+    k = np.clip(i[:, None] + offs, 0, n - 1)
+    step = ang[1] - ang[0]
+    u = offs - 0.5  # samples from the midpoint between i and i + 1
+    y = profs[rows, k] - levels[:, None]
+    # weighted least squares of y on (1, u, u^2), the unused samples weighted 0; a line
+    # (the u^2 column dropped) where one or two samples each side are all there is
+    quad = half >= 3
+    cols = [np.ones_like(u, dtype=np.float64) * use, u * use, (u * u) * use * quad[:, None]]
+    a = np.stack(cols, axis=2)  # (rows, samples, 3)
+    ata = np.einsum("rsi,rsj->rij", a, a)
+    ata[~quad, 2, 2] = 1.0  # the line's normal equations, the u^2 term held at 0
+    atb = np.einsum("rsi,rs->ri", a, y * use)
+    c0, c1, c2 = np.linalg.solve(ata, atb[..., None])[..., 0].T
+    # the root of c0 + c1 u + c2 u^2 nearest the midpoint, where the curve falls there
+    disc = c1 * c1 - 4.0 * c2 * c0
     with np.errstate(invalid="ignore", divide="ignore"):
-        right = _outer_crossing(ang, profs, levels, last, sigma)
-        left = -_outer_crossing(ang, profs[:, ::-1], levels, n - 1 - first, back)
-    return np.where(ok, left, np.nan), np.where(ok, right, np.nan)
+        root = np.where(np.abs(c2) > 1e-12 * np.abs(c1),
+                        -2.0 * c0 / (c1 + np.sign(c1) * np.sqrt(np.maximum(disc, 0.0))),
+                        -c0 / c1)
+    r = rows[:, 0]
+    pi, pj = profs[r, i], profs[r, np.minimum(i + 1, n - 1)]
+    with np.errstate(invalid="ignore", divide="ignore"):  # (not falling there: midway)
+        linear = ang[i] + step * np.where(pi > pj, np.clip((pi - levels) / (pi - pj), 0, 1),
+                                          0.5)
+    # falling through the level, clearly not a tangent (the nearer root's slope is c1's
+    # sign): a decision that floating rounding at another scale of the counts cannot flip
+    good = (c1 < 0) & (disc > 1e-8 * c1 * c1) & (np.abs(root) <= half - 0.5)
+    return np.where(good, ang[i] + step * (0.5 + root), linear)
 
 
 #: Samples each side's line is fitted to where a step is looked for at a crossing.
@@ -212,7 +304,7 @@ def _line(y: np.ndarray, u: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, fl
     return y.mean(axis=1), (y * du).sum(axis=1) / den, mean
 
 
-def _outer_crossing(ang, profs, levels, i, sigma):
+def _outer_crossing(ang, profs, levels, i, sigma, smooth_reading=None):
     """Where each row falls through its level beyond sample ``i`` (its last at or above the
     level), in deg from nadir toward increasing index: linear between samples i and i + 1,
     unless the lines fitted to the :data:`STEP_SAMPLES` samples inside and outside differ
@@ -223,7 +315,8 @@ def _outer_crossing(ang, profs, levels, i, sigma):
     rows = np.arange(len(profs))
     h = ang[1] - ang[0]
     pi, pj = profs[rows, i], profs[rows, i + 1]
-    linear = ang[i] + h * (pi - levels) / (pi - pj)
+    linear = ang[i] + h * (pi - levels) / (pi - pj) if smooth_reading is None \
+        else smooth_reading
     m, n = STEP_SAMPLES, profs.shape[1]
     if sigma is None:
         return linear
@@ -295,57 +388,84 @@ def _level(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid], c_deg: float
 DRAW_CHUNK = 50
 
 
+def hemisphere_columns(ang: np.ndarray, prof: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The columns of a plane profile (``ang`` -180 .. 180 deg from nadir) in the hemisphere
+    of its largest value, and their angles from that hemisphere's pole (-90 .. 90): the
+    lower one about nadir, or the upper one about the zenith (a luminaire lighting the
+    ceiling). Beam and field angles are read there, between the horizons, as the IES and
+    CIE define them for a beam: light in the other hemisphere is not part of it."""
+    if abs(ang[int(np.argmax(prof))]) <= 90.0:
+        cols = np.flatnonzero(np.abs(ang) <= 90.0 + 1e-9)
+        return cols, ang[cols]
+    up = np.flatnonzero(ang >= 90.0 - 1e-9)
+    down = np.flatnonzero((ang <= -90.0 + 1e-9) & (ang > -180.0 + 1e-9))
+    return np.concatenate([up, down]), np.concatenate([ang[up] - 180.0, ang[down] + 180.0])
+
+
 def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
                   rng, peak: Peak | None = None,
                   planes: tuple[float, ...] = (0.0, 90.0), fractions: tuple[float, ...] = (
                       0.5, 0.1)) -> dict:
     """The beam (``fraction`` 0.5) and field (0.1) angles in the vertical planes through
     ``planes`` (C, deg): {(c, fraction): (angle, standard error, every crossing of the level
-    (deg from nadir, negative toward C + 180))}. A profile with a shoulder near the level
-    crosses it more than twice; the angle is between the outermost two, as CIE and IES read
-    it. The errors come from :data:`BOOTSTRAP_DRAWS` redraws of the grid within its errors
-    (``rng``'s normal draws, see :func:`redrawn`: both sides of a symmetric profile are the
-    same values and move together) and of the level's top within its error."""
+    (deg from the pole, negative toward C + 180), why it is undefined ("" where it is
+    defined))}. The angles lie in the hemisphere of the profile's top
+    (:func:`hemisphere_columns`); a profile with a shoulder near the level crosses it more
+    than twice, and the angle is between the outermost two, as CIE and IES read it, each
+    read without the outward bias of noise (:func:`outermost_crossings`). The errors come
+    from :data:`BOOTSTRAP_DRAWS` redraws of the grid within its errors (``rng``'s normal
+    draws, see :func:`redrawn`: both sides of a symmetric profile are the same values and
+    move together) and of the level's top within its error, each redraw read alike."""
     tops = {c: _level(grid, halves, c, peak) for c in planes}
-    sigmas = {c: _plane_profile(grid, c, grid.sigma)[1] for c in planes}
-    out, draws = {}, {}
+    out, draws, columns, halfs = {}, {}, {}, {}
     for c in planes:
         ang, prof = _plane_profile(grid, c)
+        cols, x = hemisphere_columns(ang, prof)
+        columns[c] = (cols, x)
+        sigma = _plane_profile(grid, c, grid.sigma)[1][cols]
+        prof = prof[cols]
         for f in fractions:
             level = f * tops[c][0]
-            outer = outermost_crossings(ang, prof[None], np.array([level]), sigmas[c])
-            width = float(outer[1][0] - outer[0][0])
-            out[c, f] = (None, None, ()) if not level > 0 or math.isnan(width) else \
-                (width, None, _step_read(crossings(ang, prof, level), outer))
             draws[c, f] = []
+            if not level > 0:
+                out[c, f] = (None, None, (), "no light in the plane")
+                continue
+            halfs[c, f] = fit_half_widths(x, prof[None], np.array([level]))
+            outer = outermost_crossings(x, prof[None], np.array([level]), sigma, halfs[c, f])
+            width = float(outer[1][0] - outer[0][0])
+            if math.isnan(width):
+                out[c, f] = (None, None, (), f"the profile does not fall to {f:.0%} of its "
+                             "top on both sides before the horizon")
+            else:
+                out[c, f] = (width, None, _step_read(crossings(x, prof, level), outer), "")
     # each profile's half-planes as weights of the grid's planes (linear across them):
     # only the planes they use are redrawn
     weights = grid.at(np.array([a for c in planes for a in (c + 180.0, c)]),
                       np.eye(len(grid.c)))
     rows = np.flatnonzero(np.abs(weights).sum(axis=0) > 0)
-    ang = np.concatenate([-grid.gamma[::-1], grid.gamma[1:]])
     for start in range(0, BOOTSTRAP_DRAWS, DRAW_CHUNK):
         d = min(DRAW_CHUNK, BOOTSTRAP_DRAWS - start)
         sides = np.einsum("hk,dkg->dhg", weights[:, rows], redrawn(grid, rng, d, rows))
         z = rng.standard_normal(d)  # the top's redraw: one peak, the same in every plane
         for i, c in enumerate(planes):
             b, a = sides[:, 2 * i], sides[:, 2 * i + 1]
-            profs = np.concatenate([b[:, ::-1], a[:, 1:]], axis=1)
+            cols, x = columns[c]
+            profs = np.concatenate([b[:, ::-1], a[:, 1:]], axis=1)[:, cols]
+            sigma = _plane_profile(grid, c, grid.sigma)[1][cols]
             top = tops[c][0] + tops[c][1] * z
             wanted = [f for f in fractions if out[c, f][0] is not None]
             if not wanted:
                 continue
             # every fraction's redraws at once: the rows are computed alike, row by row
-            got = spread_angles(ang, np.tile(profs, (len(wanted), 1)),
-                                np.concatenate([f * top for f in wanted]), sigmas[c])
+            half = np.concatenate([np.repeat(halfs[c, f], d, axis=0) for f in wanted])
+            got = spread_angles(x, np.tile(profs, (len(wanted), 1)),
+                                np.concatenate([f * top for f in wanted]), sigma, half)
             for f, row in zip(wanted, got.reshape(len(wanted), d)):
-                draws[c, f] += row[~np.isnan(row)].tolist()
-    for key, (angle, _, cross) in out.items():
-        if angle is None:
-            out[key] = (None, None, ())
-        else:
+                draws[c, f] += row[np.isfinite(row)].tolist()
+    for key, (angle, _, cross, why) in out.items():
+        if angle is not None:
             d = draws[key]
-            out[key] = (angle, float(np.std(d, ddof=1)) if len(d) > 1 else None, cross)
+            out[key] = (angle, float(np.std(d, ddof=1)) if len(d) > 1 else None, cross, why)
     return out
 
 
@@ -419,6 +539,10 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
         field_angle_c90_c270_error=spreads[90.0, 0.1][1],
         beam_crossings_c0_c180=spreads[0.0, 0.5][2],
         beam_crossings_c90_c270=spreads[90.0, 0.5][2],
+        spread_notes={f"{kind}_angle_{plane}": spreads[c, f][3]
+                      for kind, f in (("beam", 0.5), ("field", 0.1))
+                      for plane, c in (("c0_c180", 0.0), ("c90_c270", 90.0))
+                      if spreads[c, f][3]} or None,
         cie_flux_code=code, cie_flux_code_values=values, cie_flux_code_errors=errors,
         photometry_error=accuracy.rms if acc.spread_known else None,
         photometry_worst_error=accuracy.worst if acc.spread_known else None,

@@ -112,7 +112,10 @@ def main_figures(record: Mapping, info) -> Section:
     if opening:
         rows.append([Cell("Luminous opening (mm)"),
                      Cell(" x ".join(f"{1000 * x:.1f}" for x in opening))])
-    rows.append([Cell("Symmetry of the files"), Cell(str(r.get("symmetry") or "-"))])
+    why = {"declared": "declared", "geometry": "by the geometry",
+           "measured": "shown by the counts"}.get(r.get("symmetry_source") or "", "")
+    rows.append([Cell("Symmetry of the files"),
+                 Cell(f"{r.get('symmetry') or '-'}{f' ({why})' if why else ''}")])
     return Section("Photometric figures (± one standard error)", ("", ""), rows)
 
 

@@ -51,7 +51,7 @@ def _columns(s: Section, x0: float, x1: float) -> list[float]:
 def _draw_section(fig, s: Section, y: float, x0: float, x1: float, size: float = 7.0
                   ) -> float:
     """Draw a section from height ``y`` down; returns the height below it."""
-    fig.text(x0, y, s.title, fontsize=size + 2.5, weight="bold", va="top")
+    fig.text(x0, y, s.title, fontsize=size + 2.5, weight="bold", va="top", parse_math=False)
     y -= 1.5 * LINE
     cols = _columns(s, x0, x1)
     if any(s.header):
@@ -66,10 +66,11 @@ def _draw_section(fig, s: Section, y: float, x0: float, x1: float, size: float =
             # baselines, not tops, line up (a column's first glyphs do not shift it): a
             # text's baseline is its last line's
             fig.text(x, y - (0.8 + len(s.rows) - 1) * LINE, column, fontsize=size,
-                     va="baseline", linespacing=spacing)
+                     va="baseline", linespacing=spacing, parse_math=False)
         y -= LINE * (len(s.rows) + 0.4)
     if s.note:
-        fig.text(x0, y, s.note, fontsize=size - 1, color="#555555", va="top", wrap=True)
+        fig.text(x0, y, s.note, fontsize=size - 1, color="#555555", va="top", wrap=True,
+                 parse_math=False)
         y -= LINE * (1 + len(s.note) // 150)
     return y - 0.6 * LINE
 
@@ -99,11 +100,13 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
     with matplotlib.rc_context(CORE_FONTS), _quiet_font_lookup(), \
             PdfPages(buf, metadata=meta) as pdf:
         fig = plt.figure(figsize=PAGE)
-        fig.text(LEFT, 0.975, data.name, fontsize=15, weight="bold", va="top")
+        # the luminaire's text is text: a "$" in a name starts no mathtext
+        fig.text(LEFT, 0.975, data.name, fontsize=15, weight="bold", va="top",
+                 parse_math=False)
         sub = " · ".join(x for x in (data.info.manufacturer, data.info.catalogue_number) if x)
         fig.text(LEFT, 0.952, f"{sub}{' · ' if sub else ''}photometric datasheet, "
                  f"{when:%Y-%m-%d}{', run ' + data.run_id if data.run_id else ''}",
-                 fontsize=8, color="#555555", va="top")
+                 fontsize=8, color="#555555", va="top", parse_math=False)
         narrow = is_narrow(data.record)
         if data.solid_png:
             ax = fig.add_axes((0.02, 0.60, 0.40, 0.34))
@@ -133,7 +136,7 @@ def datasheet_pdf(data: DatasheetInput, when: datetime | None = None) -> bytes:
         while queue:
             fig = plt.figure(figsize=PAGE)
             fig.text(LEFT, 0.975, f"{data.name} (continued)", fontsize=11, weight="bold",
-                     va="top")
+                     va="top", parse_math=False)
             y = TOP
             while queue and (y == TOP or y - _height(queue[0]) > BOTTOM):
                 y = _draw_section(fig, queue.pop(0), y, LEFT, RIGHT)

@@ -18,15 +18,16 @@ efficacy) and colour rendering index (``ColorInformation/ColorRenderingIndex``).
 from __future__ import annotations
 
 import io
+import math
 import uuid
 import zipfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Mapping
-from xml.sax.saxutils import escape
 
 from .. import __version__
 from .l3d import EMITTER_PART
+from .xml_text import xml_text
 
 #: GLDF format version written (``Header/FormatVersion``): 1.0.0-rc.3.
 FORMAT_VERSION = (1, 0, 3)
@@ -52,12 +53,20 @@ _KINDS = {"ldt": ("ldc", "ldc/eulumdat"), "ies": ("ldc", "ldc/ies"),
 
 
 def _locale(tag: str, text: str) -> str:
-    return f'<{tag}><Locale language="en">{escape(text)}</Locale></{tag}>'
+    return f'<{tag}><Locale language="en">{xml_text(text)}</Locale></{tag}>'
 
 
 def _num(value: float) -> str:
     """A double as XML text that reads back to the same double."""
     return repr(float(value))
+
+
+def _in_range(value: float | None, lo: float, hi: float) -> float | None:
+    """``value`` where it is a finite number in [lo, hi], else None (the stage reader
+    refuses others; a scene made in code may hold anything)."""
+    if value is None or not math.isfinite(value) or not lo <= value <= hi:
+        return None
+    return float(value)
 
 
 def descriptive_photometry(record: Mapping, input_power_w: float | None) -> str:
@@ -89,13 +98,13 @@ def descriptive_photometry(record: Mapping, input_power_w: float | None) -> str:
             parts.append(f"<{tag}><C0-C180>{_num(a)}</C0-C180><C90-C270>{_num(b)}"
                          f"</C90-C270></{tag}>")
     if record.get("cie_flux_code"):
-        parts.append(f"<CIE-FluxCode>{escape(record['cie_flux_code'])}</CIE-FluxCode>")
+        parts.append(f"<CIE-FluxCode>{xml_text(record['cie_flux_code'])}</CIE-FluxCode>")
     ugr = catalogue_ugr(record)
     if ugr is not None:  # X crosswise, Y endwise
         parts.append(f"<UGR-4H8H-70-50-20-LQ><X>{_num(ugr[0])}</X><Y>{_num(ugr[1])}</Y>"
                      "</UGR-4H8H-70-50-20-LQ>")
     if record.get("bug_rating"):
-        parts.append(f"<LightDistributionBUG-Rating>{escape(record['bug_rating'])}"
+        parts.append(f"<LightDistributionBUG-Rating>{xml_text(record['bug_rating'])}"
                      "</LightDistributionBUG-Rating>")
     return f"<DescriptivePhotometry>{''.join(parts)}</DescriptivePhotometry>" if parts else ""
 
@@ -119,21 +128,22 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
     stamp = when.strftime("%Y-%m-%dT%H:%M:%SZ")
     major, minor, pre = FORMAT_VERSION
     manufacturer = info.manufacturer or "unknown manufacturer"
+    power = _in_range(info.input_power_w, 0.0, math.inf)
     number = info.catalogue_number or name
     present = {k: getattr(files, k) for k in _KINDS if getattr(files, k) is not None}
     file_list = "".join(f'<File id="file_{k}" contentType="{_KINDS[k][1]}" '
-                        f'type="localFileName">{escape(v[0])}</File>'
+                        f'type="localFileName">{xml_text(v[0])}</File>'
                         for k, v in present.items())
     photometries = ("<Photometries><Photometry id=\"photometry_ldt\">"
                     "<PhotometryFileReference fileId=\"file_ldt\"/>"
-                    f"{descriptive_photometry(record, info.input_power_w)}</Photometry>"
+                    f"{descriptive_photometry(record, power)}</Photometry>"
                     "<Photometry id=\"photometry_ies\"><PhotometryFileReference "
                     "fileId=\"file_ies\"/></Photometry></Photometries>")
     colour = ""
-    if info.colour_rendering_index is not None or record.get("cct_K") is not None:
-        cri = "" if info.colour_rendering_index is None else \
-            f"<ColorRenderingIndex>{int(round(info.colour_rendering_index))}" \
-            "</ColorRenderingIndex>"
+    ra = _in_range(info.colour_rendering_index, 0.0, 100.0)  # what GLDF's int can hold
+    if ra is not None or record.get("cct_K") is not None:
+        cri = "" if ra is None else \
+            f"<ColorRenderingIndex>{int(round(ra))}</ColorRenderingIndex>"
         cct = "" if record.get("cct_K") is None else \
             f"<CorrelatedColorTemperature>{int(round(record['cct_K']))}" \
             "</CorrelatedColorTemperature>"
@@ -141,8 +151,8 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
     lamp = info.lamp or f"lumitrace emitters, {_num(record.get('lamp_flux') or 0.0)} lm"
     light_source = ("<LightSources><FixedLightSource id=\"light_source\">"
                     f"{_locale('Name', lamp)}"
-                    f"<Manufacturer>{escape(manufacturer)}</Manufacturer>"
-                    f"<RatedInputPower>{_num(info.input_power_w or 0.0)}</RatedInputPower>"
+                    f"<Manufacturer>{xml_text(manufacturer)}</Manufacturer>"
+                    f"<RatedInputPower>{_num(power or 0.0)}</RatedInputPower>"
                     f"{colour}</FixedLightSource></LightSources>")
     flux = record.get("luminous_flux") or 0.0
     emitter = ("<Emitters><Emitter id=\"emitter\"><FixedLightEmitter>"
@@ -168,13 +178,13 @@ def product_xml(record: Mapping, info, files: GldfFiles, name: str,
                f"<EmitterObjectExternalName>{EMITTER_PART}</EmitterObjectExternalName>"
                "</EmitterReference></ModelGeometryReference></Geometry>"
                "</Variant></Variants>")
-    meta = (f"<ProductMetaData><UniqueProductId>{escape(number)}</UniqueProductId>"
+    meta = (f"<ProductMetaData><UniqueProductId>{xml_text(number)}</UniqueProductId>"
             f"{_locale('ProductNumber', number)}{_locale('Name', name)}"
             f"{_locale('Description', description)}{pictures}</ProductMetaData>")
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             '<Root xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
             'xsi:noNamespaceSchemaLocation="https://gldf.io/xsd/gldf/1.0.0-rc.3/gldf.xsd">'
-            f"<Header><Manufacturer>{escape(manufacturer)}</Manufacturer>"
+            f"<Header><Manufacturer>{xml_text(manufacturer)}</Manufacturer>"
             f'<FormatVersion major="{major}" minor="{minor}" pre-release="{pre}"/>'
             f"<CreatedWithApplication>lumitrace {__version__}</CreatedWithApplication>"
             f"<GldfCreationTimeCode>{stamp}</GldfCreationTimeCode>"

@@ -15,11 +15,12 @@ import io
 import re
 import zipfile
 from datetime import datetime, timezone
-from xml.sax.saxutils import escape
 
 import numpy as np
 
 from .. import __version__
+from ..photometry.plain_text import one_line
+from .xml_text import xml_text
 
 #: The L3D format version written (``FormatVersion``), as the schema it validates against.
 FORMAT_VERSION = (0, 11)
@@ -47,7 +48,8 @@ def part_id(path: str, taken: set[str]) -> str:
 def obj_text(parts: list[tuple[str, str, np.ndarray]], name: str) -> str:
     """A Wavefront OBJ of the ``parts`` (id, prim path, triangles (T, 3, 3) m): one object
     ``name``, a group per part, vertices shared within a part."""
-    lines = [f"# lumitrace {__version__}: the parts of {name}, metres", f"o {MODEL_ID}"]
+    lines = [f"# lumitrace {__version__}: the parts of {one_line(name, 'utf-8')}, metres",
+             f"o {MODEL_ID}"]
     faces_out, base = [], 0
     for pid, path, tri in parts:
         pts = np.asarray(tri, dtype=np.float64).reshape(-1, 3)
@@ -95,11 +97,11 @@ def structure_xml(parts: list[tuple[str, str, np.ndarray]], opening, name: str,
     major, minor = FORMAT_VERSION
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             '<Luminaire xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance">'
-            f'<Header><Name>{escape(name)}</Name>'
+            f'<Header><Name>{xml_text(name)}</Name>'
             f'<Description>{len(parts)} parts of the USD stage (groups of the OBJ): '
-            f'{escape(", ".join(path for _, path, _ in parts))}; metres, photometric frame '
+            f'{xml_text(", ".join(path for _, path, _ in parts))}; metres, photometric frame '
             '(x C0, y C90, z up)</Description>'
-            f'<CreatedWithApplication>{escape(f"lumitrace {__version__}")}'
+            f'<CreatedWithApplication>{xml_text(f"lumitrace {__version__}")}'
             '</CreatedWithApplication>'
             f'<CreationTimeCode>{when.strftime("%Y-%m-%dT%H:%M:%S")}</CreationTimeCode>'
             f'<FormatVersion major="{major}" minor="{minor}"/></Header>'

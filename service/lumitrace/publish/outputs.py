@@ -21,7 +21,9 @@ from ..filenames import INTENSITY_SUFFIX, LATLONG_SUFFIX, RESULT_LAYER_SUFFIX, s
 from ..photometry import frame
 from ..film.convergence import colour_maps
 from ..photometry.colour import ColourOverAngle, colour_over_angle
-from ..photometry.distribution import Photometry, files_accuracy, photometry_of
+from ..photometry.distribution import (SYMMETRY_TOLERANCE, Photometry, files_accuracy,
+                                      photometry_of)
+from ..schema import SYMMETRY as LUMINAIRE_SYMMETRY
 from ..photometry.measured import emitter_rings
 from ..photometry.zonal import zonal_flux
 from ..photometry.tables import application_figures
@@ -73,11 +75,12 @@ def build_record(result: TraceResult, ph: Photometry, paths: dict[str, Path],
     the stage has no colour) and its output paths."""
     fig = ph.figures
     if result.judge_files and result.files_accuracy is None:  # judged on the grid written
-        result.files_accuracy = files_accuracy(result.accumulator, ph.grid)
+        result.files_accuracy = files_accuracy(result.scene, result.accumulator, ph)
     peak_dir = frame.directions(np.array(fig.peak_c), np.array(fig.peak_gamma),
                                 result.scene.up_axis, frame.luminaire_rotation(result.scene))
     o = ph.opening
     return ResultRecord({**trace_figures(result), **fig.as_dict(), "symmetry": ph.grid.symmetry,
+                         "symmetry_source": ph.symmetry.source,
                          "peak_direction": tuple(float(x) for x in peak_dir),
                          "luminous_opening": (o.length, o.width, o.height),
                          **application_figures(ph, result.accumulator),
@@ -198,6 +201,11 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
         deliverables = False
     est = result.estimate
     ph = photometry_of(scene, result.accumulator)
+    if ph.symmetry.contradicted:
+        warn(f"{scene.luminaire_path}.{LUMINAIRE_SYMMETRY}: declared {ph.symmetry.name}, but "
+             "the photon counts show a departure from it of more than "
+             f"{SYMMETRY_TOLERANCE:.0%} RMS: the files average over a symmetry the "
+             "distribution does not have", OutputWarning)
     col = colour_over_angle(result.accumulator)
     if col is None:
         paths.pop("colour_data")
@@ -254,7 +262,8 @@ def write_outputs(result: TraceResult, out_dir: str | os.PathLike | None,
                                          layer_dir,
                                          {**(extra or {}), "runId": tx.run_id, **owned},
                                          (scene.up_axis, scene.meters_per_unit))
-                write_layer_file(stage_path, staged["result_layer"], text)
+                write_layer_file(stage_path, staged["result_layer"], text,
+                                 replaces=paths["result_layer"])
                 layer_digest = written_layer and file_digest(staged["result_layer"])
                 tx.commit(last=paths["result_layer"])
             except Interrupted as exc:

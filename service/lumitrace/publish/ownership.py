@@ -11,8 +11,10 @@ live stage's are never shared.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
@@ -87,6 +89,18 @@ def _recorded(layer: Path) -> tuple[str | None, dict[str, str] | None]:
     return data.get(STAGE_KEY), {str(k): str(v) for k, v in files.items()}
 
 
+def _readable(path: Path) -> None:
+    """Raise :class:`OutputError` saying so where ``path`` cannot be read: whether
+    lumitrace wrote it cannot be told then (its record or its digest is unread)."""
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise OutputError(f"cannot be read ({exc.strerror or exc}), so whether lumitrace "
+                          "wrote it cannot be told: make it readable and writable by you "
+                          "(chmod u+rw), or move it away", str(path)) from None
+
+
 def _not_ours(path: Path, why: str) -> OutputError:
     return OutputError(f"{why}: lumitrace replaces only the files it wrote for this stage; "
                        "move it away, or write the outputs to a folder of their own (--out)",
@@ -100,47 +114,91 @@ def claim_outputs(stage_path: Path | None, paths: dict[str, Path],
     first file it may not replace. ``inputs`` are the real paths of the files the stage
     reads."""
     layer = Path(paths["result_layer"])
-    layer_dir = layer.parent
+    return claim_files(stage_path, layer, _recorded, paths.values(), inputs,
+                       output_names(layer.name[:-len(RESULT_LAYER_SUFFIX)]))
+
+
+def claim_files(stage_path: Path | None, record: Path, read_record, paths: Iterable[Path],
+                inputs: Iterable[str] = (), names: Iterable[str] = ()) -> Claim:
+    """The ownership rules, for any record of the files lumitrace wrote for a stage (a
+    result layer, a datasheet's record): ``record`` (one of ``paths``) is read by
+    ``read_record(record)`` -> (stage reference, {file name: SHA-256}), (None, None) for
+    a file that is no such record. Raises :class:`OutputError` naming the first of
+    ``paths`` that may not be replaced; the claim drops the recorded files among
+    ``names`` that this write does not make."""
+    paths = [Path(p) for p in paths]
+    record = Path(record)
+    folder = record.parent
+    what = "result layer" if record.name.endswith(RESULT_LAYER_SUFFIX) else "record"
     reads = {os.path.realpath(f) for f in inputs}
-    for key, path in paths.items():
-        if key != "result_layer" and os.path.realpath(path) in reads:
+    for path in paths:
+        if path != record and os.path.realpath(path) in reads:
             raise OutputError("is a file the stage reads (a layer, an IES profile or a ray "
                               "file): its output would replace its own input; rename it, or "
                               "write the outputs to another folder (--out)", str(path))
-    existing = [Path(p) for p in paths.values() if os.path.lexists(p)]
+    existing = [p for p in paths if os.path.lexists(p)]
     for path in existing:
         if path.is_symlink() or not path.is_file():
             raise _not_ours(path, "is not a regular file")
-    if not os.path.lexists(layer):
+        _readable(path)
+    if not os.path.lexists(record):
         if existing:
-            raise _not_ours(existing[0], "exists, and no result layer of this stage "
-                                         f"({layer.name}) says lumitrace wrote it")
+            raise _not_ours(existing[0], f"exists, and no {what} of this stage "
+                                         f"({record.name}) says lumitrace wrote it")
         return Claim()
-    reference, files = _recorded(layer)
+    reference, files = read_record(record)
     if files is None:
-        raise _not_ours(layer, "is not a result layer lumitrace wrote")
+        raise _not_ours(record, f"is not a {what} lumitrace wrote")
     notes = []
-    if reference != stage_reference(stage_path, layer_dir):
-        recorded = layer_dir / reference if reference else None
+    if reference != stage_reference(stage_path, folder):
+        recorded = folder / reference if reference else None
         if stage_path is None or recorded is None or \
                 not _same_file(recorded, Path(stage_path)):
             if recorded is not None and recorded.exists() or stage_path is None:
                 raise OutputError(f"holds the results of another stage, "
                                   f"{recorded or 'one with no file'}; write this stage's "
-                                  "outputs to a folder of their own (--out)", str(layer))
-            notes.append(f"{layer}: took over the results of {recorded}, which no longer "
+                                  "outputs to a folder of their own (--out)", str(record))
+            notes.append(f"{record}: took over the results of {recorded}, which no longer "
                          "exists (a moved or renamed stage)")
     for path in existing:
-        if path == layer:
+        if path == record:
             continue
         digest = files.get(path.name)
         if digest is None:
-            raise _not_ours(path, f"is not among the files {layer.name} says lumitrace wrote")
+            raise _not_ours(path, f"is not among the files {record.name} says lumitrace wrote")
         if file_digest(path) != digest:
             raise _not_ours(path, "changed since lumitrace wrote it")
-    ours = set(p.name for p in paths.values())
-    names = output_names(layer.name[:-len(RESULT_LAYER_SUFFIX)])
-    dropped = tuple(layer_dir / name for name in files
-                    if name in names and name not in ours and (layer_dir / name).is_file()
-                    and file_digest(layer_dir / name) == files[name])
+    ours = set(p.name for p in paths)
+    dropped = tuple(folder / name for name in files
+                    if name in set(names) and name not in ours and (folder / name).is_file()
+                    and file_digest(folder / name) == files[name])
     return Claim(dropped=dropped, notes=tuple(notes))
+
+
+def recorded_files(layer: Path) -> dict[str, str]:
+    """{file name: SHA-256} of the files a result layer records; empty where it records
+    none (or is none lumitrace wrote)."""
+    _, files = _recorded(Path(layer)) if os.path.lexists(layer) else (None, None)
+    return files or {}
+
+
+def vouched_bytes(layer: Path, path: Path) -> bytes | None:
+    """The bytes of ``path``, an output in the result layer ``layer``'s folder, where the
+    layer's ownership record vouches for them (the SHA-256 it recorded for that name) and
+    ``path`` is a regular file, no symlink; None otherwise (changed, truncated, replaced,
+    missing, or no record of it). The bytes hashed are the bytes returned."""
+    path, layer = Path(path), Path(layer)
+    if path.parent.absolute() != layer.parent.absolute():
+        return None
+    digest = recorded_files(layer).get(path.name)
+    if digest is None:
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+            return None
+        data = fh.read()
+    return data if hashlib.sha256(data).hexdigest() == digest else None

@@ -35,18 +35,24 @@ def photometry_json(ph: Photometry, run_id: str = "") -> str:
     figures with theirs and the luminous opening, as JSON text."""
     g = ph.grid
     doc = {
-        "definition": "each intensity is the photon flux through its cell (C +- half the C "
-                      "step, gamma between the midpoints to its neighbours; at gamma 0 and "
-                      "180 the polar cap of poleCaps_deg, all C) over the cell's solid "
-                      "angle: an unbiased estimate of the cell's mean intensity; sigma is "
-                      "its standard error (binomial, analog photons)",
+        "definition": "each intensity is a point value at its gamma: the value there of a "
+                      "parabola fitted to the photon flux per solid angle in 0.25 deg gamma "
+                      "bins around it (to its nearer neighbour, at least three bins each "
+                      "side), within its C cell (C +- half the C step, whose mean it is); "
+                      "at gamma 0 and 180 an even parabola's over the polar cap of "
+                      "poleCaps_deg, all C; sigma is its standard error (binomial, analog "
+                      "photons, exact for the fit's fixed weights)",
         "frame": "type C: gamma from nadir (the luminaire's -up), C counter-clockwise from "
                  "its +X seen from above",
         "runId": run_id,
         "units": {"c": "deg", "gamma": "deg", "candela": "cd", "sigma": "cd"},
         "symmetry": g.symmetry,
+        "symmetrySource": ph.symmetry.source,
+        "symmetrySettled": ph.symmetry.settled,
+        "symmetryAveraged": ph.symmetry.name,
         "poleCaps_deg": None if g.pole_caps is None else list(g.pole_caps),
-        "symmetryDepartures": ph.departures,
+        "symmetryDepartures": {name: {"estimate": b[0], "lower": b[1], "upper": b[2]}
+                               for name, b in ph.symmetry.departures.items()},
         "c": g.c.tolist(), "gamma": g.gamma.tolist(),
         "candela": g.candela.tolist(), "sigma": g.sigma.tolist(),
         "figures": {k: defined(v) for k, v in ph.figures.as_dict().items()},
@@ -76,11 +82,13 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
                 "LUMCAT": info.catalogue_number or name,
                 "LUMINAIRE": info.name or f"{luminaire} ({Path(scene.stage_path).name})",
                 "LAMP": lamps,
-                "FILEGENINFO": "computed by photon tracing from the USD stage; cell means "
-                               "from photon counts, relative RMS standard error "
+                "FILEGENINFO": "computed by photon tracing from the USD stage; point values "
+                               "in gamma (parabolas fitted to 0.25 deg bins of photon "
+                               "counts), means over each C plane's cell; relative RMS "
+                               "standard error "
                                f"{'n/a' if err is None else f'{err:.2%}'} (per value in "
                                f"{paths['photometry_data'].name}); "
-                               f"symmetry {grid.symmetry}",
+                               f"symmetry {ph.symmetry.describe()}",
                 "_LUMITRACE_RUN": run_id}
     if cct_K is not None:
         keywords["_CCT"] = f"{cct_K:.0f} K"
@@ -103,7 +111,7 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
               fig.downward_flux_fraction, fig.light_output_ratio,
               company=info.manufacturer or "lumitrace",
-              report=f"lumitrace {name} run {run_id}".strip(),
+              report=f"lumitrace {name} run {run_id}; symmetry {ph.symmetry.source}",
               number=info.catalogue_number, file_name=paths["ldt"].name,
               lamp_type=info.lamp or "lumitrace emitters",
               colour="" if cct_K is None else f"{cct_K:.0f} K",

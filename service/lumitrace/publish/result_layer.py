@@ -23,7 +23,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..atomic import atomic_path
+from ..atomic import UMASK, atomic_path
 from ..errors import OutputError
 from ..filenames import result_layer_path
 from ..schema import RESULT_KINDS, RESULT_PREFIX
@@ -124,9 +124,26 @@ def result_layer_text(stage: Path | None, luminaire_path: str | None,
                                         documentation)
 
 
-def write_layer_file(stage: Path | None, path: Path, text: str) -> None:
-    """Write layer text atomically with the old layer's (or the stage's) file mode."""
-    mode = file_mode(path if path.exists() or stage is None else stage)
+def layer_mode(stage: Path | None, layer: Path | None) -> int:
+    """The file mode of a result layer: the layer's it replaces, else the stage's (whoever
+    reads the stage reads its results), never executable. A mode that does not let its
+    owner read and write is no model (a stage made unreadable while a delta came, a layer
+    an earlier version left so): lumitrace reads back every layer it wrote, and one it
+    cannot read would refuse every later run. An ordinary file's mode (0666 less the
+    umask) where neither is a model."""
+    for model in (layer, stage):
+        mode = file_mode(model, None) if model is not None else None
+        if mode is not None and mode & 0o600 == 0o600:
+            return mode & 0o666
+    return 0o666 & ~UMASK
+
+
+def write_layer_file(stage: Path | None, path: Path, text: str,
+                     replaces: Path | None = None) -> None:
+    """Write layer text atomically with the mode of :func:`layer_mode`: that of the layer
+    at ``replaces`` (default ``path``: a layer staged elsewhere names the one it will
+    replace), or the stage's."""
+    mode = layer_mode(stage, replaces if replaces is not None else path)
     try:
         with atomic_path(path) as tmp:
             tmp.write_text(text, encoding="utf-8")

@@ -24,11 +24,12 @@ class ResultLayerWarning(OutputWarning):
     """The result layer was written but could not be sublayered into the stage."""
 
 
-def file_mode(path: Path) -> int:
+def file_mode(path: Path, missing: int | None = 0o644) -> int | None:
+    """The permission bits of ``path``; ``missing`` where it has none (gone)."""
     try:
         return stat.S_IMODE(path.stat().st_mode)
     except OSError:
-        return 0o644
+        return missing
 
 
 def _resolves_to(entry: str, root_dir: Path, target: Path) -> bool:

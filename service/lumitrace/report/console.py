@@ -94,7 +94,9 @@ def summary_text(r, stage) -> str:
         f"{ang(r.beam_angle_c90_c270, r.beam_angle_c90_c270_error)} (C90-C270)",
         f"  field angle     {ang(r.field_angle_c0_c180, r.field_angle_c0_c180_error)} "
         f"(C0-C180), {ang(r.field_angle_c90_c270, r.field_angle_c90_c270_error)} (C90-C270)",
-        f"  symmetry        {r.symmetry}"]
+        *(f"                  {key.replace('_', ' ')}: - ({why})"
+          for key, why in (r.spread_notes or {}).items()),
+        f"  symmetry        {r.symmetry} ({_SOURCE.get(r.symmetry_source, '?')})"]
     if r.chromaticity_uv is not None:
         cct = "none (Duv beyond 0.05)" if r.cct_K is None else f"{r.cct_K:.0f} K"
         lines += [
@@ -112,3 +114,8 @@ def summary_text(r, stage) -> str:
         else "  pictures        (not drawn)",
         f"  result layer    {r.result_layer}"]
     return "\n".join(lines)
+
+
+#: How the summary says why the files have their symmetry.
+_SOURCE = {"declared": "declared on the stage", "geometry": "shown by the geometry",
+           "measured": "shown by the photon counts", "none": "none shown"}

@@ -58,11 +58,13 @@ def published_values(layer: Path, prim_path: str) -> dict:
 
 
 def command(args) -> int:
-    """Write the datasheet; exit 0 (2 where the published result cannot be reproduced)."""
+    """Write the datasheet; exit 0 (2 where the published result cannot be reproduced, or
+    where a file in the datasheet's place is not one lumitrace wrote for this stage)."""
     from ..publish.check import check_stage
     from ..publish.datasheet import DatasheetInput
-    from ..publish.deliverables import write_datasheet
+    from ..publish.datasheet_files import claim_datasheet, publish_datasheet
     from ..publish.outputs import build_record, planned_outputs
+    from ..publish.ownership import vouched_bytes
     from ..photometry.colour import colour_over_angle
     from ..photometry.distribution import photometry_of
     from ..run.session import run
@@ -76,7 +78,10 @@ def command(args) -> int:
                              str(args.stage))
     scene = read_stage(args.stage)
     name = stage_name(args.stage)
-    folder = Path(args.results) if args.results else Path(args.stage).absolute().parent
+    stage_path = Path(args.stage).absolute()
+    out = Path(args.out) if args.out else stage_path.parent / f"{name}.datasheet"
+    claim_datasheet(stage_path, out, name, scene.input_files())  # before any photon
+    folder = Path(args.results) if args.results else stage_path.parent
     layer = folder / f"{name}{RESULT_LAYER_SUFFIX}"
     status = check_stage(args.stage, args.results).status
     published = published_values(layer, scene.luminaire_path) \
@@ -92,12 +97,12 @@ def command(args) -> int:
     result = run(scene, settings)
     ph = photometry_of(scene, result.accumulator)
     _, _, paths = planned_outputs(scene, args.results)
-    out = Path(args.out) if args.out else Path(args.stage).absolute().parent / \
-        f"{name}.datasheet"
-    sheet = {"datasheet_html": out / f"{name}.datasheet.html",
-             "datasheet_pdf": out / f"{name}.datasheet.pdf"}
-    kept = {k: v for k, v in paths.items() if v.is_file() and k != "gldf"} if reproduce \
-        else {}
+    # the published files the result layer vouches for (their SHA-256 recorded when they
+    # were written): no other file is named, read or embedded
+    kept = {k: v for k, v in paths.items() if k not in ("gldf", "result_layer")
+            and vouched_bytes(layer, v) is not None} if reproduce else {}
+    sheet = {"datasheet_html": out.absolute() / f"{name}.datasheet.html",
+             "datasheet_pdf": out.absolute() / f"{name}.datasheet.pdf"}
     record = build_record(result, ph, {**kept, **sheet}, colour_over_angle(result.accumulator))
     if reproduce:
         differ = [a for a, k in CHECKED.items() if a in published and
@@ -106,16 +111,47 @@ def command(args) -> int:
             raise LumitraceError("the published result could not be reproduced (its "
                                  f"{', '.join(differ)} differ): trace the stage again",
                                  str(layer))
-    solid = kept.get("photometric_solid")
-    data = DatasheetInput(record, ph.grid, scene.info,
-                          solid.read_bytes() if solid is not None else None,
+    solid = None
+    if reproduce and "photometric_solid" in published_files(layer, paths):
+        solid = vouched_bytes(layer, paths["photometric_solid"]) or \
+            _solid_png(scene, ph, record)  # changed, replaced or gone: drawn again
+    data = DatasheetInput(record, ph.grid, scene.info, solid,
                           "" if reproduce else "traced for this datasheet, not published")
-    write_datasheet(data, sheet["datasheet_html"], sheet["datasheet_pdf"])
+    publish_datasheet(data, stage_path, out, name, scene.input_files(),
+                      {"inputHash": record["input_hash"], "fromPublished": reproduce,
+                       "status": status})
     summary = {"datasheet_html": str(sheet["datasheet_html"]),
                "datasheet_pdf": str(sheet["datasheet_pdf"]), "from_published": reproduce,
-               "status": status, "input_hash": record["input_hash"]}
+               "status": status, "input_hash": record["input_hash"],
+               "solid_redrawn": solid is not None and "photometric_solid" not in kept}
     what = "the published result, reproduced" if reproduce else \
         f"a trace of {record['photons']:,} photons: no current published result ({status})"
     print(json.dumps(summary) if args.json else
           f"{sheet['datasheet_html']}\n{sheet['datasheet_pdf']}\n({what})", file=sys.stdout)
     return 0
+
+
+def published_files(layer: Path, paths: dict) -> set[str]:
+    """The output keys of ``paths`` whose files the result layer records."""
+    from ..publish.ownership import recorded_files
+
+    names = recorded_files(layer)
+    return {k for k, v in paths.items() if Path(v).name in names}
+
+
+def _solid_png(scene, ph, record) -> bytes:
+    """The photometric solid drawn again (PNG bytes), as the trace drew it."""
+    import tempfile
+
+    from ..photometry.diagrams import photometric_solid
+    from ..publish.datasheet_content import luminaire_name
+    from ..publish.transaction import signals_held
+
+    fig = ph.figures
+    title = f"{luminaire_name(record, scene.info)}: {fig.luminous_flux:.0f} lm, " \
+            f"LOR {fig.light_output_ratio:.2f}"
+    with tempfile.TemporaryDirectory(prefix="lumitrace-solid-") as tmp:
+        path = Path(tmp) / "solid.png"
+        with signals_held():  # VTK does not survive an exception raised inside it
+            photometric_solid(path, ph.grid, scene, title)
+        return path.read_bytes()

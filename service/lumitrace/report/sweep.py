@@ -3,28 +3,46 @@
 
 A case is one stage with one selection per variant set of its luminaire prim (every
 combination by default). Its outputs go to ``OUT/NAME/`` or ``OUT/NAME/SET-VALUE,...``,
-never sublayered into the stage (variants would fight over it). The table
-(:mod:`.sweep_table`) is written after every case, so a sweep stopped part-way and started
-again traces only the cases whose results are not current: same input hash (scene and the
-settings that shape the map), same stop criterion, result layer still there.
+never sublayered into the stage (variants would fight over it), with the case's row of the
+table, ``sweep-case.json``, written after them. The table (:mod:`.sweep_table`) is made
+from those per-case records after every case, so it lists every case whose record is in
+``OUT`` (another sweep's into the same folder too), and a sweep stopped part-way and
+started again traces only the cases whose results are not current: same input hash (scene
+and the settings that shape the map), same stop criterion, result layer still there.
+
+One sweep at a time writes into a folder: a second one is refused at once, naming the
+first (its process, start and command line), by a lock the kernel releases when the first
+ends however it ends. A case that fails (a variant whose values the stage reader refuses,
+a stage that cannot be read, outputs it may not replace) is one failed row, named with its
+reason; the other cases run.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import glob
 import itertools
 import json
+import os
+import shlex
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable
 
+from ..atomic import write_text
 from ..errors import ClusterLost, LumitraceError
 from ..filenames import EDITS_LAYER_SUFFIX, RESULT_LAYER_SUFFIX, stage_name
 from . import sweep_table
 
 #: Stage files a folder contributes (our own layers excluded).
 STAGE_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
+#: The lock file of a sweep's folder, and each case's record (its row of the table).
+LOCK = ".lumitrace-sweep.lock"
+CASE_RECORD = "sweep-case.json"
 
 
 @dataclass(frozen=True)
@@ -35,6 +53,8 @@ class Case:
     stage: Path
     variants: tuple[tuple[str, str], ...]
     folder: Path
+    #: why the case cannot run (its stage could not be read to plan it), or empty
+    error: str = ""
 
     @property
     def label(self) -> str:
@@ -44,6 +64,11 @@ class Case:
     @property
     def key(self) -> str:
         return f"{self.stage}|{self.label}"
+
+    @property
+    def name(self) -> str:
+        """``STAGE.usda [SET=VALUE, ...]``: the case in messages."""
+        return f"{self.stage.name} [{self.label}]" if self.label else self.stage.name
 
 
 def stage_files(items: list[str]) -> list[Path]:
@@ -101,11 +126,17 @@ def variant_sets(stage_path: Path) -> dict[str, list[str]]:
 
 def plan(stages: list[Path], wanted: dict[str, list[str]] | None, out: Path) -> list[Case]:
     """Every case: per stage, each combination of the selected variants (``wanted``: sets
-    to vary and their values, empty lists meaning all; None: every set, every value)."""
+    to vary and their values, empty lists meaning all; None: every set, every value). A
+    stage that cannot be opened is one case, failed with the reason."""
     cases = []
     seen: set[str] = set()
     for stage in stages:
-        sets = variant_sets(stage)
+        try:
+            sets = variant_sets(stage)
+        except Exception as exc:  # noqa: BLE001 - USD's errors: the case says why
+            cases.append(Case(stage, (), out / stage_name(stage),
+                              error=f"cannot open the stage: {_reason(exc)}"))
+            continue
         chosen = []
         for name, values in sets.items():
             if wanted is not None and name not in wanted:
@@ -125,6 +156,14 @@ def plan(stages: list[Path], wanted: dict[str, list[str]] | None, out: Path) -> 
     if missing:
         raise LumitraceError(f"no stage of the sweep has a variant set {missing[0]!r}")
     return cases
+
+
+def _reason(exc: BaseException) -> str:
+    """One line saying why, from a lumitrace error or USD's."""
+    from ..stage.diagnostics import tf_message
+
+    text = str(exc) if isinstance(exc, (LumitraceError, OSError)) else tf_message(exc)
+    return " ".join(text.split()) or type(exc).__name__
 
 
 def read_case(case: Case):
@@ -149,8 +188,8 @@ def _request(settings) -> dict:
 
 
 def _current(row: dict | None, case: Case, expected_hash: str, settings) -> bool:
-    if not row or not row.get("complete") or row.get("input_hash") != expected_hash or \
-            row.get("request") != _request(settings):
+    if not row or not row.get("complete") or row.get("error") or \
+            row.get("input_hash") != expected_hash or row.get("request") != _request(settings):
         return False
     from pxr import Sdf
 
@@ -164,43 +203,147 @@ def _current(row: dict | None, case: Case, expected_hash: str, settings) -> bool
     return attr is not None and attr.default == expected_hash
 
 
+def read_record(folder: Path) -> dict | None:
+    """The row a case's folder records (:data:`CASE_RECORD`), None where it has none."""
+    try:
+        row = json.loads((folder / CASE_RECORD).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return row if isinstance(row, dict) and "key" in row else None
+
+
+def recorded_rows(out: Path) -> list[dict]:
+    """Every case's row recorded in the sweep folder ``out`` (``OUT/NAME/`` and
+    ``OUT/NAME/SUB/``), by stage and variant: what the table is made of."""
+    rows = []
+    for record in sorted(out.glob(f"*/{CASE_RECORD}")) + sorted(out.glob(f"*/*/{CASE_RECORD}")):
+        row = read_record(record.parent)
+        if row is not None:
+            rows.append(row)
+    return sorted(rows, key=lambda r: (str(r.get("stage")), str(r.get("variant"))))
+
+
+def _record(case: Case, row: dict) -> None:
+    case.folder.mkdir(parents=True, exist_ok=True)
+    write_text(case.folder / CASE_RECORD, json.dumps(row, indent=1) + "\n")
+
+
+def _write_table(out: Path, traced: dict[str, bool]) -> list[dict]:
+    """The table and the overview from the records in ``out`` (``traced``: whether this
+    sweep traced a case, by key); returns the rows."""
+    rows = [{**r, "traced": traced.get(r["key"], False)} for r in recorded_rows(out)]
+    sweep_table.write(out, rows)
+    return rows
+
+
+@contextlib.contextmanager
+def locked_folder(out: Path):
+    """Hold the sweep lock of the folder ``out`` for the block; refuse at once (a
+    :class:`LumitraceError`) where another sweep holds it, naming it."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / LOCK
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise LumitraceError(f"cannot create the sweep's lock file: {exc.strerror}",
+                                 str(path)) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            holder = os.pread(fd, 4096, 0).decode(errors="replace")
+            os.close(fd)
+            if exc.errno not in (errno.EAGAIN, errno.EACCES):
+                raise
+            raise LumitraceError(f"another sweep is writing into this folder ({_holder(holder)})"
+                                 ": wait for it to end, or give this one another --out",
+                                 str(out)) from None
+        try:
+            same = os.stat(path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # its holder removed it as we opened it: lock the file named now
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps({"pid": os.getpid(), "started": time.strftime(
+            "%Y-%m-%d %H:%M:%S"), "command": "lumitrace " + shlex.join(sys.argv[1:])}).encode(), 0)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)  # still held: a sweep waiting finds it gone
+        os.close(fd)
+
+
+def _holder(text: str) -> str:
+    try:
+        h = json.loads(text)
+        return f"pid {h['pid']}, started {h['started']}: {h['command']}"
+    except (ValueError, KeyError, TypeError):
+        return "a sweep whose lock names nothing"
+
+
 def run_sweep(cases: list[Case], settings, out: Path, pictures: bool = False,
               log: Callable[[str], None] | None = None) -> list[dict]:
-    """Trace every case whose results are not current; write the table and the overview
-    after each; return the rows (``traced``: whether this sweep traced the case)."""
+    """Trace every case whose results are not current, each recorded in its folder; write
+    the table and the overview (from every case recorded in ``out``) after each; return
+    this sweep's rows (``traced``: whether it traced the case; ``error``: why a case
+    failed). The folder is locked meanwhile (:func:`locked_folder`)."""
+    with locked_folder(out):
+        return _run_cases(cases, settings, out, pictures, log)
+
+
+def _run_cases(cases: list[Case], settings, out: Path, pictures: bool,
+               log: Callable[[str], None] | None) -> list[dict]:
     from ..publish.outputs import claim_planned_outputs, write_outputs
     from ..publish.record import input_hash
     from ..run.session import run
 
-    out.mkdir(parents=True, exist_ok=True)
-    before = {r["key"]: r for r in sweep_table.read_rows(out)}
     rows: list[dict] = []
+    traced: dict[str, bool] = {}
     for i, case in enumerate(cases):
-        scene = read_case(case)
-        expected = input_hash(SimpleNamespace(scene=scene, settings=settings))
-        old = before.get(case.key)
-        if _current(old, case, expected, settings):
-            rows.append({**old, "traced": False})
-            if log:
-                log(f"[{i + 1}/{len(cases)}] {case.stage.name} {case.label}: current")
-            continue
-        case.folder.mkdir(parents=True, exist_ok=True)
-        claim_planned_outputs(scene, case.folder)
-        t0 = time.perf_counter()
         lost = None
         try:
-            result = run(scene, settings)
-        except ClusterLost as exc:  # the batches that finished are written, then said
-            result, lost = exc.result, exc
-        record = write_outputs(result, case.folder, sublayer=False, pictures=pictures)
-        rows.append(sweep_table.row(case, record, expected, _request(settings),
-                                    complete=lost is None, wall=time.perf_counter() - t0))
-        sweep_table.write(out, rows + [r for r in before.values()
-                                       if r["key"] not in {x["key"] for x in rows}])
+            if case.error:
+                raise LumitraceError(case.error, str(case.stage))
+            scene = read_case(case)
+            expected = input_hash(SimpleNamespace(scene=scene, settings=settings))
+            old = read_record(case.folder)
+            if _current(old, case, expected, settings):
+                rows.append({**old, "traced": False})
+                traced[case.key] = False
+                if log:
+                    log(f"[{i + 1}/{len(cases)}] {case.name}: current")
+                continue
+            case.folder.mkdir(parents=True, exist_ok=True)
+            claim_planned_outputs(scene, case.folder)
+            t0 = time.perf_counter()
+            try:
+                result = run(scene, settings)
+            except ClusterLost as exc:  # the batches that finished are written, then said
+                result, lost = exc.result, exc
+            record = write_outputs(result, case.folder, sublayer=False, pictures=pictures)
+            row = sweep_table.row(case, record, expected, _request(settings),
+                                  complete=lost is None, wall=time.perf_counter() - t0)
+            said = f"{record['photons']:,} photons, {record['seconds']:.1f} s"
+        except ClusterLost:
+            raise
+        except Exception as exc:  # noqa: BLE001 - lumitrace's and USD's errors: one row
+            from pxr import Tf
+
+            if not isinstance(exc, (LumitraceError, OSError, Tf.ErrorException)):
+                raise
+            row = sweep_table.failed_row(case, f"{case.name}: {_reason(exc)}")
+            said = f"failed: {_reason(exc)}"
+        row = {**row, "traced": not row.get("error")}
+        _record(case, row)
+        rows.append(row)
+        traced[case.key] = row["traced"]
+        _write_table(out, traced)
         if log:
-            log(f"[{i + 1}/{len(cases)}] {case.stage.name} {case.label}: "
-                f"{record['photons']:,} photons, {record['seconds']:.1f} s")
+            log(f"[{i + 1}/{len(cases)}] {case.name}: {said}")
         if lost is not None:
             raise lost.written(record["photons"])
-    sweep_table.write(out, rows)
+    _write_table(out, traced)
     return rows

@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from ..run.settings import scheduler_address
+
 
 def add_parser(sub) -> None:
     """The ``lumitrace sweep`` command's arguments."""
@@ -27,7 +29,8 @@ def add_parser(sub) -> None:
     w.add_argument("--resolution", type=int, default=64)
     w.add_argument("--seed", type=int, default=0)
     w.add_argument("--threads", type=int, default=None)
-    w.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    w.add_argument("--scheduler", type=scheduler_address, default=None,
+                   metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers")
     w.add_argument("--out", type=Path, default=Path("sweep"),
                    help="the sweep's folder (default ./sweep)")
@@ -35,10 +38,14 @@ def add_parser(sub) -> None:
                    help="draw each case's polar curve and photometric solid (PNG, slow)")
     w.add_argument("--json", action="store_true", help="print the table as one JSON object")
     w.add_argument("--quiet", action="store_true", help="no line per case on stderr")
+    w.epilog = ("exit status: 0 every case traced (or current); 1 a case failed (the others "
+                "ran, the table names it and why); 2 the sweep could not start (no stage, "
+                "another sweep writing into --out); 3 a case missed --target-error")
 
 
 def command(args) -> int:
-    """``lumitrace sweep``: exit 0, or 3 when a target error was given and a case missed it."""
+    """``lumitrace sweep``: exit 0; 1 when a case failed (the others ran; the table names
+    it and why); 3 when a target error was given and a case missed it."""
     from ..run.settings import TraceSettings, default_threads
     from . import sweep_table
     from .sweep import parse_variants, plan, run_sweep, stage_files
@@ -54,11 +61,18 @@ def command(args) -> int:
     cases = plan(stage_files(args.stages), parse_variants(args.variants), args.out.resolve())
     say = None if args.quiet or args.json else lambda s: print(s, file=sys.stderr, flush=True)
     rows = run_sweep(cases, settings, args.out.resolve(), args.pictures, say)
+    failed = [r for r in rows if r.get("error")]
     if args.json:
         print(json.dumps({"rows": rows, "table": str(args.out / sweep_table.CSV),
-                          "overview": str(args.out / sweep_table.HTML)}))
+                          "overview": str(args.out / sweep_table.HTML),
+                          "failed": len(failed)}))
     elif not args.quiet:
-        print(f"{len(rows)} cases ({sum(r['traced'] for r in rows)} traced): "
+        print(f"{len(rows)} cases ({sum(bool(r['traced']) for r in rows)} traced"
+              f"{f', {len(failed)} failed' if failed else ''}): "
               f"{args.out / sweep_table.CSV}, {args.out / sweep_table.HTML}")
+    for r in failed:
+        print(f"lumitrace: error: {r['error']}", file=sys.stderr)
+    if failed:
+        return 1
     missed = args.target_error is not None and not all(r["converged"] for r in rows)
     return 3 if missed else 0

@@ -330,7 +330,7 @@ class Refinement:
         the target on the files (None where they judge it on the map)."""
         if self.settings.target_of != "files":
             return None
-        return files_accuracy(self.accumulator)
+        return files_accuracy(self.scene, self.accumulator)
 
     def _least_photons(self) -> int:
         """Photons traced before the target may stop the session (or size its rounds)."""

@@ -53,6 +53,49 @@ class SettingsError(LumitraceError):
     """A trace setting is out of range or of the wrong type."""
 
 
+#: The form of the Dask scheduler addresses lumitrace connects to (Dask's TCP comm).
+SCHEDULER_FORM = "tcp://HOST:PORT"
+_SCHEDULER = re.compile(r"tcp://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
+                        r":([0-9]{1,5})")
+#: Why the schemes Dask knows but lumitrace does not connect to are refused.
+_SCHEMES = {"tls": "needs TLS certificates, which lumitrace does not pass to Dask",
+            "inproc": "is a scheduler inside one process, which no other process reaches",
+            "ucx": "needs UCX, which lumitrace does not set up",
+            "ws": "is Dask's websocket comm, which lumitrace does not set up",
+            "wss": "is Dask's websocket comm, which lumitrace does not set up"}
+
+
+def scheduler_problem(address) -> str | None:
+    """Why ``address`` is no Dask scheduler address lumitrace connects to (the accepted
+    form is :data:`SCHEDULER_FORM`: a host name, an IPv4 address or an [IPv6] address, and
+    a port 1-65535), or None where it is one."""
+    accepted = f"give the scheduler's address as {SCHEDULER_FORM}, e.g. tcp://127.0.0.1:8786"
+    if not isinstance(address, str):
+        return f"must be text, got {type(address).__name__}"
+    scheme, sep, _ = address.partition("://")
+    if not sep:
+        return f"{address!r} has no scheme: {accepted}"
+    if scheme in _SCHEMES:
+        return f"{scheme}:// {_SCHEMES[scheme]}: {accepted}"
+    if scheme != "tcp":
+        return f"{scheme}:// is not a Dask scheduler's scheme: {accepted}"
+    m = _SCHEDULER.fullmatch(address)
+    if m is None or not 1 <= int(m.group(2)) <= 65535:
+        return f"{address!r} is not a host and a port 1-65535: {accepted}"
+    return None
+
+
+def scheduler_address(text: str) -> str:
+    """``--scheduler``'s argparse type: ``text`` where :func:`scheduler_problem` finds
+    nothing wrong, else the parser's error (exit status 2, before anything runs)."""
+    import argparse
+
+    problem = scheduler_problem(text)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return text
+
+
 def default_threads() -> int:
     """Tracing workers when none are asked for: all cores."""
     return os.cpu_count() or 1
@@ -122,10 +165,9 @@ class TraceSettings:
         if self.workers not in WORKER_MODES:
             raise SettingsError(f"must be one of {', '.join(WORKER_MODES)}, got "
                                 f"{self.workers!r}", prop="workers")
-        if self.scheduler is not None and not (isinstance(self.scheduler, str) and re.fullmatch(
-                r"([a-z]+://)?(\[[0-9a-fA-F:.]+\]|[^\s/:\[\]]+)(:\d+)?(/\S*)?", self.scheduler)):
-            raise SettingsError(f"must be a scheduler address like tcp://HOST:PORT, got "
-                                f"{self.scheduler!r}", prop="scheduler")
+        problem = None if self.scheduler is None else scheduler_problem(self.scheduler)
+        if problem is not None:
+            raise SettingsError(problem, prop="scheduler")
 
     def budget(self) -> int | None:
         """Total photons to trace, or None when only time or error stops the session."""
@@ -141,6 +183,41 @@ class TraceSettings:
 
 #: The settings a service's client may change while it runs.
 KNOBS = ("threshold", "target_error", "photons", "paused")
+#: The largest photon budget and the smallest target error a service's client may ask
+#: for by default (``serve --max-photons``, ``--min-target-error``): about half an hour of
+#: tracing on a laptop's cores, and a grid error ten times below the default target.
+SERVICE_MAX_PHOTONS = 10_000_000_000
+SERVICE_MIN_TARGET_ERROR = 0.002
+
+
+@dataclass(frozen=True)
+class ServiceLimits:
+    """The work a client of a service may ask for through ``/settings``, as the command
+    line that started it allows: a photon budget of at most ``max_photons``, a target
+    error of at least ``min_target_error``."""
+
+    max_photons: int = SERVICE_MAX_PHOTONS
+    min_target_error: float = SERVICE_MIN_TARGET_ERROR
+
+    def __post_init__(self) -> None:
+        put = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731 (frozen)
+        put("max_photons", _integer("max_photons", self.max_photons, 1, MAX_PHOTONS))
+        put("min_target_error", _real("min_target_error", self.min_target_error, 0.0, 1.0,
+                                      lo_open=True))
+
+    def check(self, settings: TraceSettings, options: bool = False) -> None:
+        """Raise :class:`SettingsError` naming ``photons`` or ``target_error`` (or, with
+        ``options``, the command line's option) where ``settings`` asks for more work."""
+        if settings.photons is not None and settings.photons > self.max_photons:
+            raise SettingsError(f"must be at most {self.max_photons:,} (the service's "
+                                f"--max-photons), got {settings.photons:,}",
+                                prop="--photons" if options else "photons")
+        if settings.target_error is not None and \
+                settings.target_error < self.min_target_error:
+            raise SettingsError(f"must be at least {self.min_target_error:g} (the "
+                                f"service's --min-target-error), got "
+                                f"{settings.target_error:g}",
+                                prop="--target-error" if options else "target_error")
 
 
 def with_knobs(settings: TraceSettings, changes: dict) -> tuple[TraceSettings, bool | None]:

@@ -308,6 +308,11 @@ class Scene:
     #: per part, its own triangles and placement where it has one placement (else None;
     #: empty: none known): the same world triangles, as the tracer's structure takes them
     part_frames: tuple = field(default=(), compare=False, repr=False)
+    #: the symmetry declared on the luminaire prim ("": none declared, lumitrace shows it)
+    declared_symmetry: str = ""
+    #: a declared luminous opening: (shape "rectangular" or "round", (length along C0,
+    #: width along C90, height) in m); () where it is measured from the photons
+    declared_opening: tuple = ()
 
     @property
     def photometric_axes(self) -> np.ndarray:
@@ -415,6 +420,8 @@ class Scene:
                 except OSError:
                     h.update(b"unreadable file")
         h.update(self.up_axis.encode())
+        if self.declared_symmetry or self.declared_opening:  # they shape the files
+            h.update(repr((self.declared_symmetry, self.declared_opening)).encode())
         if self.luminaire_to_world:
             h.update(np.asarray(self.photometric_axes, np.float64).tobytes())
         return h.hexdigest()

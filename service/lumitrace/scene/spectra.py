@@ -28,17 +28,28 @@ BANDS = 41
 LINE_D, LINE_F, LINE_C = 587.56, 486.13, 656.27
 
 
+def colour_science():
+    """colour-science, imported without its note that SciPy is absent: lumitrace uses none
+    of its SciPy-based functions, and SciPy is not one of its dependencies."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message='"SciPy" related API features')
+        import colour
+    return colour
+
+
 @functools.lru_cache(maxsize=1)
 def observer() -> np.ndarray:
     """CIE 1931 2 degree colour-matching functions on :data:`WAVELENGTHS`, (401, 3)."""
-    import colour
+    colour = colour_science()
 
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy()
     return np.ascontiguousarray(cmfs.align(_shape()).values, np.float64)
 
 
 def _shape():
-    import colour
+    colour = colour_science()
 
     return colour.SpectralShape(float(WAVELENGTHS[0]), float(WAVELENGTHS[-1]), 1.0)
 
@@ -47,7 +58,7 @@ def _shape():
 def d65() -> np.ndarray:
     """CIE standard illuminant D65 on the grid (relative power): the white of a light whose
     colour is given in linear Rec.709 RGB only."""
-    import colour
+    colour = colour_science()
 
     return np.ascontiguousarray(colour.SDS_ILLUMINANTS["D65"].copy().align(_shape()).values)
 

@@ -1,7 +1,9 @@
 """The HTTP face of the service (aiohttp): status, deltas, the event stream, results.
 
 Every answer is JSON (the event stream excepted); every failure is a 4xx or 5xx JSON body
-``{"error": ..., "problems": [{"where", "why"}, ...]}`` and never stops the service.
+``{"error": ..., "problems": [{"where", "why"}, ...]}`` and never stops the service. Every
+request passes the :class:`~lumitrace.serve.guard.Guard` (Host, Origin, JSON bodies, the
+page's key) and, with a token, the bearer check, before its handler runs.
 """
 from __future__ import annotations
 
@@ -16,13 +18,19 @@ from ..delta.protocol import DeltaError, delta_schema, parse_json_object, parse_
 from ..errors import LumitraceError
 from .engine import Engine
 from .events import EventLog
+from .guard import Guard, header_bytes
 from .live import LiveStage
+from .reference import MAX_FILE_CHARS, KeptFrames, reference_frame
 from .viewer import PAGE_DIR, PAGE_FILES, PreviewCache, editable_scene, geometry_frame
 
 #: Largest request body accepted (bytes): a layer fragment or a mesh's points fit.
 MAX_BODY_BYTES = 8 << 20
-#: What the page may load: its own files only (no CDN, no network), inline styles.
-PAGE_POLICY = "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'"
+#: What the page may load: its own files only (no CDN, no network), inline styles; no
+#: other page may frame it.
+PAGE_POLICY = ("default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; "
+               "frame-ancestors 'none'")
+#: Where the page file holds the service's key (:attr:`Guard.key`), replaced when served.
+KEY_PLACEHOLDER = b"LUMITRACE-KEY"
 #: Seconds between keep-alive comments on an idle event stream.
 KEEPALIVE_SECONDS = 15.0
 
@@ -36,32 +44,32 @@ def _problem(status: int, message: str, problems=()) -> web.Response:
     return _json({"error": message, "problems": [p.as_dict() for p in problems]}, status)
 
 
-def _header_bytes(value: str) -> bytes:
-    """A header's value as the bytes the client sent: what is not UTF-8 (Latin-1, say)
-    arrives as surrogate escapes, which a plain ``encode`` refuses (a 500 for a wrong
-    token)."""
-    try:
-        return value.encode("utf-8", "surrogateescape")
-    except UnicodeEncodeError:  # a lone surrogate no client byte maps to
-        return value.encode("utf-8", "surrogatepass")
-
-
 def make_app(live: LiveStage, engine: Engine, events: EventLog,
-             token: str | None = None, viewer: bool = True) -> web.Application:
+             token: str | None = None, viewer: bool = True,
+             guard: Guard | None = None) -> web.Application:
     """The aiohttp application of a running service (with the live view page unless
-    ``viewer`` is False)."""
-    previews = PreviewCache()
+    ``viewer`` is False); ``guard`` holds its Host names and the page's key (a service
+    bound to 127.0.0.1 when None)."""
+    guard = guard if guard is not None else Guard()
+    kept = KeptFrames()
+    previews = PreviewCache(kept)
     if viewer:  # an edit's first preview is made as soon as its map is, before its files
-        engine.refreshed = lambda: previews.get(engine, hold=False)
+        # (its UGR figures with the next frame; a done revision's, kept, has them)
+        engine.refreshed = lambda: previews.get(engine, hold=False, ugr=engine.done)
 
     @web.middleware
-    async def guard(request: web.Request, handler):
+    async def checks(request: web.Request, handler):
         # the page's own files hold no data: they load without the token, and the page
         # then sends it with every request it makes
-        public = viewer and request.method == "GET" and (
+        public = viewer and request.method in ("GET", "HEAD") and (
             request.path == "/" or request.path.startswith("/page/"))
+        refusal = guard.check(request.method, request.headers,
+                              request.content_type if "Content-Type" in request.headers
+                              else "", page_file=public)
+        if refusal is not None:
+            return _problem(refusal.status, refusal.message)
         if token is not None and not public:
-            given = _header_bytes(request.headers.get("Authorization", ""))
+            given = header_bytes(request.headers.get("Authorization", ""))
             if not hmac.compare_digest(given, f"Bearer {token}".encode()):
                 return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
                                      "TOKEN)")
@@ -114,7 +122,13 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             last_id = max(0, int(last))
         except ValueError:
             return _problem(400, f"Last-Event-ID must be an event id, got {last!r}")
-        last_id, gap = events.resume(last_id)
+        if not request.headers.get("Last-Event-ID"):  # a resuming client goes on from its id
+            try:
+                last_id, gap = _start(events, request.query, last_id)
+            except ValueError as exc:
+                return _problem(400, str(exc))
+        else:
+            last_id, gap = events.resume(last_id)
         if request.query.get("format") == "json":  # the history so far, not a stream
             return _json({"events": [e.as_dict() for e in events.since(last_id)],
                           "oldest_id": events.oldest_id(), "first_id": events.first_id,
@@ -140,15 +154,20 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
         name = request.match_info.get("name", "index.html")
         if name not in PAGE_FILES:
             return _problem(404, f"no page file {name!r}")
-        return web.Response(body=(PAGE_DIR / name).read_bytes(),
-                            content_type=PAGE_FILES[name],
-                            headers={"Cache-Control": "no-cache",
-                                     "Content-Security-Policy": PAGE_POLICY})
+        body = (PAGE_DIR / name).read_bytes()
+        if name == "index.html":  # the key, for this origin's eyes only (never cached)
+            body = body.replace(KEY_PLACEHOLDER, guard.key.encode())
+        return web.Response(body=body, content_type=PAGE_FILES[name],
+                            headers={"Cache-Control": "no-store" if name == "index.html"
+                                     else "no-cache",
+                                     "Content-Security-Policy": PAGE_POLICY,
+                                     "X-Frame-Options": "DENY",
+                                     "Referrer-Policy": "no-referrer"})
 
     async def preview(_request: web.Request) -> web.Response:
         data = await asyncio.get_running_loop().run_in_executor(None, previews.get, engine)
-        if data is None:
-            return _problem(404, "nothing traced yet")
+        if data is None:  # not an error: a client waits for the first frame quietly
+            return web.Response(status=204, headers={"Cache-Control": "no-store"})
         return web.Response(body=data, content_type="application/octet-stream",
                             headers={"Cache-Control": "no-store"})
 
@@ -164,7 +183,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
         rev = engine.revision
         if rev is None:
             return _problem(404, "no revision taken yet")
-        return _json(editable_scene(rev.scene, rev.number))
+        return _json(editable_scene(rev.scene, rev.number, rev.transforms))
 
     async def settings(request: web.Request) -> web.Response:
         if request.method == "GET":
@@ -177,7 +196,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
         except LumitraceError as exc:
             return _problem(422, str(exc))
 
-    app = web.Application(middlewares=[guard], client_max_size=MAX_BODY_BYTES)
+    app = web.Application(middlewares=[checks], client_max_size=MAX_BODY_BYTES)
     app.add_routes([web.get("/status", status), web.post("/deltas", deltas),
                     web.get("/events", stream), web.get("/results", results),
                     web.get("/schema", schema), web.get("/preview", preview),
@@ -185,4 +204,69 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
                     web.get("/settings", settings), web.post("/settings", settings)])
     if viewer:
         app.add_routes([web.get("/", page), web.get("/page/{name}", page)])
+        app.add_routes(_compare_routes(kept))
     return app
+
+
+def _start(events: EventLog, query, last_id: int) -> tuple[int, dict | None]:
+    """Where a new stream (or history) starts: after ``last_id`` (``last_id=``), after the
+    newest event (``since=now``: from now on), or at the first event of revision ``N`` or
+    later (``revision=N``); and the gap to report. Raises ValueError for a bad query."""
+    since, revision = query.get("since"), query.get("revision")
+    if since is not None and since != "now":
+        raise ValueError(f"since must be 'now', got {since!r}")
+    if since is not None and revision is not None:
+        raise ValueError("give since=now or revision=N, not both")
+    if since == "now":
+        return events.newest_id(), None
+    if revision is not None:
+        try:
+            number = int(revision)
+        except ValueError:
+            raise ValueError(f"revision must be a revision number, got {revision!r}") \
+                from None
+        return events.before_revision(number)
+    return events.resume(last_id)
+
+
+def _compare_routes(kept: KeptFrames) -> list:
+    """What the live view compares with: the kept preview frames of recent revisions, and
+    a target photometric file made into a frame."""
+
+    async def revisions(_request: web.Request) -> web.Response:
+        return _json({"revisions": kept.summaries()})
+
+    async def revision_preview(request: web.Request) -> web.Response:
+        try:
+            number = int(request.match_info["number"])
+        except ValueError:
+            return _problem(400, f"not a revision number: {request.match_info['number']!r}")
+        data = kept.get(number)
+        if data is None:
+            return _problem(404, f"no preview of revision {number} is kept (the newest "
+                                 "revisions' are: GET /revisions)")
+        return web.Response(body=data, content_type="application/octet-stream",
+                            headers={"Cache-Control": "no-store"})
+
+    async def reference(request: web.Request) -> web.Response:
+        try:
+            body = parse_json_object(await request.read())
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+        name, text = body.get("name", "target"), body.get("text")
+        if not isinstance(name, str) or not isinstance(text, str):
+            return _problem(400, "give the file as {\"name\": NAME, \"text\": ITS TEXT} "
+                                 "(strings)")
+        if len(text) > MAX_FILE_CHARS:
+            return _problem(413, f"the file is larger than {MAX_FILE_CHARS} characters")
+        try:
+            data = await asyncio.get_running_loop().run_in_executor(
+                None, reference_frame, name, text)
+        except LumitraceError as exc:
+            return _problem(422, str(exc))
+        return web.Response(body=data, content_type="application/octet-stream",
+                            headers={"Cache-Control": "no-store"})
+
+    return [web.get("/revisions", revisions),
+            web.get("/revisions/{number}/preview", revision_preview),
+            web.post("/reference", reference)]

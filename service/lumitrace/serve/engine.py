@@ -24,7 +24,7 @@ from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord, defined
 from ..run.incremental import Selection, retrace, select
 from ..run.session import Refinement
-from ..run.settings import TraceSettings, with_knobs
+from ..run.settings import ServiceLimits, TraceSettings, with_knobs
 from ..trace.prepared import TracingFrame, prepare
 from ..trace.tracer import trace_batch
 from .events import EventLog
@@ -70,8 +70,11 @@ class Engine:
 
     def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
                  out_dir: Path | None = None, records_cap: int = RECORDS_CAP,
-                 sublayer: bool = True, deliverables: bool = False):
+                 sublayer: bool = True, deliverables: bool = False,
+                 limits: ServiceLimits | None = None):
         self.live = live
+        #: the photon budget and target error a client may set (the command line's)
+        self.limits = limits if limits is not None else ServiceLimits()
         # an edit waits for the batches running when it comes: small ones (the counts are
         # the same for any batch size, and the rounds still grow with the photons)
         self.settings = replace(settings, workers="threads",
@@ -180,6 +183,7 @@ class Engine:
         A new threshold re-filters the current map at once, without retracing; a new
         target or budget goes on refining (or stops) from the photons traced."""
         new, paused = with_knobs(self.settings, changes)
+        self.limits.check(new)
         knobs = bool(set(changes) - {"paused"})
         with self._cv:
             refilter = new.threshold != self.settings.threshold
@@ -262,6 +266,7 @@ class Engine:
                 "relative_error": defined(est.error) if est else None,
                 "relative_error_bound": defined(est.error_bound) if est else None,
                 **self._judged(r),
+                "target_error": self.settings.convergence_target,
                 "photons_per_second": (acc.photons / elapsed) if acc else 0.0,
                 "written_revision": self.written.get("revision"),
                 "written_photons": self.written.get("photons"),

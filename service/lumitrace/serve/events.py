@@ -102,6 +102,29 @@ class EventLog:
         with self._lock:
             return [e for e in self._events if e.id > last_id]
 
+    def newest_id(self) -> int:
+        """The id of the newest event (``first_id - 1`` before any)."""
+        with self._lock:
+            return self._events[-1].id if self._events else self.first_id - 1
+
+    def before_revision(self, revision: int) -> tuple[int, dict[str, Any] | None]:
+        """Where a client following from ``revision`` starts: after the event before the
+        first kept event of that revision or a later one (after the newest event where
+        there is none yet), and the gap to report where the ring has dropped older events
+        and the first kept one is of a later revision already."""
+        with self._lock:
+            kept = list(self._events)
+        earlier = False  # a kept event of an earlier revision: nothing of this one is lost
+        for e in kept:
+            number = e.data.get("revision")
+            if not isinstance(number, int):
+                continue
+            if number >= revision:
+                lost = not earlier and number > revision and kept[0].id > self.first_id
+                return e.id - 1, {"missed_before": e.id, "restart": False} if lost else None
+            earlier = True
+        return (kept[-1].id if kept else self.first_id - 1), None
+
     def oldest_id(self) -> int:
         with self._lock:
             return self._events[0].id if self._events else 0

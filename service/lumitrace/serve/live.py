@@ -11,7 +11,7 @@ import asyncio
 import functools
 import hashlib
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -34,6 +34,7 @@ from ..stage.reader import scene_from_stage
 from ..stage.reuse import ReadCache
 from ..trace.profiles import profile_table
 from .state import ServiceState
+from .transforms import part_transforms
 
 
 class LayerUnreadable(LumitraceError):
@@ -55,6 +56,9 @@ class Revision:
     effect: Effect
     source: str  # "start", "delta" or "file"
     layers: tuple[str, ...] = ()  # the layer files whose edit made it
+    #: per part path, its local transform as the editor shows it
+    #: (:func:`~lumitrace.serve.transforms.part_transforms`), read with the scene
+    transforms: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def check_profiles(scene: Scene) -> None:
@@ -188,7 +192,8 @@ class LiveStage:
 
     def start(self) -> Revision:
         """The revision the service starts from (the edits layer's last one)."""
-        return Revision(self.revision, self.scene, Effect("topology"), "start")
+        return Revision(self.revision, self.scene, Effect("topology"), "start",
+                        transforms=self.call(self._transforms, self.scene))
 
     def apply(self, deltas: list[dict], base_revision: int | None = None) -> Revision:
         """Apply a batch of deltas (all or none), persist the edits layer durably and read
@@ -219,7 +224,8 @@ class LiveStage:
         self.scene, self.revision = scene, revision
         for path in self.asset_files():  # a light's file a delta named: watched from now on
             self.known.setdefault(path, file_digest(path))
-        return Revision(revision, scene, effect, "delta")
+        return Revision(revision, scene, effect, "delta",
+                        transforms=self._transforms(scene))
 
     def reload(self, paths: set[Path]) -> Revision | None:
         """Reload the used layers among ``paths`` whose content changed (``force``: USD
@@ -256,7 +262,12 @@ class LiveStage:
         self.scene = scene
         self._remember_files()  # new sublayers, references or light files are watched now
         return Revision(self.revision, scene, effect, "file",
-                        tuple(str(p) for p, _ in changed))
+                        tuple(str(p) for p, _ in changed), self._transforms(scene))
+
+    def _transforms(self, scene: Scene) -> dict:
+        """The parts' local transforms as the editor shows them, read now (on the USD
+        thread, with the scene they belong to)."""
+        return part_transforms(self.stage, scene.parts, scene.time_code)
 
     def _record(self, revision: int, scene: Scene) -> None:
         """Record a revision handed out (a restarted service goes on above it)."""

@@ -12,10 +12,11 @@ from pathlib import Path
 from aiohttp import web
 
 from ..errors import LumitraceError, LumitraceWarning
-from ..run.settings import TraceSettings
+from ..run.settings import ServiceLimits, TraceSettings
 from .app import make_app
 from .engine import Engine
 from .events import EventLog
+from .guard import Guard
 from .live import LiveStage
 from .lock import StageLock
 from .log import echo_events
@@ -47,12 +48,21 @@ def check_binding(host: str, token: str | None) -> None:
 def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           port: int = DEFAULT_PORT, token: str | None = None,
           out_dir: Path | None = None, viewer: bool = True, quiet: bool = False,
-          sublayer: bool = True, deliverables: bool = False) -> int:
+          sublayer: bool = True, deliverables: bool = False, allow_hosts=(),
+          limits: ServiceLimits | None = None) -> int:
     """Run the service until a signal; return the exit status (0). ``viewer`` serves the
     live view page at ``/``; ``quiet`` says nothing on stderr but the fatal; ``sublayer``
     False leaves the stage file untouched (the result layer is not sublayered into it);
-    ``deliverables`` writes the datasheet and the GLDF container with the pictures."""
+    ``deliverables`` writes the datasheet and the GLDF container with the pictures;
+    ``allow_hosts`` are the names besides loopback ones and ``host`` that requests may
+    give as their ``Host``; ``limits`` bound what a client may set through /settings."""
     check_binding(host, token)
+    try:
+        guard = Guard.of(host, allow_hosts)
+    except ValueError as exc:
+        raise LumitraceError(str(exc)) from None
+    limits = limits if limits is not None else ServiceLimits()
+    limits.check(settings, options=True)
     lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
         state = ServiceState.of(stage)  # revisions and event ids go on from the last run
@@ -60,9 +70,10 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
                           block=EVENT_BLOCK)
         live = LiveStage(stage, state=state)
         engine = Engine(live, settings, events, out_dir, sublayer=sublayer,
-                        deliverables=deliverables)
+                        deliverables=deliverables, limits=limits)
         try:
-            asyncio.run(_main(live, engine, events, host, port, token, lock, viewer, quiet))
+            asyncio.run(_main(live, engine, events, host, port, token, lock, viewer, quiet,
+                              guard))
         finally:
             live.close()
     finally:
@@ -86,7 +97,7 @@ def _route_warnings(events: EventLog) -> None:
 
 async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
                 token: str | None, lock: StageLock, viewer: bool = True,
-                quiet: bool = False) -> None:
+                quiet: bool = False, guard: Guard | None = None) -> None:
     loop = asyncio.get_running_loop()
     events.bind(loop)
     echo = None if quiet else asyncio.create_task(echo_events(events))
@@ -94,7 +105,7 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         loop.add_signal_handler(sig, stop.set)
-    runner = web.AppRunner(make_app(live, engine, events, token, viewer),
+    runner = web.AppRunner(make_app(live, engine, events, token, viewer, guard),
                            handle_signals=False,
                            access_log=None)
     await runner.setup()

@@ -27,6 +27,7 @@ from ..film.cubemap import bilinear_taps, face_size, sample_map
 from ..photometry import frame
 from ..photometry.distribution import photometry_of
 from ..photometry.quantities import scaled_figures
+from ..photometry.ugr import ugr_table
 from ..publish.record import defined
 from ..scene import Scene
 
@@ -39,7 +40,7 @@ MAX_TRIANGLES = 150_000
 #: The files the page is made of (served from the package, no network).
 PAGE_DIR = Path(__file__).with_name("page")
 PAGE_FILES = {"index.html": "text/html", "viewer.js": "text/javascript",
-              "viewer.css": "text/css"}
+              "compare.js": "text/javascript", "viewer.css": "text/css"}
 
 
 def frame_bytes(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
@@ -107,28 +108,35 @@ class _Cached:
     lights: tuple
     header: dict
     arrays: dict
+    #: whether its figures hold the UGR (computed, even where undefined)
+    ugr: bool = True
 
 
 class PreviewCache:
     """The current preview frame, made once per (revision, photons, threshold)."""
 
-    def __init__(self) -> None:
+    def __init__(self, kept=None) -> None:
+        #: where every frame made is handed (:class:`~lumitrace.serve.reference.KeptFrames`)
+        self.kept = kept
         self._lock = threading.Lock()
         # one frame is made at a time: requests arriving while it is made wait for it and
         # take it, rather than each making its own (and slowing every one down)
         self._making = threading.Lock()
         self._cached: _Cached | None = None
 
-    def get(self, engine, hold: bool = True) -> bytes | None:
+    def get(self, engine, hold: bool = True, ugr: bool = True) -> bytes | None:
         """The current preview frame of ``engine``; with ``hold`` (a client's request) the
         last frame while the engine is about to replace it (:meth:`Engine.preview_waits`),
-        without (the engine's own refresh) always the current one."""
+        without (the engine's own refresh) always the current one. ``ugr`` False leaves
+        the UGR figures out of a frame made now (an edit's first preview, which a designer
+        waits for: they come with the next one)."""
         # the key first: a client polling an unchanged preview costs no copy of the counts
         key = engine.snapshot_key()
         if key is None:
             return None
         with self._lock:
-            if self._cached is not None and self._cached.key == key:
+            if self._cached is not None and self._cached.key == key and \
+                    (self._cached.ugr or not ugr):
                 return self._cached.data
         early = self._earlier_rescaled(engine, key)
         if early is not None:
@@ -144,24 +152,27 @@ class PreviewCache:
             key = (snap["revision"], snap["photons"], snap["threshold"], snap["iteration"])
             with self._lock:
                 last = self._cached
-            if last is not None and last.key == key:
+            if last is not None and last.key == key and (last.ugr or not ugr):
                 return last.data
             acc = snap["accumulator"]
             lights = acc.light_state()
             k = flux_scale(last.lights, lights) if last is not None and \
-                last.version == acc.version and last.key[2] == key[2] else None
+                last.version == acc.version and last.key[2] == key[2] and \
+                (last.ugr or not ugr) else None
             if k is not None:  # the same counts, every light dimmed alike: a rescale
                 header, arrays = _rescaled(last.header, last.arrays, k, snap["revision"],
                                            snap["seconds"], iterations=snap["iteration"],
                                            target_error=snap["target"],
                                            converged=snap["converged"])
             else:
-                header, arrays = preview_parts(**snap)
+                header, arrays = preview_parts(**snap, ugr=ugr)
             data = frame_bytes(header, arrays)
             with self._lock:
                 if self._cached is None or self._cached.key[0] <= key[0]:  # none newer
                     self._cached = _Cached(key, data, acc.version, acc.lineage, lights,
-                                           header, arrays)
+                                           header, arrays, last.ugr if k is not None else ugr)
+            if self.kept is not None:
+                self.kept.keep(header, data)
         return data
 
     def _earlier_rescaled(self, engine, key: tuple) -> bytes | None:
@@ -187,7 +198,10 @@ class PreviewCache:
         with self._lock:
             if self._cached is last:  # no newer frame was made meanwhile
                 self._cached = _Cached((revision, *last.key[1:]) if done else key, data,
-                                       last.version, last.lineage, lights, header, arrays)
+                                       last.version, last.lineage, lights, header, arrays,
+                                       last.ugr)
+        if self.kept is not None:
+            self.kept.keep(header, data)
         return data
 
 
@@ -211,15 +225,18 @@ def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: floa
     """A preview's header and arrays for the same counts with every light's flux times
     ``k``, as revision ``revision`` (and the header's fields ``changes``): intensities and
     fluxes scale, angles and relative errors stay."""
+    figures = scaled_figures(header["figures"], k)
+    for key in UGR_KEYS[::2]:  # L^2 omega / Lb scales with k: UGR moves by 8 log10 k
+        if figures.get(key) is not None:
+            figures[key] += 8.0 * math.log10(k)
     header = {**header, **changes, "revision": revision, "seconds": seconds,
-              "lamp_lumens": header["lamp_lumens"] * k,
-              "figures": scaled_figures(header["figures"], k)}
+              "lamp_lumens": header["lamp_lumens"] * k, "figures": figures}
     return header, {name: a * k for name, a in arrays.items()}
 
 
 def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
-                  converged: bool, seconds: float) -> tuple[dict, dict]:
+                  converged: bool, seconds: float, ugr: bool = True) -> tuple[dict, dict]:
     """The header and arrays of a refinement's preview (an
     :meth:`~lumitrace.serve.engine.Engine.snapshot`): the map (filtered and raw, cd) on a
     lat-long grid in the photometric frame, the published C-gamma grid (cd) with its
@@ -232,13 +249,15 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
     shape = (len(LATLONG_GAMMA), len(LATLONG_C))
     both = np.stack([est.filtered, est.raw], axis=-1)
     filtered, raw = (m.reshape(shape) for m in sample_map(both, None, taps).T)
-    fig = ph.figures.as_dict()
+    fig = {**ph.figures.as_dict(),
+           **(catalogue_ugr(ph) if ugr else dict.fromkeys(UGR_KEYS))}
     header = {
         "revision": revision, "photons": photons, "iterations": iteration,
         "seconds": seconds, "threshold": threshold, "target_error": target,
         "relative_error": defined(est.error), "relative_error_bound": defined(est.error_bound),
         "raw_relative_error": defined(est.raw_error), "stepped_back": bool(est.stepped_back),
         "converged": converged, "lamp_lumens": ph.lamp_flux, "symmetry": ph.grid.symmetry,
+        "symmetry_source": ph.symmetry.source,
         "c": full.c.tolist(), "gamma": full.gamma.tolist(),
         "latlong": {"c": LATLONG_C.tolist(), "gamma": LATLONG_GAMMA.tolist()},
         "figures": {k: _plain(v) for k, v in fig.items()},
@@ -246,6 +265,28 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
     }
     sigma = full.sigma if full.sigma is not None else np.zeros_like(full.candela)
     return header, {"filtered": filtered, "raw": raw, "grid": full.candela, "sigma": sigma}
+
+
+#: The UGR figures a preview carries (4H x 8H, 70/50/20, crosswise and endwise), each
+#: followed by its standard error.
+UGR_KEYS = ("ugr_4h8h_70_50_20", "ugr_4h8h_70_50_20_error", "ugr_4h8h_70_50_20_endwise",
+            "ugr_4h8h_70_50_20_endwise_error")
+#: The last photometry whose UGR was computed, and its UGR figures.
+_LAST_UGR: list = [None, None]
+
+
+def catalogue_ugr(ph) -> dict[str, float | None]:
+    """The catalogue UGR figures (:data:`UGR_KEYS`) of a
+    :class:`~lumitrace.photometry.distribution.Photometry` (None where its opening has no
+    area or no light leaves), computed once per photometry (a few ms)."""
+    if _LAST_UGR[0] is ph:
+        return _LAST_UGR[1]
+    out = dict.fromkeys(UGR_KEYS)
+    if (ph.opening.area > 0 or ph.opening.height > 0) and ph.figures.luminous_flux > 0:
+        table = ugr_table(ph.grid, ph.opening).as_dict()
+        out = {k: defined(table[k]) for k in UGR_KEYS}
+    _LAST_UGR[:] = [ph, out]
+    return out
 
 
 def _plain(value: Any) -> Any:
@@ -260,16 +301,20 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-def editable_scene(scene: Scene, revision: int) -> dict[str, Any]:
-    """The parts, their materials (the prim that holds each material's values, and the
-    values), the emitters and their fluxes, with the ranges a delta must respect."""
+def editable_scene(scene: Scene, revision: int,
+                   transforms: dict[str, dict] | None = None) -> dict[str, Any]:
+    """The parts (with their local ``transforms`` where given:
+    :func:`~lumitrace.serve.transforms.part_transforms`), their materials (the prim that
+    holds each material's values, and the values), the emitters and their fluxes, with the
+    ranges a delta must respect."""
     index = np.asarray(scene.material_index)
     part = np.asarray(scene.part_index)
     parts = []
     for k, name in enumerate(scene.parts):
         mats = sorted(set(index[part == k].tolist()))
         parts.append({"path": name, "materials": [scene.materials[m].path for m in mats],
-                      "triangles": int((part == k).sum())})
+                      "triangles": int((part == k).sum()),
+                      "transform": (transforms or {}).get(name)})
     materials = [{"path": m.path, "scattering": m.scattering, "reflectance": m.reflectance,
                   "specularReflectance": m.specular_reflectance,
                   "transmittance": m.transmittance, "ior": m.ior, "roughness": m.roughness,

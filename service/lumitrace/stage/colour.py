@@ -59,7 +59,7 @@ def sampled_spectrum(prim: Usd.Prim, name: str, time: Usd.TimeCode) -> np.ndarra
 def named_illuminant(text: str, where: str) -> np.ndarray:
     """The spectrum of ``lumitrace:illuminant``: "blackbody T", "daylight T" (K) or a
     colour-science illuminant or light source name."""
-    import colour
+    colour = spectra.colour_science()
 
     words = text.split()
     if len(words) == 2 and words[0].lower() in ("blackbody", "daylight"):
@@ -86,14 +86,14 @@ def _on_grid(sd) -> np.ndarray:
 
 def blackbody(cct: float) -> np.ndarray:
     """A Planckian radiator of ``cct`` K on the grid (relative power)."""
-    import colour
+    colour = spectra.colour_science()
 
     return _on_grid(colour.sd_blackbody(cct, spectra._shape()))
 
 
 def daylight(cct: float) -> np.ndarray:
     """CIE daylight of correlated colour temperature ``cct`` K on the grid."""
-    import colour
+    colour = spectra.colour_science()
 
     xy = colour.temperature.CCT_to_xy_CIE_D(cct)
     return _on_grid(colour.sd_CIE_illuminant_D_series(xy))
@@ -105,7 +105,7 @@ def tint(rgb) -> np.ndarray | None:
     c = np.clip(np.asarray(rgb, np.float64), 0.0, None)
     if c.max() <= 0.0 or np.ptp(c) <= 1e-6 * c.max():
         return None
-    import colour
+    colour = spectra.colour_science()
 
     sd = colour.recovery.RGB_to_sd_Mallett2019(c / c.max())
     return np.clip(_on_grid(sd), 0.0, 1.0)

@@ -60,6 +60,7 @@ from ..scene.groups import group_emitters
 from . import validate
 from .diagnostics import UsdDiagnostics, check_composition, check_sublayers, tf_message
 from .geometry import LocalMesh, local_mesh, non_degenerate
+from .luminaire_data import LUMINAIRE_DATA, luminaire_data_problem
 from .lights import body_triangles, has_body, light_kind, read_light, read_mesh_light
 from .profile import has_profile, mesh_agrees, read_profile
 from .materials import BoundMaterials
@@ -257,36 +258,70 @@ class _Reader:
             layer_files=tuple(sorted(layer.realPath for layer in self.stage.GetUsedLayers()
                                      if layer.realPath)),  # (USD's order is a set's)
             info=self._luminaire_info(root),
+            declared_symmetry=self._declared_symmetry(root),
+            declared_opening=self._declared_opening(root),
         )
+
+    def _authored(self, prim: Usd.Prim, name: str):
+        """An attribute's authored value at the reading time, or None."""
+        attr = prim.GetAttribute(name)
+        return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+
+    def _declared_symmetry(self, root: Usd.Prim) -> str:
+        """The symmetry declared on the luminaire prim ("" where none is: auto)."""
+        value = self._authored(root, schema.SYMMETRY)
+        if value is None:
+            return ""
+        value = validate.check_token(value, schema.SYMMETRY_TOKENS, str(root.GetPath()),
+                                     schema.SYMMETRY)
+        return "" if value == "auto" else value
+
+    def _declared_opening(self, root: Usd.Prim) -> tuple:
+        """A declared luminous opening: (shape, (length, width, height) in m), or ()."""
+        where = str(root.GetPath())
+        shape = self._authored(root, schema.OPENING_SHAPE)
+        size = self._authored(root, schema.OPENING_SIZE)
+        if shape is not None:
+            shape = validate.check_token(shape, schema.OPENING_SHAPES, where,
+                                         schema.OPENING_SHAPE)
+        if shape in (None, "measured"):
+            return ()
+        if size is None:
+            raise StageError(f"{schema.OPENING_SHAPE} is {shape!r}: author its size "
+                             "(length, width, height in stage units)", where,
+                             schema.OPENING_SIZE)
+        values = validate.check_array(size, where, schema.OPENING_SIZE)
+        if values.shape != (3,) or not np.all(np.isfinite(values)) or np.any(values < 0) \
+                or np.any(values[:2] <= 0):
+            raise StageError("must be (length, width, height), length and width above 0 "
+                             f"and height at least 0, got {tuple(values.tolist())}", where,
+                             schema.OPENING_SIZE)
+        if shape == "round" and values[0] != values[1]:
+            raise StageError("a round opening has one diameter: length and width must be "
+                             f"equal, got {values[0]:g} and {values[1]:g}", where,
+                             schema.OPENING_SIZE)
+        return shape, tuple(float(v) * self.meters_per_unit for v in values)
 
     def _luminaire_info(self, root: Usd.Prim) -> LuminaireInfo:
         """The luminaire's own data (manufacturer, names, lamp, power, colour rendering),
-        checked: text must be text without NUL, the power finite and at least 0, the
-        colour rendering index finite and at most 100."""
+        checked as :mod:`.luminaire_data` says: one line of printable text, the power
+        finite and at least 0, the colour rendering index finite in [0, 100]."""
         where = str(root.GetPath())
-
-        def authored(name: str):
+        values = {}
+        for name in LUMINAIRE_DATA:
             attr = root.GetAttribute(name)
-            return attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
-
-        text = {}
-        for name in schema.LUMINAIRE_TEXT:
-            value = authored(name)
-            if value is not None and (not isinstance(value, str) or "\x00" in value):
-                raise StageError(f"must be text, got {value!r}", where, name)
-            text[name] = (value or "").strip()
-        power = authored(schema.INPUT_POWER)
-        power = None if power is None else validate.check_non_negative(
-            power, where, schema.INPUT_POWER)
-        cri = authored(schema.COLOUR_RENDERING_INDEX)
-        if cri is not None:
-            cri = validate.check_finite(cri, where, schema.COLOUR_RENDERING_INDEX)
-            if cri > 100.0:
-                raise StageError(f"must be at most 100, got {cri:g}", where,
-                                 schema.COLOUR_RENDERING_INDEX)
+            value = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+            if value is None:
+                continue
+            problem = luminaire_data_problem(name, value)
+            if problem is not None:
+                raise StageError(problem, where, name)
+            values[name] = value.strip() if isinstance(value, str) else float(value)
+        text = {name: values.get(name, "") for name in schema.LUMINAIRE_TEXT}
         return LuminaireInfo(text[schema.MANUFACTURER], text[schema.LUMINAIRE_NAME],
                              text[schema.CATALOGUE_NUMBER], text[schema.LAMP_DESCRIPTION],
-                             power, cri)
+                             values.get(schema.INPUT_POWER),
+                             values.get(schema.COLOUR_RENDERING_INDEX))
 
     def _luminaire_to_world(self, root: Usd.Prim) -> tuple:
         """The luminaire prim's local-to-world transform (local stage units to world m),

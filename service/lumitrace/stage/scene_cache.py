@@ -37,7 +37,6 @@ import time
 from pathlib import Path
 
 from ..digests import file_stamp, readable_digest
-from ..loading import collector_paused
 from ..method_cache import cache_folder, read_kept, write_kept
 from ..scene import Scene
 from ..schema import PLUGIN_PATH_VARIABLE
@@ -70,8 +69,7 @@ def read_stage(path: str | Path, luminaire: str | None = None, *,
         if scene is not None:
             return scene
     started = time.time_ns()
-    with collector_paused():  # USD's modules
-        from . import reader
+    from . import reader
 
     scene, whole = reader.read_stage_file(path, luminaire, time=time_code)
     if entry is not None and whole:
