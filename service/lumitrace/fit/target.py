@@ -1,8 +1,9 @@
 """The target distribution a fit matches: an IES LM-63 or EULUMDAT file, read once.
 
-Its grid is taken as the file states it (candela for its lamps), its symmetry as the file
-declares it (IES by its horizontal angles, EULUMDAT by its symmetry indicator), and zero
-outside its gamma range (an IES file of a downlight often stops at 90 deg).
+Its grid is taken as the file states it (candela for its lamps; a point value a little
+below zero where a measured file's noise put it there), its symmetry as the file declares
+it (IES by its horizontal angles, EULUMDAT by its symmetry indicator), and zero outside its
+gamma range (an IES file of a downlight often stops at 90 deg).
 """
 from __future__ import annotations
 
@@ -73,8 +74,6 @@ def read_target(path: str | os.PathLike) -> Target:
     if cd.size == 0 or g.size < 2 or not np.all(np.isfinite(cd)) or not np.all(np.diff(g) > 0):
         raise FitError("cannot read the target: its gamma angles must rise and its values "
                        "be finite numbers", where)
-    if (cd < 0).any():
-        raise FitError("cannot read the target: it holds negative intensities", where)
     if not (cd > 0).any():
         raise FitError("the target holds no light (every intensity is 0)", where)
     return Target(grid, float(g[0]), float(g[-1]), lamp_flux, str(p))
