@@ -45,6 +45,22 @@ class Target:
         out[:, (g < self.gamma_lo - 1e-9) | (g > self.gamma_hi + 1e-9)] = 0.0
         return out
 
+    def half_width(self) -> float | None:
+        """Half-angle (deg from the peak's gamma, outward) where the mean profile over C
+        falls to half of its peak; None where it never does."""
+        g = np.asarray(self.grid.gamma, np.float64)
+        rows = self.grid.at(np.arange(0.0, 360.0, 5.0))
+        profile = rows.mean(axis=0)
+        k = int(np.argmax(profile))
+        below = np.flatnonzero(profile[k:] < 0.5 * profile[k])
+        if not below.size:
+            return None
+        j = k + int(below[0])
+        # linear between the last value above half and the first below
+        a, b = profile[j - 1], profile[j]
+        cross = g[j - 1] + (a - 0.5 * profile[k]) / (a - b) * (g[j] - g[j - 1])
+        return float(cross - g[k])
+
     def as_dict(self) -> dict:
         return {"file": self.path, "symmetry": self.symmetry, "lamp_flux": self.lamp_flux,
                 "gamma_range": [self.gamma_lo, self.gamma_hi]}
