@@ -20,8 +20,9 @@ standard error (``light_output_ratio``, ``beam_angle_c0_c180``, ``ugr_4h8h_70_50
 standard errors, and the merit's follows from them: the variance of ``m^2`` for Gaussian
 noise about the true differences, the second-order part of the noise, which the observed
 differences already hold, taken off (over 24 seeds of the mirror cup the spread of a merit
-was 0.93-1.01 of its stated error); the terms' errors are combined as independent. The *noise floor* is the merit a perfect candidate would show at
-the same photons: ``sqrt(sum dOmega s^2 / sum dOmega t^2)``.
+was 0.87-0.95 of its stated error); the terms' errors are combined as independent. The
+*noise floor* is the merit a perfect candidate would show at the same photons:
+``sqrt(sum dOmega s^2 / sum dOmega t^2)``.
 """
 from __future__ import annotations
 
