@@ -6,9 +6,10 @@ distribution from the target's,
 (planes every 5 deg, gammas every 2.5 deg, finer across a target beam narrower than 5 deg
 half width): the candidate's point values as lumitrace's files state them, the target's
 interpolated there, in the target's symmetry (the candidate's counts averaged over the
-mirror images the target declares, as lumitrace's own files average them). By default the shape alone is compared: ``a`` and ``t`` are each distribution over
-its own total flux (cd/klm of the light leaving the luminaire), so a candidate that sends
-out less light is not penalised for it; ``absolute`` compares candela.
+mirror images the target declares, as lumitrace's own files average them). By default
+the shape alone is compared: ``a`` and ``t`` are each distribution over its own total
+flux (cd/klm of the light leaving the luminaire), so a candidate that sends out less light
+is not penalised for it; ``absolute`` compares candela.
 
 **Figures.** Terms ``NAME = VALUE`` add ``((f - VALUE) / |VALUE|)^2`` to the square of the
 merit; constraints ``NAME <= VALUE`` and ``NAME >= VALUE`` add ``(10 v)^2``, ``v`` the
