@@ -56,7 +56,8 @@ def _input_limits() -> dict[str, tuple[str, str]]:
         values = f">= {low:g}" if math.isinf(high) else f"in [{low:g}, {high:g}]"
         return f"at least two (nm, value) pairs, wavelengths increasing, values {values}"
 
-    text = "text without NUL characters"
+    text = ("one line of at most 1000 characters: no control characters or line breaks "
+            "(see files-and-safety)")
     return {
         s.SCATTERING: ("", "one of " + ", ".join(s.SCATTERING_TOKENS)),
         s.REFLECTANCE: ("fraction", closed(s.REFLECTANCE) + "; with transmittance at most 1"),
@@ -82,7 +83,7 @@ def _input_limits() -> dict[str, tuple[str, str]]:
         s.CATALOGUE_NUMBER: ("", text),
         s.LAMP_DESCRIPTION: ("", text),
         s.INPUT_POWER: ("W", "finite, >= 0"),
-        s.COLOUR_RENDERING_INDEX: ("Ra", "finite, at most 100"),
+        s.COLOUR_RENDERING_INDEX: ("Ra", "finite, from 0 to 100"),
         s.PROFILE_POINTS: ("the mesh's units", "at least two finite (r, z) pairs, no two in "
                                                "a row the same, r >= 0 in a revolve"),
         s.PROFILE_KIND: ("", "one of " + ", ".join(s.PROFILE_KINDS)),

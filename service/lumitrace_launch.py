@@ -4,17 +4,28 @@ Importing lumitrace loads USD, which takes a few tenths of a second and can swal
 KeyboardInterrupt raised meanwhile (the run would then go on and publish). So this small
 module, which imports only the standard library, records SIGINT, SIGTERM and SIGHUP before
 lumitrace is imported, and hands them to :func:`lumitrace.cli.main`.
+
+The recorders are set by the module's first statement, with the interpreter's built-in
+``_signal`` (nothing to import): a process started with SIGINT ignored (a background job
+of a shell script) loses a SIGINT only until then, during the interpreter's own start-up
+(``tools/early_interrupt.py`` measures that window).
 """
-import functools
-import os
-import signal
-import sys
+import _signal
 
 _early: list[int] = []
 
 
 def _record(signum, _frame) -> None:
     _early.append(signum)
+
+
+for _s in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
+    _signal.signal(_s, _record)
+
+import functools  # noqa: E402  (after the recorders: nothing comes before them)
+import os  # noqa: E402
+import signal  # noqa: E402
+import sys  # noqa: E402
 
 
 def main() -> int:

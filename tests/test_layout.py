@@ -154,8 +154,12 @@ def test_engine_imports_without_the_plotting_extra():
 FLAT_LAYOUT_HASHES = {
     "reference/isotropic": "74885995c26e1e6419f1f59f4a44c41858dd613b19419eb87f37d1defaa5c37f",
     "reference/lambertian_disc": "a818f3a50a5ffb320f3d08cbaab0612a293b7661485ddda25e3e44ea2f9d12c4",
-    "reference/integrating_sphere":
+    # (the sphere's long diffuse paths meet its 32,064 triangles at their shared edges:
+    # the hits' last bits, hence a few paths, follow the CPU's vector unit Embree picks;
+    # each hash was seen on one kind of CPU, the second on an AMD EPYC without AVX-512)
+    "reference/integrating_sphere": (
         "2ef6c95572fce44173d768bf8d99758b17a54b885d029d6d7f5e20a2016cb42a",
+        "b6fd93a5241f194af33070665172a3a17ef120eadea3dd9fc7e0d313e21f826c"),
     "reference/fresnel_slab": "854719614bc656974fbcb22e90c35e5c6ad5f9965e4c4d17dba4ec2a9b39b877",
     "reference/paraboloid":
         "a8bb1c7b9efb5dc4242680d71a351f829e4b3a7de0b64b677f7673e69685d6ae",
@@ -175,7 +179,8 @@ def test_maps_are_bit_identical_to_the_flat_layout(name):
     for t in r.accumulator.emitters:
         h.update(np.ascontiguousarray(t.counts, dtype="<i8").tobytes())
         h.update(np.array([t.photons, t.absorbed, t.cut], dtype="<i8").tobytes())
-    assert h.hexdigest() == FLAT_LAYOUT_HASHES[name]
+    want = FLAT_LAYOUT_HASHES[name]
+    assert h.hexdigest() in (want if isinstance(want, tuple) else (want,))
 
 
 def test_tests_mirror_the_package():

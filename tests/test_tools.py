@@ -30,6 +30,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "beam_angle_seeds.py": ("--seeds", "2", "--photons", "20000", "--only", "disc"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
     "colour_cost.py": ("--photons", "20000", "--repeats", "1"),
+    "early_interrupt.py": ("--delays", "0", "--repeats", "1", "--dispositions", "default"),
     "dask_bench.py": ("--photons", "100000", "--resolution", "8", "--small-batches", "10"),
     "deliverables_cost.py": ("--photons", "20000", "--repeats", "1", "--no-pictures"),
     "convergence_report.py": ("--seconds", "0.3", "--resolution", "8", "--out", "{out}",
@@ -43,6 +44,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
                          "--resolution", "8", "--threads", "1"),
     "live_loop_bench.py": ("--edits", "1", "--client", "page"),
+    "live_view_screenshot.py": ("--help",),  # drives headless Chromium for a minute
     "part_edit_bench.py": ("--triangles", "20000", "--repeats", "1"),
     "make_stages.py": ("--check",),
     "photometry_accuracy.py": ("--photons", "20000", "--stages", "isotropic"),
@@ -63,7 +65,7 @@ RUNS: dict[str, tuple[str, ...]] = {
 #: Checks that say nothing when all is well (their exit status says it).
 SILENT = ("generate_schema.py", "make_stages.py")
 #: Modules other scripts and the tests import: importing them is their run.
-MODULES = ("service_process.py", "stress_cases.py")
+MODULES = ("headless_browser.py", "service_process.py", "stress_cases.py")
 #: Run against a live service below (it needs one), or with its output checked below.
 SERVED = ("edit_reflector.py", "service_load.py")
 #: Not run here, with the reason.
@@ -71,6 +73,9 @@ SKIPPED = {
     "peer": "a C++/Rust peer tracer built with an external toolchain (side_by_side.py "
             "runs it where built; --peer none here)",
     "setup.sh": "installs packages into the environment; only its syntax is checked",
+    **{name: "runs in Blender's own Python (.venv-blender): tests/lumitrace_blender runs "
+             "it, and skips saying why where that environment is missing"
+       for name in ("blender_install.py", "blender_live_session.py", "blender_roundtrip.py")},
 }
 
 

@@ -28,7 +28,7 @@ import bpy
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "service"))
 import lumitrace_blender  # noqa: E402  (the add-on beside lumitrace, in service/)
-from lumitrace_blender import ies_light, live, records  # noqa: E402
+from lumitrace_blender import ies_light, live, panels, records  # noqa: E402
 
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
 SPEC = "lumitrace:specularReflectance"
@@ -97,16 +97,39 @@ def render(scene, path) -> float:
 
 
 def wait_written(link, revision, photons):
-    """Take the service's events until ``revision``'s last result (all ``photons``, with
-    its pictures: nothing is written for it after that) is written, then load the
-    service's newest result into the light."""
-    status = link.service.status()
-    if not (status["written_revision"] == revision and status["written_photons"] == photons
-            and status["written_pictures"]):
-        link.wait_for(lambda kind, data: kind == "written" and data["revision"] == revision
-                      and data["photons"] == photons and data["pictures"], timeout=240)
+    """Take the service's events until the last result of ``revision`` (None: of the
+    newest revision, whichever it is when it is reached) is written (all ``photons``, with
+    its pictures: nothing is written for it after that), then load the service's newest
+    result into the light; returns that revision."""
+    while True:
+        status = link.service.status()
+        target = status["revision"] if revision is None else revision
+        if status["written_revision"] == target and status["written_photons"] == photons \
+                and status["written_pictures"] and status["revision"] == target:
+            break
+        link.wait_for(lambda kind, data: kind in ("written", "revision"), timeout=240)
     link.refresh()
-    assert link.light_revision == revision, (link.light_revision, revision)
+    assert link.light_revision == target, (link.light_revision, target)
+    return target
+
+
+def panel_text(scene) -> list[str]:
+    """The texts the live link's panel shows (a panel draws only in a window, which
+    Blender as a module has not: a stand-in layout records them)."""
+    texts = []
+
+    class Layout:
+        def column(self, **kwargs):
+            return self
+
+        def label(self, text="", **kwargs):
+            texts.append(text)
+
+        def operator(self, *args, **kwargs):
+            return argparse.Namespace()
+
+    panels.draw_link(Layout(), argparse.Namespace(scene=scene))
+    return texts
 
 
 def main(url, stage, out, photons, size=None, samples=16, denoise=False):
@@ -117,10 +140,11 @@ def main(url, stage, out, photons, size=None, samples=16, denoise=False):
     do_render = size is not None
     if do_render:
         room(scene, size, samples, denoise)
-    clock = Clock()
-    link = live.connect(scene, url, timer=False, clock=clock)
-    report = {"connected_revision": link.revision}
-    wait_written(link, link.revision, photons)
+    assert bpy.ops.lumitrace.connect(url=url) == {"FINISHED"}
+    link = live.LINKS[scene.name]
+    clock = link.clock = Clock()  # the session's own clock from here on
+    link.changed_at = clock()
+    report = {"connected_revision": wait_written(link, None, photons)}
 
     # the drag: ten moves 0.05 s apart send nothing; once it holds still, one delta
     diffuser = by_prim(bpy.data.objects, "/Luminaire/Diffuser")
@@ -166,7 +190,8 @@ def main(url, stage, out, photons, size=None, samples=16, denoise=False):
         report["render_after"] = render(scene,
                                         os.path.join(out, "blender_room_reflector_050.png"))
     report["error"] = link.error
-    live.disconnect(scene)
+    report["panel"] = panel_text(scene)
+    assert bpy.ops.lumitrace.disconnect() == {"FINISHED"}
     return report
 
 

@@ -4,11 +4,13 @@ edit with the revision before it (pinned), the map's difference view on, a part 
 
     python tools/live_view_screenshot.py [--stage stages/downlight.usda] [--out DIR]
                                          [--target FILE.ies|.ldt] [--photons N]
+                                         [--edit PRIM PROPERTY VALUE] [--part NAME]
 
 Writes ``live-view.png`` (the whole page, comparing), ``live-view-solid.png`` (the 3D view
 as loaded), ``live-view-compare.png`` (the compare, polar and map panels) into ``--out``
 (default: the current folder). ``--target``: compare with that file instead of the pinned
-revision.
+revision; ``--edit``: the edit made (default: the demo's reflector, specular reflectance
+0.72); ``--part``: the part picked (default: the Reflector).
 """
 from __future__ import annotations
 
@@ -21,9 +23,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
 
-from helpers.browser import browser, until  # noqa: E402
+from headless_browser import browser, until  # noqa: E402
 from service_process import Service  # noqa: E402
 
 REFLECTOR = "/Luminaire/Materials/ReflectorAluminium"
@@ -53,6 +54,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("."))
     p.add_argument("--target", type=Path, default=None)
     p.add_argument("--photons", type=int, default=400_000)
+    p.add_argument("--edit", nargs=3, metavar=("PRIM", "PROPERTY", "VALUE"),
+                   default=[REFLECTOR, "lumitrace:specularReflectance", "0.72"])
+    p.add_argument("--part", default="Reflector")
     args = p.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
@@ -77,8 +81,8 @@ def main(argv=None) -> int:
                 else:
                     driver.find_element("id", "pin").click()
                     until(driver, "lumitrace.reference")
-                revision = service.client.set(REFLECTOR, "lumitrace:specularReflectance",
-                                              0.72)["revision"]
+                prim, prop, value = args.edit
+                revision = service.client.set(prim, prop, float(value))["revision"]
                 service.wait_done(revision, pictures=False, timeout=600)
                 until(driver, f"lumitrace.preview.header.revision === {revision} && "
                               f"lumitrace.preview.header.photons === "
@@ -86,7 +90,8 @@ def main(argv=None) -> int:
                 driver.find_element("css selector",
                                     "input[name=map-kind][value=difference]").click()
                 index = driver.execute_script(
-                    "return lumitrace.scene.parts.findIndex(p => p.path.endsWith('Reflector'))")
+                    "return lumitrace.scene.parts.findIndex(p => p.path.endsWith(arguments[0]))",
+                    "/" + args.part)
                 driver.execute_script(f"selectPart({index})")
                 time.sleep(0.5)
                 driver.save_screenshot(str(args.out / "live-view.png"))

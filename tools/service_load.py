@@ -305,7 +305,7 @@ def measure_events(count: int) -> dict:
 
     async def main():
         events.bind(asyncio.get_running_loop())
-        runner = web.AppRunner(make_app(None, None, events), access_log=None)
+        runner = web.AppRunner(make_app(None, None, events, viewer=False), access_log=None)
         await runner.setup()
         site = web.TCPSite(runner, "127.0.0.1", 0)
         await site.start()

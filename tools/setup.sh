@@ -36,8 +36,8 @@ blender_env() {
         return 0
     fi
     rm -rf .venv-blender
-    "$py311" -m venv .venv-blender
-    if ! .venv-blender/bin/python -m pip install -q 'bpy==4.5.*'; then
+    if ! "$py311" -m venv .venv-blender ||
+            ! .venv-blender/bin/python -m pip install -q 'bpy==4.5.*'; then
         rm -rf .venv-blender
         echo "note: bpy 4.5 did not install: the Blender tests are skipped" >&2
     fi

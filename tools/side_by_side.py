@@ -70,7 +70,7 @@ import make_stages as ms  # noqa: E402  (the reference stages' builders)
 from lumitrace.film.cubemap import texel_directions, texel_solid_angles  # noqa: E402
 from lumitrace.film.texel_quadrature import texel_integrals  # noqa: E402
 from lumitrace.photometry import frame  # noqa: E402
-from lumitrace.photometry.measured import cell_solid_angle_grid, grid_counts  # noqa: E402
+from lumitrace.photometry.measured import cell_fluxes, cell_solid_angle_grid  # noqa: E402
 from lumitrace.report.convergence_report import crossing_time  # noqa: E402
 from lumitrace.report.references import expected_intensity, read_expectation  # noqa: E402
 from lumitrace.run.session import TraceSettings, run  # noqa: E402
@@ -222,13 +222,9 @@ def time_to_levels(t: dict) -> dict:
 def _raw_grid(acc) -> tuple[np.ndarray, np.ndarray]:
     """The goniophotometer's cell means (cd) and their variances on the grid."""
     omega = cell_solid_angle_grid(GAMMAS, C_STEP)
-    flux = np.zeros_like(omega)
-    var = np.zeros_like(omega)
-    for w, _, values, idx in acc.emitter_cells():
-        n = grid_counts(values, idx, C_STEP, GAMMAS)
-        flux += w * n
-        var += w * w * n  # Poisson: analog photons of one weight
-    return flux / omega, var / omega**2
+    flux = cell_fluxes(acc, GAMMAS, C_STEP)
+    w = acc.emitters[0].photon_flux  # Poisson: analog photons of one weight
+    return flux / omega, w * flux / omega**2
 
 
 class _MapCells:
@@ -350,15 +346,18 @@ def convergence(stage: Path, max_photons: int, resolution: int, seed: int = 1) -
     return out
 
 
-def files_cell_means(expectation: dict, up_axis: str, c: np.ndarray, gamma: np.ndarray,
-                     caps: tuple[float, float], sub: int = 12) -> np.ndarray:
-    """The closed form's mean over every cell of a published grid (planes ``c`` every
-    C step all round, gamma zones between midpoints, the poles over their caps)."""
+def files_points(expectation: dict, up_axis: str, c: np.ndarray, gamma: np.ndarray,
+                 sub: int = 12) -> np.ndarray:
+    """The closed form as a published grid states it: at each listed gamma (a point),
+    over each plane's C cell (planes ``c`` every C step all round); the poles one value."""
     step = float(c[1] - c[0]) if len(c) > 1 else 360.0
-    edges = np.concatenate([[0.0], 0.5 * (gamma[1:] + gamma[:-1]), [180.0]])
-    lo, hi = edges[:-1].copy(), edges[1:].copy()
-    hi[0], lo[-1] = caps[0], 180.0 - caps[1]
-    return cell_means(expectation, up_axis, c, step, lo, hi, pooled_poles=True, sub=sub)
+    f = (np.arange(sub) + 0.5) / sub
+    out = np.zeros((len(c), len(gamma)))
+    for i, c0 in enumerate(c):
+        cc, gg = np.meshgrid(c0 - 0.5 * step + f * step, gamma, indexing="ij")
+        d = frame.directions(cc, gg, up_axis).reshape(-1, 3)
+        out[i] = expected_intensity(expectation, d).reshape(cc.shape).mean(axis=0)
+    return out
 
 
 def files_true_error(stage: Path, photometry_json: Path) -> float | None:
@@ -378,10 +377,10 @@ def files_true_error(stage: Path, photometry_json: Path) -> float | None:
 
 def grid_true_error(expectation: dict, up_axis: str, grid) -> tuple[float, np.ndarray]:
     """A published grid's true relative RMS error over the sphere against the closed
-    form's cell means, and each value's error over its standard error (NaN where it states
-    none)."""
+    form as the grid states it (:func:`files_points`), and each value's error over its
+    standard error (NaN where it states none)."""
     full = grid.full()
-    ref = files_cell_means(expectation, up_axis, full.c, full.gamma, grid.pole_caps)
+    ref = files_points(expectation, up_axis, full.c, full.gamma)
     omega = cell_solid_angle_grid(full.gamma, float(full.c[1] - full.c[0]))
     true = math.sqrt(float((omega * (full.candela - ref) ** 2).sum())
                      / float((omega * ref ** 2).sum()))

@@ -44,6 +44,10 @@ def main(argv=None) -> int:
     ap.add_argument("--target", type=float, default=0.02)
     ap.add_argument("--reference-photons", type=int, default=64_000_000)
     args = ap.parse_args(argv)
+    stage = Path(args.stage)
+    if not stage.exists():  # a path in the checkout, from anywhere
+        stage = Path(__file__).resolve().parents[1] / args.stage
+    args.stage = str(stage)
     ref = run_one(args.stage, 1000, args.reference_photons, None)
     print(f"reference: {ref['photons']:,} photons, {ref['symmetry']} ({ref['source']}), "
           + ", ".join(f"{k} {ref[k]:.2f} +- {ref[k + '_error']:.2f}" for k in BEAMS))

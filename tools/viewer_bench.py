@@ -19,33 +19,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
 
+from headless_browser import browser, until  # noqa: E402
 from service_process import Service  # noqa: E402
-
-
-def browser(width: int = 1400, height: int = 1500):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service as DriverService
-
-    options = webdriver.ChromeOptions()
-    for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", f"--window-size={width},{height}",
-                "--disable-dev-shm-usage"):
-        options.add_argument(arg)
-    options.binary_location = shutil.which("chromium") or shutil.which("chromium-browser")
-    return webdriver.Chrome(service=DriverService(shutil.which("chromedriver")),
-                            options=options)
-
-
-def until(driver, script: str, timeout: float = 60.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = driver.execute_script(f"return ({script});")
-        if value:
-            return value
-        time.sleep(0.02)
-    raise TimeoutError(script)
 
 
 def main(argv=None) -> int:

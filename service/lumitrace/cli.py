@@ -6,16 +6,17 @@ import contextlib
 import json
 import math
 import os
-import re
 import signal
 import sys
 import warnings
 from pathlib import Path
 
 from .errors import ClusterLost, Interrupted, LumitraceError, LumitraceWarning
+from .publish.preflight import preflight, refuse_hidden_results
 from .pyplot import short_setter_docs
 from .fit import cli as fit  # its arguments (stdlib only)
 from .report import datasheet_command, sweep_cli as sweep  # their arguments (stdlib only)
+from .serve.options import add_access_options
 from .report.console import pct as _pct, pm as _pm, progress_bar as _progress_bar, summary_text
 from .run.settings import DEFAULT_BATCH_SIZE, DEFAULT_THRESHOLD, scheduler_address
 from .trace.job import MAX_DEPTH
@@ -107,8 +108,7 @@ def _add_trace(sub) -> None:
     t.add_argument("--workers", choices=("auto", "threads", "processes"), default="auto",
                    help="run batches in threads or worker processes; auto uses threads "
                         "(the map does not depend on it)")
-    t.add_argument("--scheduler", type=scheduler_address, default=None,
-                   metavar="tcp://HOST:PORT",
+    t.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers (lumitrace[dask]; "
                         "the map does not depend on it); exit 4 if it goes away mid-run")
     t.add_argument("--batch-size", type=_positive_int, default=DEFAULT_BATCH_SIZE, metavar="N",
@@ -145,11 +145,12 @@ def _add_trace(sub) -> None:
 
 
 def _add_check(sub) -> None:
-    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 when "
+    c = sub.add_parser("check", help="are the stage's composed results current? (exit 0 "
                                      "current and converged, 1 stale or missing, 3 not "
-                                     "converged)",
+                                     "converged, 4 a publishing interrupted, unfinished)",
                        description="Compose the stage and compare its lumitrace:result:* "
-                                   "attributes with the scene as it is now: a pipeline gate.")
+                                   "attributes with the scene as it is now: a pipeline gate; "
+                                   "a killed run's half-done publishing is finished first.")
     c.add_argument("stage", type=Path)
     c.add_argument("--out", type=Path, default=None,
                    help="the folder a trace wrote the results to (trace --out DIR, with or "
@@ -177,24 +178,11 @@ def _add_serve(sub) -> None:
     v.add_argument("--resolution", type=_positive_int, default=64)
     v.add_argument("--threshold", type=_non_negative_float, default=DEFAULT_THRESHOLD)
     v.add_argument("--threads", type=_positive_int, default=None)
-    v.add_argument("--scheduler", type=scheduler_address, default=None,
-                   metavar="tcp://HOST:PORT",
+    v.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="trace the rounds on this Dask scheduler's workers (lumitrace[dask])")
     v.add_argument("--no-viewer", action="store_true",
                    help="do not serve the live view page at / (the JSON API only)")
-    vtoken = v.add_mutually_exclusive_group()
-    vtoken.add_argument("--token", default=None,
-                        help="bearer token every request must carry (visible in the process "
-                             "list: prefer --token-file or env LUMITRACE_TOKEN)")
-    vtoken.add_argument("--token-file", type=Path, default=None, metavar="FILE",
-                        help="read the bearer token from FILE (its first line)")
-    v.add_argument("--allow-host", action="append", default=[], metavar="NAME",
-                   help="a host name requests may address the service by, besides "
-                        "localhost, loopback addresses and --host (repeatable)")
-    v.add_argument("--max-photons", type=_positive_int, default=None, metavar="N",
-                   help="the largest photon budget a client may set (default 1e10)")
-    v.add_argument("--min-target-error", type=_positive_float, default=None, metavar="E",
-                   help="the smallest target error a client may set (default 0.002)")
+    add_access_options(v, _positive_int, _positive_float)
     v.add_argument("--out", type=Path, default=None,
                    help="output folder (default: beside the stage)")
     v.add_argument("--no-sublayer", action="store_true", help="leave the stage file "
@@ -411,6 +399,8 @@ def cmd_check(args) -> int:
     from .publish.check import check_stage
 
     verdict = check_stage(args.stage, args.out)
+    for note in verdict.values.get("recovered", ()):
+        print(f"warning: {note}", file=sys.stderr)
     print(json.dumps(verdict.as_dict()) if args.json else f"{args.stage}: {verdict.status}: "
           f"{verdict.message}")
     return verdict.exit_status
@@ -429,12 +419,9 @@ def cmd_serve(args) -> int:
     preflight(args.stage, args.out, stage_folder_written=True)
     if not 0 <= args.port <= 65535:
         raise LumitraceError(f"--port must be 0..65535, got {args.port}")
-    token = service_token(args.token, args.token_file)
-    from .run.settings import ServiceLimits
+    from .serve.guard import read_token
 
-    limits = ServiceLimits(**{k: v for k, v in (("max_photons", args.max_photons),
-                                                ("min_target_error", args.min_target_error))
-                              if v is not None})
+    token = read_token(args.token, args.token_file)
     from .photometry.solid_render import start_renderer
 
     # the solids drawn off this process's interpreter, which edits need, in a window
@@ -442,33 +429,8 @@ def cmd_serve(args) -> int:
     start_renderer(warm_up=True, fork=True)
     return serve(args.stage, settings, args.host, args.port, token, args.out, quiet=args.quiet,
                  viewer=not args.no_viewer, sublayer=not args.no_sublayer,
-                 deliverables=args.deliverables, allow_hosts=args.allow_host, limits=limits)
-
-
-def service_token(given: str | None, path: Path | None) -> str | None:
-    """The service's bearer token: ``--token``, the first line of ``--token-file``, or
-    the environment's ``LUMITRACE_TOKEN`` (None: no token). One a header can carry."""
-    where = "--token"
-    if path is not None:
-        where = f"--token-file {path}"
-        try:
-            lines = path.read_text(encoding="utf-8").splitlines()
-        except (OSError, UnicodeDecodeError) as exc:
-            why = getattr(exc, "strerror", None) or exc
-            raise LumitraceError(f"cannot read the token: {why}", str(path)) from None
-        given = lines[0].strip() if lines else ""
-        if not given:
-            raise LumitraceError("the token file is empty", str(path))
-    elif given is None:
-        given, where = os.environ.get("LUMITRACE_TOKEN") or None, "LUMITRACE_TOKEN"
-    else:
-        from .errors import warn
-
-        warn("--token is visible to every user of this machine in the process list: give "
-             "it with --token-file FILE or the environment's LUMITRACE_TOKEN")
-    if given is not None and not re.fullmatch(r"[\x21-\x7e]+", given):
-        raise LumitraceError(f"{where}: a token is printable ASCII without spaces")
-    return given
+                 deliverables=args.deliverables, allow_hosts=args.allow_host,
+                 limits=(args.max_photons, args.min_target_error))
 
 
 def cmd_edits(args) -> int:
@@ -599,74 +561,6 @@ def _interrupted_message(exc: Interrupted) -> str:
         return (f"lumitrace: {name}: interrupted after this run's outputs were published "
                 "(they are complete)")
     return f"lumitrace: {name}: interrupted; nothing was written, earlier outputs are unchanged"
-
-
-def refuse_hidden_results(stage: Path) -> None:
-    """Stop before tracing when the stage's root layer, which is stronger than the result
-    layer sublayered into it, holds result opinions (a stage flattened with its results):
-    the new results would compose hidden under them. Reads the root layer alone (no
-    composition: a stage with other problems is the reader's to report)."""
-    from .publish.check import may_hold_results, result_opinion_prims
-
-    if not may_hold_results(stage):
-        return
-    from pxr import Sdf
-
-    try:
-        layer = Sdf.Layer.OpenAsAnonymous(str(stage), metadataOnly=False)
-    except Exception:  # noqa: BLE001 - the stage reader reports what is wrong, clearly
-        return
-    prims = result_opinion_prims(layer) if layer is not None else []
-    if prims:
-        raise LumitraceError(
-            f"holds lumitrace:result:* opinions on {prims[0]} that are stronger than the "
-            "result layer (left by flattening a stage with results?): the new results "
-            "would be hidden under them. Trace with --replace-results to remove them, or "
-            "with --no-sublayer",
-            str(stage))
-
-
-def preflight(stage: Path, out: Path | None, stage_folder_written: bool = False) -> None:
-    """What can be checked before a long trace: the stage is a regular file, the output
-    folder (``out``, else the stage's) exists or can be made, and can be written to, as
-    can the stage's own folder where ``stage_folder_written`` (the service's edits
-    layer lives there)."""
-    import stat as st
-
-    try:
-        mode = os.stat(stage).st_mode
-    except FileNotFoundError:
-        raise LumitraceError("stage file not found", str(stage)) from None
-    except OSError as exc:
-        raise LumitraceError(f"cannot open the stage: {exc.strerror}", str(stage)) from None
-    if not st.S_ISREG(mode):
-        raise LumitraceError("the stage is not a regular file", str(stage))
-    folders = [out.absolute() if out is not None else stage.absolute().parent]
-    if stage_folder_written and out is not None:
-        folders.append(stage.absolute().parent)
-    for folder in folders:
-        _writable_folder(folder, out is None)
-
-
-def _writable_folder(folder: Path, hint_out: bool) -> None:
-    """Make ``folder`` if missing and prove it writable by writing in it."""
-    if folder.exists() and not folder.is_dir():
-        raise LumitraceError("the output folder is a file, not a folder", str(folder))
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise LumitraceError(f"cannot create the output folder: {exc.strerror}",
-                             str(folder)) from None
-    try:  # a real write: permissions, read-only mounts and ACLs all answer it
-        import tempfile
-
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        hint = "" if not hint_out else \
-            " (results go to the stage's folder unless --out names another)"
-        raise LumitraceError(f"the output folder is not writable: {exc.strerror}{hint}",
-                             str(folder)) from None
 
 
 def _dispatch(args) -> int:

@@ -28,9 +28,11 @@ def _menu_export(self, context):
 def register():
     import bpy
 
-    from . import operators, panels
+    from . import operators, panels, state
     for cls in operators.CLASSES + panels.CLASSES:
         bpy.utils.register_class(cls)
+    if state.forget not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(state.forget)
     bpy.types.TOPBAR_MT_file_import.append(_menu_import)
     bpy.types.TOPBAR_MT_file_export.append(_menu_export)
 
@@ -38,9 +40,11 @@ def register():
 def unregister():
     import bpy
 
-    from . import live, operators, panels
+    from . import live, operators, panels, state
     for scene in bpy.data.scenes:
         live.disconnect(scene)
+    if state.forget in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(state.forget)
     bpy.types.TOPBAR_MT_file_import.remove(_menu_import)
     bpy.types.TOPBAR_MT_file_export.remove(_menu_export)
     for cls in reversed(operators.CLASSES + panels.CLASSES):

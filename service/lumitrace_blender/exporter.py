@@ -15,6 +15,7 @@ reader never sees half an export, and a refused export leaves the old file as it
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import tempfile
 
@@ -64,7 +65,13 @@ def edits_layer(entry: dict, changes: list[state.Edit], original: str | None = N
         layer.pseudoRoot.SetInfo("upAxis", entry["upAxis"])
     layer.documentation = ("Edits made in Blender over " + os.path.basename(entry["file"])
                            + " (lumitrace add-on)")
+    folder = os.path.dirname(entry["file"])
     for edit in changes:
+        if edit.op == "set" and edit.usd_type == "asset" and edit.value and \
+                not os.path.isabs(edit.value) and "://" not in edit.value:
+            # as written in Blender, relative to the stage's folder: anchored anew here
+            target = os.path.normpath(os.path.join(folder, edit.value))
+            edit = dataclasses.replace(edit, value=layer_path(target, anchor or folder))
         author(layer, edit, Sdf, Gf, Vt)
     return layer
 
@@ -123,6 +130,8 @@ def usd_value(value, type_name: str, Sdf, Gf, Vt):
         return Vt.FloatArray([float(v) for v in value])
     if type_name == "color3f":
         return Gf.Vec3f(*map(float, value))
+    if type_name == "double3":
+        return Gf.Vec3d(*map(float, value))
     if type_name == "asset":
         return Sdf.AssetPath(value)
     return value

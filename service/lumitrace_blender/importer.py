@@ -46,6 +46,7 @@ def import_stage(context, filepath: str, set_units: bool = True) -> dict:
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     up = str(UsdGeom.GetStageUpAxis(stage))
     scene = context.scene
+    earlier = _forget(file)
     importer = _Importer(scene, stage, file, luminaire, mpu)
     axes = None
     if up == "Y":  # Blender is Z-up: an unexported parent stands the Y-up stage upright
@@ -63,7 +64,23 @@ def import_stage(context, filepath: str, set_units: bool = True) -> dict:
              "objects": sorted(importer.objects), "materials": sorted(importer.materials),
              "material_scope": importer.material_scope}
     records.add_stage(scene, entry)
+    if earlier:
+        importer.warnings.append(f"{earlier} objects and materials of an earlier import of "
+                                 "this stage are plain Blender data now (not exported)")
     return {**entry, "warnings": importer.warnings}
+
+
+def _forget(file: str) -> int:
+    """Unlink what an earlier import of ``file`` made from the stage (a second import
+    would otherwise have two objects for one prim); returns how many."""
+    count = 0
+    for collection in (bpy.data.objects, bpy.data.materials, bpy.data.lights):
+        for block in collection:
+            rec = records.record(block)
+            if rec is not None and rec.get("stage") == file:
+                del block[records.KEY]
+                count += 1
+    return count
 
 
 class _Importer:
@@ -355,7 +372,8 @@ def set_property(target, name: str, value) -> None:
     """Set ``target[name]`` and, for a schema attribute, its limits and description."""
     target[name] = value
     attr = schema.BY_NAME.get(name)
-    if attr is None or attr.usd_type not in ("float", "double") or isinstance(value, bool):
+    if attr is None or attr.usd_type not in ("float", "double", "int") or \
+            isinstance(value, bool):
         return
     ui = target.id_properties_ui(name)
     limits = {}
@@ -363,4 +381,7 @@ def set_property(target, name: str, value) -> None:
         limits["min"] = limits["soft_min"] = attr.low
     if attr.high is not None:
         limits["max"] = limits["soft_max"] = attr.high
-    ui.update(description=attr.doc, precision=4, **limits)
+    if attr.usd_type == "int":
+        ui.update(description=attr.doc, **{k: int(v) for k, v in limits.items()})
+    else:
+        ui.update(description=attr.doc, precision=4, **limits)

@@ -12,6 +12,8 @@ Nothing here waits on the service inside a tick longer than one HTTP request.
 """
 from __future__ import annotations
 
+import atexit
+import math
 import os
 import queue
 import threading
@@ -106,11 +108,13 @@ class LiveLink:
         self.sent = state.recorded_state(self.entry)
         self.seen = self.sent
         self.changed_at = self.clock()
+        self.next_poll = -math.inf
         self.events: queue.Queue = queue.Queue()
         kept = self.service.history(0)  # what happened before the link is not its news
         self.last_event_id = max((int(e["id"]) for e in kept), default=0)
         self._stop = threading.Event()
         self._thread = None
+        self.timer = None  # the Blender timer ticking the link (see connect)
         if follow:
             self._thread = threading.Thread(target=self._follow, daemon=True,
                                             name="lumitrace events")
@@ -126,7 +130,7 @@ class LiveLink:
         """Send what changed once it has held still for ``debounce`` s; returns the
         service's answer to the batch sent (None: nothing sent)."""
         now = self.clock() if now is None else now
-        current = state.state_of_stage(self.entry)
+        current = state.state_of_stage(self.entry, cached=True)
         if not _same_state(current, self.seen):
             self.seen, self.changed_at = current, now
             return None
@@ -249,15 +253,25 @@ class LiveLink:
         return world @ local
 
     def tick(self, now: float | None = None) -> None:
-        """One step of the link, as the timer runs it."""
-        self.poll(now)
+        """One step of the link, as the timer runs it. Reading Blender's state costs time
+        on Blender's own thread (a mesh of a million triangles is hashed in tens of ms):
+        the next read waits ten times what the last one took, so it never takes more than
+        a tenth of that thread."""
+        now = self.clock() if now is None else now
+        if now >= self.next_poll:
+            started = time.perf_counter()
+            self.poll(now)
+            self.next_poll = now + 10.0 * (time.perf_counter() - started)
         self.take_events()
 
-    def close(self) -> None:
+    def close(self, restore: bool = True) -> None:
+        """Stop reading events; with ``restore``, the imported lights and parts render
+        as before the link."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        photometric_view(self.entry, False)
+        if restore:
+            photometric_view(self.entry, False)
 
 
 def _same_state(a: dict, b: dict) -> bool:
@@ -329,13 +343,35 @@ def connect(scene, url: str, token: str | None = None, stage: str | None = None,
             except Exception as exc:  # noqa: BLE001 - shown in the panel, link kept
                 link.error = f"{type(exc).__name__}: {exc}"
             return TICK
+        link.timer = tick
         bpy.app.timers.register(tick, first_interval=TICK, persistent=True)
     return link
+
+
+@atexit.register
+def _disconnect_all() -> None:
+    """Every link's timer and thread stopped while Python still runs (Blender frees what
+    is left after it); Blender's data is not touched, it may be gone."""
+    for name in list(LINKS):
+        link = LINKS.pop(name)
+        _stop_timer(link)
+        link.close(restore=False)
+
+
+def _stop_timer(link: LiveLink) -> None:
+    # a Python timer left registered when Blender exits is freed after Python is, and
+    # Blender as a module then never exits
+    try:
+        if link.timer is not None and bpy.app.timers.is_registered(link.timer):
+            bpy.app.timers.unregister(link.timer)
+    except (AttributeError, ValueError):
+        pass
 
 
 def disconnect(scene) -> bool:
     link = LINKS.pop(scene.name, None)
     if link is None:
         return False
+    _stop_timer(link)
     link.close()
     return True

@@ -69,6 +69,9 @@ class LUMITRACE_PT_object(bpy.types.Panel):
         elif obj.type == "MESH":
             self.layout.label(text="Material values on the part itself:")
             draw_values(self.layout, obj, schema.MATERIAL_API, "OBJECT")
+            if any(a.name in obj for a in schema.BY_API[schema.PROFILE_API]):
+                self.layout.label(text="Generating profile (lumitrace remakes the mesh):")
+                draw_values(self.layout, obj, schema.PROFILE_API, "OBJECT")
 
 
 class LUMITRACE_PT_light(bpy.types.Panel):

@@ -13,9 +13,13 @@ from dataclasses import dataclass
 MATERIAL_API = "LumitraceMaterialAPI"
 EMITTER_API = "LumitraceEmitterAPI"
 LUMINAIRE_API = "LumitraceLuminaireAPI"
+PROFILE_API = "LumitraceProfileAPI"
 PREFIX = "lumitrace:"
 RESULT_PREFIX = "lumitrace:result:"
 SCATTERING_TOKENS = ("diffuse", "mirror", "glossy", "translucent", "dielectric", "absorber")
+SYMMETRY_TOKENS = ("auto", "none", "rotational", "quadrant", "C0-C180", "C90-C270")
+OPENING_SHAPES = ("measured", "rectangular", "round")
+PROFILE_KINDS = ("revolve", "extrude")
 #: The largest flux lumitrace takes for one light (lm).
 MAX_LUMINOUS_FLUX = 1e24
 
@@ -49,9 +53,11 @@ class Attribute:
 
     def check(self, value) -> str | None:
         """Why ``value`` is not one lumitrace accepts for this attribute (None: it is)."""
-        if self.usd_type in ("float", "double"):
+        if self.usd_type in ("float", "double", "int"):
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 return f"must be a number, got {value!r}"
+            if self.usd_type == "int" and value != int(value):
+                return f"must be a whole number, got {value!r}"
             if not math.isfinite(value):
                 return f"must be finite, got {value!r}"
             if self.low is not None and (value <= self.low if self.low_open else
@@ -74,13 +80,24 @@ class Attribute:
             try:
                 pairs = [(float(a), float(b)) for a, b in value]
             except (TypeError, ValueError):
-                return "must be a list of (wavelength nm, value) pairs"
+                return "must be a list of pairs of numbers"
             if not all(math.isfinite(a) and math.isfinite(b) for a, b in pairs):
                 return "must hold finite numbers"
+            if self.api == PROFILE_API:  # (r, z) points; lumitrace checks the rest
+                return None if len(pairs) >= 2 else "needs at least 2 points"
             if any(b < 0 for _, b in pairs):
                 return "values must be >= 0"
             if any(b[0] <= a[0] for a, b in zip(pairs, pairs[1:])):
                 return "wavelengths must increase"
+        elif self.usd_type == "double3":
+            try:
+                numbers = [float(v) for v in value]
+            except (TypeError, ValueError):
+                return "must be three numbers"
+            if len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
+                return "must be three finite numbers"
+            if self.low is not None and any(v < self.low for v in numbers):
+                return f"each must be >= {self.low:g}"
         elif self.usd_type == "float[]":
             try:
                 numbers = [float(v) for v in value]
@@ -101,6 +118,10 @@ def _e(name, usd_type, fallback=None, **kw) -> Attribute:
 
 def _l(name, usd_type, fallback=None, **kw) -> Attribute:
     return Attribute(PREFIX + name, LUMINAIRE_API, usd_type, fallback, **kw)
+
+
+def _p(name, usd_type, fallback=None, **kw) -> Attribute:
+    return Attribute(PREFIX + "profile:" + name, PROFILE_API, usd_type, fallback, **kw)
 
 
 #: Every attribute a user edits (the ``lumitrace:result:*`` ones are lumitrace's output).
@@ -140,11 +161,24 @@ ATTRIBUTES: tuple[Attribute, ...] = (
     _l("lampDescription", "string", doc="lamps or LED modules (IES [LAMP])"),
     _l("inputPower", "double", low=0.0, doc="electrical input power (W)"),
     _l("colourRenderingIndex", "double", high=100.0, doc="colour rendering index Ra"),
+    _l("symmetry", "token", "auto", tokens=SYMMETRY_TOKENS, uniform=True,
+       doc="declared symmetry of the distribution (auto: lumitrace shows it)"),
+    _l("luminousOpeningShape", "token", "measured", tokens=OPENING_SHAPES, uniform=True,
+       doc="luminous opening: measured, or declared rectangular or round"),
+    _l("luminousOpening", "double3", (0.0, 0.0, 0.0), low=0.0,
+       doc="declared opening: length (C0), width (C90), height, stage units"),
+    _p("points", "float2[]", doc="the profile's (r, z) polyline, the mesh's local units"),
+    _p("kind", "token", "revolve", tokens=PROFILE_KINDS, uniform=True,
+       doc="revolve about the local up axis, or extrude across it"),
+    _p("segments", "int", 64, low=1.0, high=4096.0,
+       doc="faces around a revolve (3-4096) or along an extrusion (1-4096)"),
+    _p("length", "float", 1.0, low=0.0, low_open=True,
+       doc="length of an extrusion, the mesh's local units"),
 )
 BY_NAME = {a.name: a for a in ATTRIBUTES}
 #: The attributes of each API schema, in the schema's order.
 BY_API = {api: tuple(a for a in ATTRIBUTES if a.api == api)
-          for api in (MATERIAL_API, EMITTER_API, LUMINAIRE_API)}
+          for api in (MATERIAL_API, EMITTER_API, LUMINAIRE_API, PROFILE_API)}
 
 
 def is_result(name: str) -> bool:

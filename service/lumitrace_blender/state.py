@@ -112,6 +112,36 @@ def mesh_digest(mesh) -> str:
     return h.hexdigest()
 
 
+#: Mesh digests the live link keeps between its reads (by the mesh's address), dropped
+#: when Blender's dependency graph says a mesh's geometry changed (see :func:`forget`).
+_DIGESTS: dict[int, str] = {}
+
+
+def cached_digest(mesh) -> str:
+    """:func:`mesh_digest`, kept until the mesh is updated (a mesh of a million triangles
+    takes most of a second to hash: too long to do ten times a second)."""
+    key = mesh.as_pointer()
+    digest = _DIGESTS.get(key)
+    if digest is None:
+        digest = _DIGESTS[key] = mesh_digest(mesh)
+    return digest
+
+
+def forget(scene=None, depsgraph=None) -> None:
+    """``depsgraph_update_post`` handler: forget the digests of meshes whose geometry the
+    update changed (all of them when it does not say which)."""
+    if depsgraph is None:
+        _DIGESTS.clear()
+        return
+    for update in depsgraph.updates:
+        block = getattr(update.id, "original", update.id)
+        if isinstance(block, bpy.types.Mesh):
+            _DIGESTS.pop(block.as_pointer(), None)
+        elif isinstance(block, bpy.types.Object) and block.type == "MESH" and \
+                update.is_updated_geometry and block.data is not None:
+            _DIGESTS.pop(block.data.as_pointer(), None)
+
+
 def lumitrace_values(idblock) -> dict:
     """The ``lumitrace:`` ID properties of an object, material or light, as plain values."""
     return {k: records.plain(v) for k, v in idblock.items() if k.startswith(schema.PREFIX)}
@@ -165,8 +195,9 @@ def slot_materials(obj, new_paths: dict) -> list[str]:
     return out
 
 
-def object_state(obj, rec: dict, new_paths: dict) -> dict:
-    """What Blender shows now for an imported object (see :func:`state_of_stage`)."""
+def object_state(obj, rec: dict, new_paths: dict, cached: bool = False) -> dict:
+    """What Blender shows now for an imported object (see :func:`state_of_stage`);
+    ``cached``: mesh digests kept since the last update of the mesh."""
     out = {"exists": True, "local": local_matrix(obj), "visible": not obj.hide_render,
            "parent": parent_prim(obj)}
     if rec["kind"] == "light" and obj.data is not None:
@@ -175,7 +206,7 @@ def object_state(obj, rec: dict, new_paths: dict) -> dict:
     else:
         out["values"] = lumitrace_values(obj)
     if rec["kind"] == "mesh" and obj.type == "MESH":
-        out["mesh"] = mesh_digest(obj.data)
+        out["mesh"] = (cached_digest if cached else mesh_digest)(obj.data)
         out["slots"] = slot_materials(obj, new_paths)
     return out
 
@@ -211,7 +242,7 @@ def imported_materials(stage_file: str):
             yield mat, rec
 
 
-def state_of_stage(entry: dict) -> dict:
+def state_of_stage(entry: dict, cached: bool = False) -> dict:
     """The current state of every prim imported from the stage ``entry``: ``(kind, prim)``
     -> state dict, kind ``object`` or ``material``; mesh objects made in Blender below an
     imported object as ``new``, and materials made in Blender that they or the imported
@@ -222,7 +253,7 @@ def state_of_stage(entry: dict) -> dict:
     added = list(new_objects(entry, paths))
     new_paths = new_material_paths(entry, [o for o, _ in objects] + [o for o, _ in added])
     for obj, rec in objects:
-        state[("object", rec["prim"])] = object_state(obj, rec, new_paths)
+        state[("object", rec["prim"])] = object_state(obj, rec, new_paths, cached)
     for mat, rec in imported_materials(entry["file"]):
         state[("material", rec["prim"])] = material_state(mat, rec)
     for obj, path in added:
@@ -327,6 +358,10 @@ def value_edits(path: str, before: dict, after: dict, where: str) -> list[Edit]:
         if attr.usd_type in ("float", "double") and isinstance(new, int) \
                 and not isinstance(new, bool):
             new = float(new)
+        if attr.usd_type == "int" and isinstance(new, float) and new == int(new):
+            new = int(new)
+        if attr.usd_type == "double3" and isinstance(new, list):
+            new = tuple(float(v) for v in new)
         if attr.usd_type == "bool":
             new = bool(new)
         why = attr.check(new)

@@ -1,55 +1,30 @@
-"""The system's headless Chromium driven by its chromedriver (never a downloaded browser),
-for tests of pages: WebGL2 by SwiftShader, the browser's log kept; poll a page for a
-condition, read an element's pixels."""
+"""The headless Chromium of ``tools/headless_browser.py`` for tests of pages: a test skips,
+saying why, where selenium or the system browser is missing; an element's pixels; the
+console's errors."""
 from __future__ import annotations
 
 import io
-import shutil
-import time
 
 import numpy as np
 import pytest
+import headless_browser
+from headless_browser import CHROMIUM, DRIVER, NO_BROWSER, until  # noqa: F401 (for tests)
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-DRIVER = shutil.which("chromedriver")
-NO_BROWSER = SKIP_WHY = ("no system Chromium and chromedriver (Debian: apt-get install "
-                         "chromium chromium-driver; tools/setup.sh --test installs them as "
-                         "root)")
+SKIP_WHY = NO_BROWSER
 
 
 def chromium(*extra: str, width: int = 1400, height: int = 1500):
-    """A new headless Chromium (``extra``: more command-line switches), its console kept
-    at every level; skips the test where selenium or the system browser is missing."""
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
-    from selenium.webdriver.chrome.service import Service as DriverService
-
+    """A new headless Chromium (see :func:`headless_browser.chromium`); skips the test
+    where selenium or the system browser is missing."""
+    pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
     if not (CHROMIUM and DRIVER):
         pytest.skip(NO_BROWSER)
-    options = webdriver.ChromeOptions()
-    for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", f"--window-size={width},{height}",
-                "--disable-dev-shm-usage", *extra):
-        options.add_argument(arg)
-    options.binary_location = CHROMIUM
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=DriverService(DRIVER), options=options)
+    return headless_browser.chromium(*extra, width=width, height=height)
 
 
 def browser(width: int = 1400, height: int = 1500):
     """A headless Chromium of that window size (its console kept, every level)."""
     return chromium(width=width, height=height)
-
-
-def until(driver, script: str, timeout: float = 60.0, step: float = 0.1):
-    """Poll a JavaScript expression in the page until it is truthy; return its value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = driver.execute_script(f"return ({script});")
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"never true in the page: {script}")
-        time.sleep(step)
 
 
 def pixels(element) -> np.ndarray:

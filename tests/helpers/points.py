@@ -23,12 +23,15 @@ def bin_means(profile, samples: int = 16) -> np.ndarray:
 
 def read_points(profile, gammas: np.ndarray, pole_caps: tuple[float, float]) -> np.ndarray:
     """The point values the files' estimator reads from ``profile`` at ``gammas``, the poles
-    over the caps of half-angles ``pole_caps`` (deg, as the grid chose them)."""
+    over the caps of half-angles ``pole_caps`` (deg, as the grid chose them): the fit, or
+    the mean of the bins beside the angle where the fit dips below zero."""
     first, weights, poles, angles = point_operators(tuple(map(float, gammas)))
     means = bin_means(profile)
-    take = first[:, None] + np.arange(weights.shape[1])[None, :]
-    out = (means[take] * weights).sum(axis=1)
+    take = first[:, None] + np.arange(weights.shape[2])[None, :]
+    fit, mean = ((means[take] * w).sum(axis=1) for w in weights)
+    out = np.where(fit < 0, mean, fit)
     for p, half in enumerate(pole_caps):
         k = int(np.argmin(np.abs(angles[p] - half)))
-        out[0 if p == 0 else -1] = poles[p, k] @ means
+        fit, cap = poles[0, p, k] @ means, poles[1, p, k] @ means
+        out[0 if p == 0 else -1] = cap if fit < 0 else fit
     return out

@@ -51,16 +51,27 @@ def test_a_move_in_blender_is_one_delta_and_the_light_is_the_services_newest_ies
                               "property": "lumitrace:specularReflectance", "value": 0.5}]
         assert report["answer"]["effect"]["kind"] == "geometry"
         assert report["reflector_answer"]["effect"]["kind"] == "material"
-        assert (report["moved_revision"], report["edited_revision"]) == (1, 2)
-        revisions = [e.data for e in s.client.history(0) if e.kind == "revision"]
-        assert [r["revision"] for r in revisions] == [0, 1, 2]
-        status = s.wait_done(2)
+        first = report["connected_revision"]
+        assert (report["moved_revision"], report["edited_revision"]) == (first + 1, first + 2)
+        # the service heard Blender twice: one revision for the drag, one for the reflector
+        sent = [e.data for e in s.client.history(0) if e.kind == "revision"
+                and e.data["source"] == "delta"]
+        assert [r["revision"] for r in sent] == [first + 1, first + 2]
+        status = s.wait_done(first + 2)
         assert report["error"] == ""
+        # the panel shows the service, revision, photons, error and the key figures
+        panel = "\n".join(report["panel"])
+        photometry = s.client.results()["photometry"]
+        for text in (s.url.rstrip("/"), f"revision {first + 2}", f"light from {first + 2}",
+                     f"{PHOTONS:,} photons",
+                     f"flux {photometry['luminous_flux']:.1f} ± "
+                     f"{photometry['luminous_flux_error']:.1f} lm", "LOR ", "peak "):
+            assert text in panel, (text, panel)
         # the Blender light holds the service's newest IES file, of the last revision (a
         # Blender text keeps the file's CRLF line ends as LF)
         ies = (stage.parent / "downlight.ies").read_bytes().replace(b"\r\n", b"\n")
         results = s.client.results()
-        assert results["revision"] == report["light_revision"] == 2
+        assert results["revision"] == report["light_revision"] == first + 2
         assert hashlib.sha256(ies).hexdigest() == report["light_ies_sha256"]
         assert (tmp_path / "light.ies").read_bytes() == ies
         served = _counts(stage.parent / "downlight.intensity.exr")

@@ -96,6 +96,11 @@ def test_the_demo_edited_in_blender_traces_as_the_same_edits_sent_as_deltas(
     assert "did you mean lumitrace:reflectance" in refusals["lumitrace:diffuseReflectance"]
     assert "must be one of diffuse" in refusals["lumitrace:scattering"]
     assert Path(report["exported"]).read_text() == text
+    assert report["asset_line"] == ["asset lumitrace:rayFile = @../rays/led.tm25@"]
+    assert report["asset_delta"] == [{"op": "set", "path": "/Luminaire/LED",
+                                      "property": "lumitrace:rayFile",
+                                      "value": "rays/led.tm25"}]
+    assert report["after_reimport"] == 0  # the edited first import is not the stage's now
 
     # the scene lumitrace reads from the export is the one the deltas give, bit for bit
     delta_stage, edits = _deltas_applied(tmp_path)
@@ -132,6 +137,8 @@ def test_every_kind_of_change_exports_as_the_live_link_sends_it(bpy_python, tmp_
     stage = tmp_path / "downlight.usda"
     shutil.copy(DEMO, stage)
     report = run_bpy("roundtrip.py", "many", stage, tmp_path)
+    # the live link's mesh digests are kept until Blender's depsgraph updates the mesh
+    assert report["digest_kept_until_update"] and report["digest_after_update"]
     ops = {(op, path) for op, path, _ in report["edits"]}
     assert {("set", "/Luminaire/LED"), ("set", "/Luminaire/Board"),
             ("set", "/Luminaire/Materials/HousingPaint/PreviewSurface"),
@@ -213,3 +220,57 @@ def test_the_addon_imports_nothing_of_lumitrace_nor_numpy():
             for name in names:
                 top = name.split(".")[0]
                 assert top in allowed or top in stdlib, f"{module.name} imports {name}"
+
+
+def test_the_addons_schema_table_is_lumitraces_schema():
+    """Every attribute of lumitrace's API schemas, as USD's schema registry reads
+    schemas/, is in the add-on's table with its API, type, fallback, tokens and
+    variability (the add-on keeps them as data: Blender's USD knows nothing of them), and
+    its ranges are the ones the stage reader validates."""
+    import importlib.util
+
+    from pxr import Sdf, Usd
+
+    import lumitrace.schema as ours
+    spec = importlib.util.spec_from_file_location(
+        "addon_schema", ROOT / "service" / "lumitrace_blender" / "schema.py")
+    table = importlib.util.module_from_spec(spec)
+    sys.modules["addon_schema"] = table  # (dataclasses look their module up)
+    try:
+        spec.loader.exec_module(table)  # no bpy needed: the module is data
+    finally:
+        del sys.modules["addon_schema"]
+    registry = Usd.SchemaRegistry()
+    seen = set()
+    for api in ours.API_SCHEMAS:
+        definition = registry.FindAppliedAPIPrimDefinition(api)
+        assert definition is not None, api
+        for name in definition.GetPropertyNames():
+            if name.startswith(table.RESULT_PREFIX):
+                assert table.is_result(name)
+                continue
+            prop = definition.GetAttributeDefinition(name)
+            mine = table.BY_NAME.get(name)
+            assert mine is not None, f"{name} of {api} is missing from the add-on's table"
+            seen.add(name)
+            assert mine.api == api, name
+            assert mine.usd_type == str(prop.GetTypeName()), name
+            assert mine.uniform == (prop.GetVariability() == Sdf.VariabilityUniform), name
+            fallback = prop.GetFallbackValue()
+            if fallback is None:
+                assert mine.fallback is None, name
+            elif hasattr(fallback, "__len__") and not isinstance(fallback, str):
+                assert tuple(mine.fallback) == pytest.approx(tuple(fallback)), name
+            else:
+                assert mine.fallback == pytest.approx(fallback), name
+            tokens = prop.GetMetadata("allowedTokens")
+            assert tuple(mine.tokens) == tuple(tokens or ()), name
+    assert seen == set(table.BY_NAME)  # and nothing the schema lacks
+    for name, (low, high) in ours.MATERIAL_RANGES.items():
+        assert (table.BY_NAME[name].low, table.BY_NAME[name].high) == (low, high), name
+    assert table.SCATTERING_TOKENS == tuple(ours.SCATTERING_TOKENS)
+    assert table.SYMMETRY_TOKENS == tuple(ours.SYMMETRY_TOKENS)
+    assert table.OPENING_SHAPES == tuple(ours.OPENING_SHAPES)
+    assert table.PROFILE_KINDS == tuple(ours.PROFILE_KINDS)
+    from lumitrace.stage.validate import MAX_LUMINOUS_FLUX
+    assert table.MAX_LUMINOUS_FLUX == MAX_LUMINOUS_FLUX

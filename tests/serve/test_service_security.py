@@ -122,7 +122,7 @@ def test_a_browsers_cross_origin_request_is_refused_on_every_route(served):
     port = served.port
     foreign = [{"Origin": "http://evil.example"}, {"Origin": f"http://127.0.0.1:{port + 1}"},
                {"Origin": f"http://localhost:{port}"}, {"Origin": "null"},
-               {"Origin": f"https://127.0.0.1:{port}"},
+               {"Origin": f"https://127.0.0.1:{port + 1}"}, {"Origin": "file://"},
                {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "no-cors"},
                {"Sec-Fetch-Site": "same-site", "Sec-Fetch-Mode": "cors"}]
     for headers in foreign:

@@ -8,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 
+from ..run.settings import scheduler_address
+
 #: Photons per candidate at first, and the default most as a multiple of it.
 DEFAULT_PHOTONS = 1 << 16
 MAX_PHOTONS_FACTOR = 16
@@ -98,7 +100,7 @@ def add_parser(sub) -> None:
                         "processes")
     f.add_argument("--threads", type=_count, default=None,
                    help="candidates traced at once (default: all cores)")
-    f.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    f.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="trace the candidates on this Dask scheduler's workers")
     f.add_argument("--no-selective", action="store_true",
                    help="trace every candidate afresh (default: retrace only the photons a "

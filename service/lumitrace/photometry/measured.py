@@ -17,7 +17,9 @@ cap is noisier than :data:`POLE_NOISE` times the median relative error of the gr
 other lit values, as far as it takes to be no noisier than that (0.5 deg steps, at most
 :data:`POLE_CAP_MAX` deg: the even parabola's value is four times as variable as the cap's
 mean, but not off by the curvature). Nothing is filtered. At a kink (the horizon of a
-one-sided disc) a fitted value lies between the two sides.
+one-sided disc) a fitted value lies between the two sides; where a parabola dips below
+zero (the foot of a sharp cut-off) the value is the mean of the bins beside it, which
+cannot.
 """
 from __future__ import annotations
 
@@ -116,6 +118,22 @@ def plane_bins(values: np.ndarray, idx: np.ndarray | None, c_step: float) -> np.
                        minlength=n * N_GAMMA).reshape(n, N_GAMMA)
 
 
+def cell_fluxes(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0) -> np.ndarray:
+    """The photon flux (lm) through every cell of a C-gamma grid: C cells of ``c_step``
+    around each plane by gamma zones between the midpoints of ``gammas`` (0.5 deg raster),
+    (planes, gammas). The raw counts a cell's mean would be made of (what a test of the
+    tracer or a peer's grid compares), not the files' values."""
+    g = np.asarray(gammas, np.float64)
+    mids = np.concatenate([[0.0], 0.5 * (g[1:] + g[:-1])])
+    starts = np.searchsorted(GAMMA_EDGES, mids - 1e-9)
+    if not np.allclose(GAMMA_EDGES[starts], mids, atol=1e-9):
+        raise LumitraceError("grid gammas must lie on a 0.5 deg raster")
+    out = 0.0
+    for w, _, values, idx in acc.emitter_cells():
+        out = out + w * np.add.reduceat(plane_bins(values, idx, c_step), starts, axis=1)
+    return np.asarray(out, np.float64) * np.ones((int(round(360.0 / c_step)), len(g)))
+
+
 #: Gauss-Legendre nodes and weights on [0, 1] (3 points): a bin's moments.
 _GL_X = 0.5 + 0.5 * np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)])
 _GL_W = np.array([5.0, 8.0, 5.0]) / 18.0
@@ -150,9 +168,10 @@ def point_operators(gammas: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, 
                                                          np.ndarray]:
     """How a profile's goniometer gamma bins (mean intensities) give point values at the
     listed ``gammas``: for every listed angle, the first bin it uses (G,) and the weights
-    of its bins from there (G, width; the poles' rows 0); for each pole and each polar
-    window tried, the bins' weights (2, windows, N_GAMMA) and the windows' half-angles
-    (2, windows, deg). A listed angle's value is the value there of a parabola fitted to
+    of its bins from there, of the fit and of the window's mean (2, G, width; the poles'
+    rows 0); for each pole and each polar window tried, the bins' weights, of the fit and
+    of the cap's mean (2, 2, windows, N_GAMMA), and the windows' half-angles (2, windows,
+    deg). A listed angle's value is the value there of a parabola fitted to
     the bins within its window (to its nearer neighbour, at least :data:`LEAST_WINDOW`
     deg each side): unbiased to second order where the distribution curves, as a beam's
     flank does, where a cell's mean is not (and a reader takes a value as the intensity
@@ -168,14 +187,17 @@ def point_operators(gammas: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, 
     first = np.minimum(lo, N_GAMMA - width)
     bins = first[:, None] + np.arange(width)[None, :]
     use = (bins >= lo[:, None]) & (bins < hi[:, None])
-    weights = np.zeros((len(g), width))
-    weights[1:-1] = np.where(use, _fit_rows(inner, bins, use, (0, 1, 2)), 0.0)
+    weights = np.zeros((2, len(g), width))
+    weights[0, 1:-1] = np.where(use, _fit_rows(inner, bins, use, (0, 1, 2)), 0.0)
+    # the fallback: the mean of the two bins beside the angle (the narrowest there is)
+    near = np.abs(centres[np.clip(bins, 0, N_GAMMA - 1)] - inner[:, None]) <= 0.25 + 1e-9
+    weights[1, 1:-1] = _window_means(bins, use & near)
     first = np.concatenate([[0], first, [0]])
     # the poles: windows from the grid's own pole zone (to the midpoint to the next
     # gamma, at least LEAST_WINDOW) widening in POLE_CAP_STEP steps to POLE_CAP_MAX
     starts = (max(LEAST_WINDOW, 0.5 * g[1]), max(LEAST_WINDOW, 0.5 * (180.0 - g[-2])))
     n_win = 1 + int(math.floor((POLE_CAP_MAX - min(starts)) / POLE_CAP_STEP + 1e-9))
-    poles = np.zeros((2, n_win, N_GAMMA))
+    poles = np.zeros((2, 2, n_win, N_GAMMA))
     angles = np.zeros((2, n_win))
     for p, start in enumerate(starts):
         half = np.minimum(start + np.arange(n_win) * POLE_CAP_STEP, max(POLE_CAP_MAX, start))
@@ -186,21 +208,50 @@ def point_operators(gammas: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, 
         nearest = np.argsort(dist, kind="stable")[:wide]
         rows = _fit_rows(np.full(n_win, pole), np.broadcast_to(nearest, (n_win, wide)),
                          inside[:, nearest], (0, 2))
-        poles[p][:, nearest] = np.where(inside[:, nearest], rows, 0.0)
+        poles[0, p][:, nearest] = np.where(inside[:, nearest], rows, 0.0)
+        poles[1, p][:, nearest] = _window_means(np.broadcast_to(nearest, (n_win, wide)),
+                                                inside[:, nearest] & (dist[nearest] <= 0.25))
         angles[p] = half
     for shared in (first, weights, poles, angles):
         shared.flags.writeable = False
     return first, weights, poles, angles
 
 
+def _window_means(bins: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Weights (G, W) of bins ``bins`` (G, W) used where ``use`` in their solid-angle
+    mean: a window's mean intensity."""
+    om = np.where(use, -np.diff(np.cos(np.radians(GAMMA_EDGES)))[np.clip(bins, 0,
+                                                                        N_GAMMA - 1)], 0.0)
+    return om / om.sum(axis=1, keepdims=True)
+
+
+def _nonnegative(fit, fit_var, mean, mean_var):
+    """The fitted values, or where a parabola dips below zero (the foot of a cut-off, a
+    dark region's noise) the mean of the bins beside the angle, which cannot: (values,
+    standard errors)."""
+    low = fit < 0
+    return np.where(low, mean, fit), np.sqrt(np.where(low, mean_var, fit_var))
+
+
 def _points(means: np.ndarray, var: np.ndarray, first: np.ndarray, weights: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray]:
     """Point values (planes, G) and their standard errors from the planes' bin means
-    (planes, N_GAMMA) and the means' variances, by the listed angles' bin weights."""
-    take = first[:, None] + np.arange(weights.shape[1])[None, :]  # (G, width)
-    value = np.einsum("pgw,gw->pg", means[:, take], weights)
-    sigma = np.sqrt(np.einsum("pgw,gw->pg", var[:, take], weights * weights))
-    return value, sigma
+    (planes, N_GAMMA) and the means' variances, by the listed angles' bin weights (fit,
+    window mean; :func:`_nonnegative`)."""
+    take = first[:, None] + np.arange(weights.shape[2])[None, :]  # (G, width)
+    m, v = means[:, take], var[:, take]
+    fit, mean = (np.einsum("pgw,gw->pg", m, w) for w in weights)
+    fit_var, mean_var = (np.einsum("pgw,gw->pg", v, w * w) for w in weights)
+    return _nonnegative(fit, fit_var, mean, mean_var)
+
+
+def _pole_points(poles: np.ndarray, mean: np.ndarray, var: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Each pole's value and standard error for every cap tried, (2, windows) each, from
+    the ring's bin means and their variances (:func:`_nonnegative`)."""
+    fit, cap = (np.einsum("pkb,b->pk", w, mean) for w in poles)
+    fit_var, cap_var = (np.einsum("pkb,b->pk", w * w, var) for w in poles)
+    return _nonnegative(fit, fit_var, cap, cap_var)
 
 
 def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
@@ -253,16 +304,12 @@ def measure_all(acc: Accumulator, gammas: np.ndarray, c_step: float = 5.0,
         # plane, from a polar cap (all planes' counts pooled), as wide as the grid from
         # all photons needs (the halves take the same caps)
         ring_mean, ring_var = rings[h][0] / ring_omega, rings[h][1] / ring_omega ** 2
-        pole_cd = np.einsum("pkb,b->pk", poles, ring_mean)
-        pole_sigma = np.sqrt(np.einsum("pkb,b->pk", poles * poles, ring_var))
+        pole_cd, pole_sigma = _pole_points(poles, ring_mean, ring_var)
         if name not in widths:
             all_cd, all_sigma = (cd, sigma) if h is None else _points(
                 sums[name, None][0] / omega, sums[name, None][1] / omega ** 2, first, weights)
             all_ring = rings[None][0] / ring_omega, rings[None][1] / ring_omega ** 2
-            widths[name] = pole_caps(all_cd, all_sigma,
-                                     np.einsum("pkb,b->pk", poles, all_ring[0]),
-                                     np.sqrt(np.einsum("pkb,b->pk", poles * poles,
-                                                       all_ring[1])))
+            widths[name] = pole_caps(all_cd, all_sigma, *_pole_points(poles, *all_ring))
         pick = widths[name]
         cd[:, [0, -1]] = pole_cd[[0, 1], pick]
         sigma[:, [0, -1]] = pole_sigma[[0, 1], pick]

@@ -1,11 +1,15 @@
 """A target photometric file (IES LM-63 or EULUMDAT) read as a reference to compare a design
-with: its C-gamma grid, lamp flux and luminous opening, and its figures computed by the same
-rules as ours (:mod:`.quantities`), without standard errors (a target states none).
+with: its C-gamma grid, lamp flux and luminous opening, and its figures as a photometric
+reader computes them from the grid it holds (no counts, no standard errors: a target states
+none).
 
-Beam and field angles are read from plane profiles interpolated linearly in gamma to the
-same 0.5 deg raster, at half (a tenth) of the peak where the peak lies in the plane, else of
-the plane's own largest value; the peak is the grid's largest value; UGR 4H x 8H 70/50/20
-from the file's luminous opening (:mod:`.ugr`)."""
+Flux by zonal integration of the grid; the peak is its largest value; beam and field angles
+are the outermost crossings of its plane profiles (linear in gamma, on a 0.5 deg raster) with
+half (a tenth) of the peak where the peak lies in the plane, else of the plane's own largest
+value (:func:`~lumitrace.photometry.quantities.outermost_crossings`, the plane rule of
+:mod:`.quantities`); UGR 4H x 8H 70/50/20 from the file's luminous opening (:mod:`.ugr`).
+A noisy grid's largest value is a spike and its angles are read off it, as any reader of
+the file would."""
 from __future__ import annotations
 
 import math
@@ -79,8 +83,10 @@ def read_target(name: str, text: str) -> Target:
 def _check(grid: CGammaGrid, where: str) -> None:
     """Refuse a grid no comparison can use (one clear error)."""
     cd, g, c = grid.candela, grid.gamma, grid.c
-    if cd.size == 0 or not np.all(np.isfinite(cd)) or (cd < 0).any():
-        raise LumitraceError("its candela values must be finite and not negative", where)
+    # (a slightly negative value is kept: unbiased point values of a noisy estimate, ours
+    # among them, may fall below zero where next to no light leaves)
+    if cd.size == 0 or not np.all(np.isfinite(cd)):
+        raise LumitraceError("its candela values must be finite numbers", where)
     if not np.all(np.isfinite(g)) or g.min() < 0 or g.max() > 180 or np.any(np.diff(g) <= 0):
         raise LumitraceError("its gamma angles must rise within 0-180 deg", where)
     if not np.all(np.isfinite(c)) or np.any(np.diff(c) <= 0):

@@ -4,20 +4,28 @@ opinions a trace refuses to hide its new results under.
 A result is current when the composed ``lumitrace:result:sceneHash`` on the luminaire prim
 equals the hash of the scene as it composes now, and every result attribute comes from a
 result layer (not from stronger opinions left, say, by flattening a stage on publish).
+
+A run killed while it published (SIGKILL or a crash after its commit point: the journal
+still names files to rename) leaves the files of two runs side by side. Before judging,
+the check finishes that publishing as the next ``trace`` would (under the stage's
+publishing lock, :func:`lumitrace.publish.transaction.recover`), and judges the set it
+completes; where it cannot (a journal another user's run left, a folder it cannot write
+in), its verdict is ``interrupted``, never ``current``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..filenames import RESULT_LAYER_SUFFIX, result_layer_path
+from ..errors import OutputError
+from ..filenames import RESULT_LAYER_SUFFIX, output_names, result_layer_path, stage_name
 from .ownership import belongs_to, recorded_stage
 from ..schema import RESULT_PREFIX
 from .result_layer import REPRESENTATION
 
 #: Exit statuses: results current (and converged), stale or missing, current but the
-#: target error not reached.
-CURRENT, STALE, NOT_CONVERGED = 0, 1, 3
+#: target error not reached, a publishing interrupted that the check could not finish.
+CURRENT, STALE, NOT_CONVERGED, INTERRUPTED = 0, 1, 3, 4
 
 
 def _is_result_layer(layer) -> bool:
@@ -97,14 +105,78 @@ class Check:
                 "exitStatus": self.exit_status, **self.values}
 
 
+def result_folders(stage_path: str | Path, results: str | Path | None = None) -> list[Path]:
+    """The folders a stage's result layer may be published in: ``results`` where given,
+    else the stage's own folder and those of the result layers its root layer sublayers
+    (``trace --out DIR`` without ``--no-sublayer``)."""
+    if results is not None:
+        return [Path(results).absolute()]
+    stage = Path(stage_path).absolute()
+    folders = [stage.parent]
+    if not stage.is_file():  # a FIFO is never opened: the reader refuses it at once
+        return folders
+    from pxr import Sdf, Tf
+
+    try:
+        root = Sdf.Layer.OpenAsAnonymous(str(stage), metadataOnly=True)
+    except Tf.ErrorException:
+        root = None
+    for sub in (root.subLayerPaths if root is not None else ()):
+        if sub.endswith(RESULT_LAYER_SUFFIX):
+            folder = (stage.parent / sub).parent.absolute()
+            if folder not in folders:
+                folders.append(folder)
+    return folders
+
+
+def finish_interrupted(stage_path: str | Path, results: str | Path | None = None
+                       ) -> tuple[list[str], str | None]:
+    """Finish a publishing of the stage's results that a killed run left half done (see
+    the module's note): (what was done, why a publishing is still unfinished or None)."""
+    from .transaction import (DEFAULT_LOCK_WAIT, journal_is_ours, journal_path, locked,
+                              recover)
+
+    name = stage_name(stage_path)
+    done: list[str] = []
+    for folder in result_folders(stage_path, results):
+        journal = journal_path(folder, name)
+        if not journal.exists():
+            continue
+        try:
+            with locked([folder], name, DEFAULT_LOCK_WAIT):
+                if journal.exists() and not journal_is_ours(journal):
+                    return done, (f"a publishing of these results was interrupted "
+                                  f"({journal}), and its journal is not one this user's "
+                                  "lumitrace wrote (nothing it names was touched): trace "
+                                  "the stage again, as its owner")
+                done += recover([folder], name, sorted(output_names(name)))
+        except OutputError as exc:
+            return done, f"a publishing of these results was interrupted ({journal.name} " \
+                         f"in {folder}) and cannot be finished here: {exc}"
+        if journal.exists():
+            return done, (f"a publishing of these results was interrupted ({journal}) and "
+                          f"could not be finished ({'; '.join(done)}): trace the stage again")
+        from pxr import Sdf
+
+        layer = Sdf.Layer.Find(str(folder / f"{name}{RESULT_LAYER_SUFFIX}"))
+        if layer is not None:  # open in this process: read it as it is now
+            layer.Reload(force=True)
+    return done, None
+
+
 def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Check:
     """Compose ``stage_path`` and judge its results against the scene it composes now.
     ``results`` is the folder a trace wrote them to with ``--out`` (and, say,
-    ``--no-sublayer``): its result layer is then composed over the stage and judged."""
+    ``--no-sublayer``): its result layer is then composed over the stage and judged. A
+    publishing that a killed run left half done is finished first (:func:`finish_interrupted`);
+    where it cannot be, the verdict is ``interrupted``."""
     from pxr import Usd
 
     from ..stage.reader import read_stage
 
+    done, unfinished = finish_interrupted(stage_path, results)
+    if unfinished is not None:
+        return Check("interrupted", unfinished, INTERRUPTED, {"recovered": done})
     scene = read_stage(stage_path)
     stage = Usd.Stage.Open(str(stage_path))
     if results is not None:
@@ -127,6 +199,7 @@ def check_stage(stage_path: str | Path, results: str | Path | None = None) -> Ch
         values[name] = v if isinstance(v, (str, int, float, bool, type(None))) else \
             getattr(v, "path", str(v))
     values["currentSceneHash"] = scene.content_hash()
+    values["recovered"] = done  # an interrupted publishing finished first
     layered = results is None and any(
         _is_result_layer(layer) for layer in stage.GetLayerStack(includeSessionLayers=False))
     # opinions stronger than a result layer hide it; without one (a stage flattened with

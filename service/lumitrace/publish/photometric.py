@@ -111,12 +111,13 @@ def write_photometric_files(scene: Scene, ph: Photometry, paths: dict[str, Path]
     write_ldt(paths["ldt"], grid, lamp, info.name or luminaire, mm,
               fig.downward_flux_fraction, fig.light_output_ratio,
               company=info.manufacturer or "lumitrace",
-              report=f"lumitrace {name} run {run_id}; symmetry {ph.symmetry.source}",
+              # the run id first: the field is cut at 78 characters
+              report=f"lumitrace run {run_id}: {name}; symmetry {ph.symmetry.source}",
               number=info.catalogue_number, file_name=paths["ldt"].name,
               lamp_type=info.lamp or "lumitrace emitters",
               colour="" if cct_K is None else f"{cct_K:.0f} K",
-              cri="" if info.colour_rendering_index is None
-              else f"{info.colour_rendering_index:g}",
+              cri="" if info.colour_rendering_index is None  # its 6 characters
+              else f"{round(info.colour_rendering_index, 2):g}",
               watts=info.input_power_w or 0.0)
     if pictures:
         title = f"{info.name or luminaire}: {fig.luminous_flux:.0f} lm, " \

@@ -2,11 +2,16 @@
 IES keyword ``[_LUMITRACE_RUN]``, the LDT report line and the result layer's metadata."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ..filenames import IES_SUFFIX, INTENSITY_SUFFIX, LDT_SUFFIX, RESULT_LAYER_SUFFIX
 from .exr import read_exr_metadata
 from .layer_text import custom_layer_data
+
+
+#: A run id in the LDT's report line.
+_LDT_RUN = re.compile(r"\brun ([0-9a-f]{16})\b")
 
 
 def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
@@ -24,11 +29,11 @@ def published_run_ids(folder: Path, name: str, layer_folder: Path | None = None
             if line.startswith("[_LUMITRACE_RUN]") and len(line.split()) > 1:
                 ids["ies"] = line.split()[1]
     ldt = folder / f"{name}{LDT_SUFFIX}"
-    if ldt.exists():
-        prefix = f"lumitrace {name} run "
-        for line in ldt.read_text(errors="replace").splitlines():
-            if line.startswith(prefix):
-                ids["ldt"] = line[len(prefix):].strip()
+    if ldt.exists():  # line 8, the report: "lumitrace run ID: NAME; ..." (or, before,
+        # "lumitrace NAME run ID...")
+        lines = ldt.read_text(encoding="latin-1").splitlines()
+        found = _LDT_RUN.search(lines[7]) if len(lines) > 7 else None
+        ids["ldt"] = found.group(1) if found else None
     layer = Path(layer_folder or folder) / f"{name}{RESULT_LAYER_SUFFIX}"
     if layer.exists():
         ids["layer"] = layer_data(layer).get("runId")

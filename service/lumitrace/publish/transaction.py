@@ -66,6 +66,22 @@ def _lock_path(folder: Path, name: str) -> Path:
     return folder / f".{name}{_LOCK}"
 
 
+def journal_path(folder: Path, name: str) -> Path:
+    """Where the publishing journal of stage ``name``'s outputs in ``folder`` is, while a
+    commit is under way (or was cut short)."""
+    return _journal_path(folder, name)
+
+
+def journal_is_ours(path: Path) -> bool:
+    """Whether the journal at ``path`` is one this user's lumitrace signed (one that
+    :func:`recover` would finish)."""
+    try:
+        record = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and _signed_by_us(record)
+
+
 def _journal_path(folder: Path, name: str) -> Path:
     return folder / f".{name}{_JOURNAL}"
 

@@ -29,8 +29,7 @@ def add_parser(sub) -> None:
     w.add_argument("--resolution", type=int, default=64)
     w.add_argument("--seed", type=int, default=0)
     w.add_argument("--threads", type=int, default=None)
-    w.add_argument("--scheduler", type=scheduler_address, default=None,
-                   metavar="tcp://HOST:PORT",
+    w.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="run the batches on this Dask scheduler's workers")
     w.add_argument("--out", type=Path, default=Path("sweep"),
                    help="the sweep's folder (default ./sweep)")

@@ -205,6 +205,14 @@ class ServiceLimits:
         put("min_target_error", _real("min_target_error", self.min_target_error, 0.0, 1.0,
                                       lo_open=True))
 
+    @classmethod
+    def of(cls, max_photons: int | None = None,
+           min_target_error: float | None = None) -> "ServiceLimits":
+        """The limits given on the command line (None: the default)."""
+        return cls(max_photons if max_photons is not None else SERVICE_MAX_PHOTONS,
+                   min_target_error if min_target_error is not None
+                   else SERVICE_MIN_TARGET_ERROR)
+
     def check(self, settings: TraceSettings, options: bool = False) -> None:
         """Raise :class:`SettingsError` naming ``photons`` or ``target_error`` (or, with
         ``options``, the command line's option) where ``settings`` asks for more work."""

@@ -8,7 +8,6 @@ page's key) and, with a token, the bearer check, before its handler runs.
 from __future__ import annotations
 
 import asyncio
-import hmac
 import json
 from typing import Any
 
@@ -16,9 +15,10 @@ from aiohttp import web
 
 from ..delta.protocol import DeltaError, delta_schema, parse_json_object, parse_request
 from ..errors import LumitraceError
+from ..run.settings import ServiceLimits, with_knobs
 from .engine import Engine
 from .events import EventLog
-from .guard import Guard, header_bytes
+from .guard import Guard
 from .live import LiveStage
 from .reference import MAX_FILE_CHARS, KeptFrames, reference_frame
 from .viewer import PAGE_DIR, PAGE_FILES, PreviewCache, editable_scene, geometry_frame
@@ -46,11 +46,16 @@ def _problem(status: int, message: str, problems=()) -> web.Response:
 
 def make_app(live: LiveStage, engine: Engine, events: EventLog,
              token: str | None = None, viewer: bool = True,
-             guard: Guard | None = None) -> web.Application:
+             guard: Guard | None = None,
+             limits: ServiceLimits | None = None) -> web.Application:
     """The aiohttp application of a running service (with the live view page unless
-    ``viewer`` is False); ``guard`` holds its Host names and the page's key (a service
-    bound to 127.0.0.1 when None)."""
-    guard = guard if guard is not None else Guard()
+    ``viewer`` is False); ``guard`` holds its Host names, token and page key (a service
+    bound to 127.0.0.1 when None); ``limits`` bound the work /settings may ask for."""
+    limits = limits if limits is not None else ServiceLimits()
+    if guard is None:
+        guard = Guard(token=token)
+    elif guard.token != token:
+        raise ValueError("the guard's token is not the service's")
     kept = KeptFrames()
     previews = PreviewCache(kept)
     if viewer:  # an edit's first preview is made as soon as its map is, before its files
@@ -59,8 +64,8 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
 
     @web.middleware
     async def checks(request: web.Request, handler):
-        # the page's own files hold no data: they load without the token, and the page
-        # then sends it with every request it makes
+        # the page's own files hold no data: they load from a link anywhere and without
+        # the token, and the page then sends its key and the token with every request
         public = viewer and request.method in ("GET", "HEAD") and (
             request.path == "/" or request.path.startswith("/page/"))
         refusal = guard.check(request.method, request.headers,
@@ -68,11 +73,6 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
                               else "", page_file=public)
         if refusal is not None:
             return _problem(refusal.status, refusal.message)
-        if token is not None and not public:
-            given = header_bytes(request.headers.get("Authorization", ""))
-            if not hmac.compare_digest(given, f"Bearer {token}".encode()):
-                return _problem(401, "missing or wrong bearer token (Authorization: Bearer "
-                                     "TOKEN)")
         try:
             return await handler(request)
         except web.HTTPException as exc:
@@ -190,6 +190,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
             return _json(engine.session_settings())
         try:
             body = parse_json_object(await request.read())
+            limits.check(with_knobs(engine.settings, body)[0])  # the command line's ranges
             return _json(engine.update_settings(body))
         except DeltaError as exc:
             return _problem(exc.status, str(exc), exc.problems)

@@ -3,10 +3,9 @@
 A new revision abandons the round in flight (its photons are dropped, never mixed into the
 new revision's map); a burst of revisions coalesces into the newest. A flux-only edit
 rescales the counts and traces nothing. Results are written after a revision's first
-iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the
-pictures once the revision is done (converged or its photon budget spent) or the service
-stops; a done revision's are drawn by the writer thread, so an edit made meanwhile is traced
-at once.
+iteration, then at most every :data:`WRITE_INTERVAL` seconds, and with the pictures once
+the revision is done (converged or its photon budget spent) or the service stops; a done
+revision's are drawn by the writer thread, so an edit made meanwhile is traced at once.
 """
 from __future__ import annotations
 
@@ -24,7 +23,7 @@ from ..publish.outputs import write_outputs
 from ..publish.record import ResultRecord, defined
 from ..run.incremental import Selection, retrace, select
 from ..run.session import Refinement
-from ..run.settings import ServiceLimits, TraceSettings, with_knobs
+from ..run.settings import TraceSettings, with_knobs
 from ..trace.prepared import TracingFrame, prepare
 from ..trace.tracer import trace_batch
 from .events import EventLog
@@ -70,11 +69,8 @@ class Engine:
 
     def __init__(self, live: LiveStage, settings: TraceSettings, events: EventLog,
                  out_dir: Path | None = None, records_cap: int = RECORDS_CAP,
-                 sublayer: bool = True, deliverables: bool = False,
-                 limits: ServiceLimits | None = None):
+                 sublayer: bool = True, deliverables: bool = False):
         self.live = live
-        #: the photon budget and target error a client may set (the command line's)
-        self.limits = limits if limits is not None else ServiceLimits()
         # an edit waits for the batches running when it comes: small ones (the counts are
         # the same for any batch size, and the rounds still grow with the photons)
         self.settings = replace(settings, workers="threads",
@@ -183,7 +179,6 @@ class Engine:
         A new threshold re-filters the current map at once, without retracing; a new
         target or budget goes on refining (or stops) from the photons traced."""
         new, paused = with_knobs(self.settings, changes)
-        self.limits.check(new)
         knobs = bool(set(changes) - {"paused"})
         with self._cv:
             refilter = new.threshold != self.settings.threshold

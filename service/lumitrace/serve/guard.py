@@ -21,15 +21,21 @@ own name. The rules, as the best local development servers have them:
 
 A program's request (the stdlib client, a DCC's Python, curl) carries neither ``Origin``
 nor ``Sec-Fetch-*``: it needs no key. With ``--token`` every request but the page's files
-also needs ``Authorization: Bearer TOKEN`` (checked by the app).
+also needs ``Authorization: Bearer TOKEN`` (401), checked after the origin and before the
+body.
 """
 from __future__ import annotations
 
 import hmac
 import ipaddress
+import os
+import re
 import secrets
 from dataclasses import dataclass, field
+from pathlib import Path
 from urllib.parse import urlsplit
+
+from ..errors import LumitraceError, warn
 
 #: Host names that always mean this machine (loopback addresses are taken as addresses).
 LOOPBACK_NAMES = frozenset({"localhost"})
@@ -93,15 +99,16 @@ def _address(name: str):
 @dataclass(frozen=True)
 class Guard:
     """The rules of one service: ``bound`` is the address (or name) it listens on,
-    ``allowed`` the extra host names (``--allow-host``); ``key`` is the page's secret,
-    new for every process."""
+    ``allowed`` the extra host names (``--allow-host``), ``token`` the bearer token (None:
+    none needed); ``key`` is the page's secret, new for every process."""
 
     bound: str = "127.0.0.1"
     allowed: frozenset[str] = frozenset()
+    token: str | None = field(default=None, repr=False)
     key: str = field(default_factory=lambda: secrets.token_urlsafe(32), repr=False)
 
     @classmethod
-    def of(cls, bound: str, allow_hosts=()) -> "Guard":
+    def of(cls, bound: str, allow_hosts=(), token: str | None = None) -> "Guard":
         names = set()
         for given in allow_hosts:
             parts = split_host(given)
@@ -109,7 +116,7 @@ class Guard:
                 raise ValueError(f"--allow-host takes a host name or address without a "
                                  f"port, got {given!r}")
             names.add(parts[0])
-        return cls(bound.strip("[]").lower(), frozenset(names))
+        return cls(bound.strip("[]").lower(), frozenset(names), token)
 
     def host_allowed(self, name: str) -> bool:
         """Whether ``name`` (from :func:`split_host`) names this service."""
@@ -140,6 +147,11 @@ class Guard:
             refusal = self._same_origin(headers, host)
             if refusal is not None:
                 return refusal
+        if self.token is not None and not page_file:
+            given = header_bytes(headers.get("Authorization", ""))
+            if not hmac.compare_digest(given, f"Bearer {self.token}".encode()):
+                return Refusal(401, "missing or wrong bearer token (Authorization: Bearer "
+                                    "TOKEN)")
         if method in SAFE_METHODS:
             return None
         if content_type != "application/json":
@@ -161,10 +173,36 @@ class Guard:
         origin = headers.get("Origin")
         if origin is None:
             return None
+        # the same name and port as the Host the browser sent (https: through a TLS
+        # proxy, whose name --allow-host gives)
         parts = urlsplit(origin.strip().lower())
-        theirs = split_host(parts.netloc) if parts.scheme == "http" and parts.netloc \
-            else None
-        port = lambda p: 80 if p is None else p  # noqa: E731
-        if theirs is None or theirs[0] != host[0] or port(theirs[1]) != port(host[1]):
+        default = {"http": 80, "https": 443}.get(parts.scheme)
+        theirs = split_host(parts.netloc) if default and parts.netloc else None
+        if theirs is None or theirs[0] != host[0] or \
+                (theirs[1] or default) != (host[1] or default):
             return Refusal(403, f"cross-origin request refused (Origin: {origin})")
         return None
+
+
+def read_token(given: str | None, path: Path | None) -> str | None:
+    """The service's bearer token: ``--token``, the first line of ``--token-file``, or
+    the environment's ``LUMITRACE_TOKEN`` (None: no token); one a header can carry."""
+    where = "--token"
+    if path is not None:
+        where = f"--token-file {path}"
+        try:
+            lines = Path(path).read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            raise LumitraceError(f"cannot read the token: {why}", str(path)) from None
+        given = lines[0].strip() if lines else ""
+        if not given:
+            raise LumitraceError("the token file is empty", str(path))
+    elif given is None:
+        given, where = os.environ.get("LUMITRACE_TOKEN") or None, "LUMITRACE_TOKEN"
+    else:
+        warn("--token is visible to every user of this machine in the process list: give "
+             "it with --token-file FILE or the environment's LUMITRACE_TOKEN")
+    if given is not None and not re.fullmatch(r"[\x21-\x7e]+", given):
+        raise LumitraceError(f"{where}: a token is printable ASCII without spaces")
+    return given

@@ -49,19 +49,20 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
           port: int = DEFAULT_PORT, token: str | None = None,
           out_dir: Path | None = None, viewer: bool = True, quiet: bool = False,
           sublayer: bool = True, deliverables: bool = False, allow_hosts=(),
-          limits: ServiceLimits | None = None) -> int:
+          limits: tuple[int | None, float | None] = (None, None)) -> int:
     """Run the service until a signal; return the exit status (0). ``viewer`` serves the
     live view page at ``/``; ``quiet`` says nothing on stderr but the fatal; ``sublayer``
     False leaves the stage file untouched (the result layer is not sublayered into it);
     ``deliverables`` writes the datasheet and the GLDF container with the pictures;
     ``allow_hosts`` are the names besides loopback ones and ``host`` that requests may
-    give as their ``Host``; ``limits`` bound what a client may set through /settings."""
+    give as their ``Host``; ``limits`` (the largest photon budget, the smallest target
+    error; None: the default) bound what a client may set through /settings."""
     check_binding(host, token)
     try:
-        guard = Guard.of(host, allow_hosts)
+        guard = Guard.of(host, allow_hosts, token)
     except ValueError as exc:
         raise LumitraceError(str(exc)) from None
-    limits = limits if limits is not None else ServiceLimits()
+    limits = ServiceLimits.of(*limits)
     limits.check(settings, options=True)
     lock = StageLock.acquire(stage)  # before the edits layer is read: one service a stage
     try:
@@ -70,10 +71,10 @@ def serve(stage: Path, settings: TraceSettings, host: str = DEFAULT_HOST,
                           block=EVENT_BLOCK)
         live = LiveStage(stage, state=state)
         engine = Engine(live, settings, events, out_dir, sublayer=sublayer,
-                        deliverables=deliverables, limits=limits)
+                        deliverables=deliverables)
         try:
             asyncio.run(_main(live, engine, events, host, port, token, lock, viewer, quiet,
-                              guard))
+                              guard, limits))
         finally:
             live.close()
     finally:
@@ -97,7 +98,8 @@ def _route_warnings(events: EventLog) -> None:
 
 async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, port: int,
                 token: str | None, lock: StageLock, viewer: bool = True,
-                quiet: bool = False, guard: Guard | None = None) -> None:
+                quiet: bool = False, guard: Guard | None = None,
+                limits: ServiceLimits | None = None) -> None:
     loop = asyncio.get_running_loop()
     events.bind(loop)
     echo = None if quiet else asyncio.create_task(echo_events(events))
@@ -105,7 +107,7 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         loop.add_signal_handler(sig, stop.set)
-    runner = web.AppRunner(make_app(live, engine, events, token, viewer, guard),
+    runner = web.AppRunner(make_app(live, engine, events, token, viewer, guard, limits),
                            handle_signals=False,
                            access_log=None)
     await runner.setup()

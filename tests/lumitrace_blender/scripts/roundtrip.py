@@ -70,6 +70,21 @@ def demo(stage, out):
         else:
             diffuser_material[name] = before
     report["refusals"] = refusals
+    # an asset path typed in Blender is relative to the stage's folder: an export
+    # elsewhere anchors it anew
+    led = by_prim(bpy.data.objects, "/Luminaire/LED").data
+    led["lumitrace:rayFile"] = "rays/led.tm25"
+    os.makedirs(os.path.join(out, "elsewhere"), exist_ok=True)
+    away = os.path.join(out, "elsewhere", "edits.usda")
+    exporter.export_stage(entry, away, "edits")
+    report["asset_line"] = [line.strip() for line in open(away) if "rayFile" in line]
+    report["asset_delta"] = [d for d in live.deltas_of(entry, exporter.edits_since_import(
+        entry)) if d.get("property") == "lumitrace:rayFile"]
+    del led["lumitrace:rayFile"]
+    # a second import of the stage: the first one's data is no longer the stage's
+    assert bpy.ops.lumitrace.import_stage(filepath=stage) == {"FINISHED"}
+    report["after_reimport"] = len(exporter.edits_since_import(
+        records.stage_entry(bpy.context.scene)))
     report["exported"], report["edits_layer"] = exported, edits
     return report
 
@@ -90,9 +105,15 @@ def many(stage, out):
     led.data["lumitrace:luminousFlux"] = 1500.0  # a flux
     led.data.size = 25.0  # the rect light's width
     board = by_prim(bpy.data.objects, "/Luminaire/Board")
+    kept = state.cached_digest(board.data)
     for v in board.data.vertices:  # a mesh edit: the board 10% smaller across
         v.co.x *= 0.9
         v.co.y *= 0.9
+    report["digest_kept_until_update"] = state.cached_digest(board.data) == kept
+    board.data.update()
+    bpy.context.view_layer.update()  # the depsgraph tells the add-on the mesh changed
+    report["digest_after_update"] = state.cached_digest(board.data) == \
+        state.mesh_digest(board.data) != kept
     housing_paint = by_prim(bpy.data.materials, "/Luminaire/Materials/HousingPaint")
     state.principled(housing_paint).inputs["Base Color"].default_value = (0.2, 0.2, 0.2, 1)
     housing = by_prim(bpy.data.objects, "/Luminaire/Housing")  # another material bound

@@ -14,6 +14,7 @@ const LT = (window.lumitrace = {
   polar: null, history: [], events: [], lastEventId: 0, drawn: { preview: 0, view3d: 0 },
   timings: [], problems: [], errors: [], frames: 0, undo: [], selected: null,
   requests: [], paused: false, reference: null, solidPositions: null, framed: null,
+  picked: null,  // the part the user picked (highlighted); none until one is
 });
 window.addEventListener("error", (e) => LT.errors.push(String(e.message)));
 
@@ -607,7 +608,7 @@ function upload(positions, normals, colours) {
   return { vao, count: positions.length / 3 };
 }
 
-const PART_COLOURS = [[0.85, 0.85, 0.82], [0.65, 0.72, 0.85], [0.9, 0.75, 0.55], [0.6, 0.8, 0.65],
+const PART_COLOURS = [[0.85, 0.85, 0.82], [0.65, 0.72, 0.85], [0.80, 0.84, 0.90], [0.6, 0.8, 0.65],  // no orange: that is the pick's
                       [0.8, 0.6, 0.75], [0.7, 0.7, 0.7]];
 
 function buildParts() {
@@ -631,7 +632,7 @@ function buildParts() {
       col.set(colour, a + 3 * k);
       for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], pos[a + 3 * k + d]); hi[d] = Math.max(hi[d], pos[a + 3 * k + d]); }
     }
-    if (part === LT.selected) {
+    if (part === LT.picked) {
       for (let k = 0; k < 9; k++) picked.push(pos[a + k]);
       for (let k = 0; k < 3; k++) pickedN.push(nx, ny, nz);
     }
@@ -854,8 +855,10 @@ function pick(e) {
 
 // ---- the editor ------------------------------------------------------------------------------
 
+// A part picked (in the view or the list): the editor shows it, the view highlights it.
 function selectPart(index) {
   LT.selected = index;
+  LT.picked = index;
   document.getElementById("part-select").value = String(index);
   buildParts();
   fillEditor();
