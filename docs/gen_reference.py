@@ -44,6 +44,7 @@ def _input_limits() -> dict[str, tuple[str, str]]:
     from the result record instead."""
     from lumitrace import schema as s
     from lumitrace.stage.colour import SPECTRUM_RANGES
+    from lumitrace.stage.profile import SEGMENTS_RANGE as PROFILE_SEGMENTS
     from lumitrace.stage.validate import MAX_LUMINOUS_FLUX
 
     def closed(name):
@@ -83,6 +84,12 @@ def _input_limits() -> dict[str, tuple[str, str]]:
         s.LAMP_DESCRIPTION: ("", text),
         s.INPUT_POWER: ("W", "finite, >= 0"),
         s.COLOUR_RENDERING_INDEX: ("Ra", "finite, from 0 to 100"),
+        s.PROFILE_POINTS: ("the mesh's units", "at least two finite (r, z) pairs, no two in "
+                                               "a row the same, r >= 0 in a revolve"),
+        s.PROFILE_KIND: ("", "one of " + ", ".join(s.PROFILE_KINDS)),
+        s.PROFILE_SEGMENTS: ("", "; ".join(f"{lo} to {hi} for {kind}" for kind, (lo, hi)
+                                           in PROFILE_SEGMENTS.items())),
+        s.PROFILE_LENGTH: ("the mesh's units", "finite, > 0 (an extrusion's)"),
     }
 
 
