@@ -90,6 +90,11 @@ def _input_limits() -> dict[str, tuple[str, str]]:
         s.PROFILE_SEGMENTS: ("", "; ".join(f"{lo} to {hi} for {kind}" for kind, (lo, hi)
                                            in PROFILE_SEGMENTS.items())),
         s.PROFILE_LENGTH: ("the mesh's units", "finite, > 0 (an extrusion's)"),
+        s.SYMMETRY: ("", "one of " + ", ".join(s.SYMMETRY_TOKENS) + " (see "
+                         "files-you-ship)"),
+        s.OPENING_SHAPE: ("", "one of " + ", ".join(s.OPENING_SHAPES)),
+        s.OPENING_SIZE: ("stage units", "length and width > 0, height >= 0, finite; a round "
+                                        "opening's length and width equal"),
     }
 
 
