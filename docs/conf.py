@@ -29,7 +29,7 @@ source_suffix = {".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_build"]
 myst_heading_anchors = 3
-myst_enable_extensions = ["colon_fence", "attrs_inline"]
+myst_enable_extensions = ["colon_fence", "attrs_inline", "deflist"]
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
 autodoc_default_options = {"members": True}
@@ -53,6 +53,7 @@ NAV: dict[str, list[str]] = {
         "symmetry?",
         "guide/outputs",
         "guide/deliverables",
+        "deliverables?",
         "guide/service",
         "service-security?",
         "files-and-safety?",

@@ -44,6 +44,7 @@ def _input_limits() -> dict[str, tuple[str, str]]:
     from the result record instead."""
     from lumitrace import schema as s
     from lumitrace.stage.colour import SPECTRUM_RANGES
+    from lumitrace.stage.profile import SEGMENTS_RANGE as PROFILE_SEGMENTS
     from lumitrace.stage.validate import MAX_LUMINOUS_FLUX
 
     def closed(name):
@@ -81,8 +82,22 @@ def _input_limits() -> dict[str, tuple[str, str]]:
         s.LUMINAIRE_NAME: ("", text),
         s.CATALOGUE_NUMBER: ("", text),
         s.LAMP_DESCRIPTION: ("", text),
+        s.AUTHOR: ("", text),
+        s.BUG_FORWARD: ("", "one of " + ", ".join(s.BUG_FORWARD_TOKENS) + " (see "
+                            "deliverables)"),
         s.INPUT_POWER: ("W", "finite, >= 0"),
         s.COLOUR_RENDERING_INDEX: ("Ra", "finite, from 0 to 100"),
+        s.PROFILE_POINTS: ("the mesh's units", "at least two finite (r, z) pairs, no two in "
+                                               "a row the same, r >= 0 in a revolve"),
+        s.PROFILE_KIND: ("", "one of " + ", ".join(s.PROFILE_KINDS)),
+        s.PROFILE_SEGMENTS: ("", "; ".join(f"{lo} to {hi} for {kind}" for kind, (lo, hi)
+                                           in PROFILE_SEGMENTS.items())),
+        s.PROFILE_LENGTH: ("the mesh's units", "finite, > 0 (an extrusion's)"),
+        s.SYMMETRY: ("", "one of " + ", ".join(s.SYMMETRY_TOKENS) + " (see "
+                         "files-you-ship)"),
+        s.OPENING_SHAPE: ("", "one of " + ", ".join(s.OPENING_SHAPES)),
+        s.OPENING_SIZE: ("stage units", "length and width > 0, height >= 0, finite; a round "
+                                        "opening's length and width equal"),
     }
 
 
@@ -160,11 +175,11 @@ def schema_page() -> str:
         out.append(f"## {schema}\n")
         out.append(f"Applied to {_APPLIES_TO.get(schema, 'a prim')}. "
                    f"{_cell(rows[0]['schema_doc'].split(chr(10) + chr(10))[0])}\n")
-        out.append(_table(["attribute", "type", "unit", "allowed values", "fallback",
-                           "meaning"],
-                          [[f"`{a['name']}`", f"`{a['type']}`", a["unit"] or "-",
-                            a["range"], f"`{a['default']}`" if a["default"] else "-",
-                            a["doc"]] for a in rows]))
+        for a in rows:  # a definition list: the meaning is too long for a table's cell
+            facts = [f"`{a['type']}`", f"unit: {a['unit']}" if a["unit"] else "no unit",
+                     f"allowed: {_cell(a['range'])}",
+                     f"fallback: `{a['default']}`" if a["default"] else "no fallback"]
+            out.append(f"`{a['name']}`\n: {' · '.join(facts)}\n\n  {_cell(a['doc'])}\n")
     return "\n".join(out)
 
 
@@ -190,8 +205,13 @@ def _describe(spec: dict, defs: dict) -> str:
         items = _describe(spec.get("items", {}), defs)
         lo, hi = spec.get("minItems"), spec.get("maxItems")
         count = f"{lo}" if lo == hi and lo is not None else \
-            f"{lo or 0} to {hi}" if hi else f"at least {lo}" if lo else ""
-        return f"array of {count} {items}".replace("  ", " ").strip()
+            f"{lo or 0} to {hi:,}" if hi else f"at least {lo}" if lo else "any number of"
+        if spec.get("items", {}).get("type") == "array":
+            return f"{count} arrays of {items}"
+        head, sep, rest = items.partition(", ") if items.startswith("string") else \
+            items.partition(" (")
+        many = head if head.endswith("s") else head + "s"
+        return f"{count} {many}" + (f"{sep}{rest}" if rest else "")
     if kind == "object":
         if "additionalProperties" in spec and isinstance(spec["additionalProperties"], dict):
             value = _describe(spec["additionalProperties"], defs)
@@ -337,11 +357,13 @@ def record_page() -> str:
            "of the EXR header. This page is generated from that declaration as the site "
            "builds. The files themselves are described in "
            "[The outputs](../guide/outputs.md).\n",
-           _table(["key", "type", "unit", "group", "result layer attribute", "EXR key",
-                   "meaning"],
-                  [[f"`{f.key}`", f.kind, f.unit or "-", f.group or "-",
-                    f"`{RESULT_PREFIX}{f.attribute}`" if f.attribute else "-",
-                    f"`{f.exr}`" if f.exr else "-", f.doc] for f in RESULT_FIELDS])]
+           ]
+    for f in RESULT_FIELDS:  # a definition list: the meaning is too long for a table's cell
+        facts = [f.kind, f"unit: {f.unit}" if f.unit else "no unit",
+                 f"in `{f.group}`" if f.group else "at the top level",
+                 f"layer: `{RESULT_PREFIX}{f.attribute}`" if f.attribute else "not in the layer",
+                 f"EXR: `{f.exr}`" if f.exr else "not in the EXR"]
+        out.append(f"`{f.key}`\n: {' · '.join(facts)}\n\n  {_cell(f.doc)}\n")
     return "\n".join(out)
 
 

@@ -36,9 +36,6 @@ def main() -> int:
     # inherit it). A value the user set wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     _start_renderer(sys.argv)
-    method_cache = _load_early("method_cache")
-    if method_cache is not None:
-        method_cache.install()
     from lumitrace.cli import main as cli_main
     from lumitrace.quick_exit import finish
 

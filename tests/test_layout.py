@@ -19,9 +19,8 @@ PACKAGE = ROOT / "service" / "lumitrace"
 RANKS = {
     "errors": 0, "atomic": 0, "filenames": 0,
     "digests": 0,  # a file's SHA-256 and its size-and-time stamp: the standard library only
-    # dataclasses' compiled methods kept on disk, and the cache folder: the standard
-    # library only (the command loads it before the package); the table cache uses it
-    "method_cache": -0.5,
+    # the cache folder and its trusted reads and whole writes: the standard library only
+    "cache_files": -0.5,
     "table_cache": 0,  # layout tables kept on disk: numpy and the standard library only
     "pyplot": 0,  # matplotlib's pyplot as every picture loads it: matplotlib only
     "tm25": 0.5,  # the ray-file format: the stage reader reads a light's rays, outputs write them

@@ -1,6 +1,7 @@
 """Every script in ``tools/`` runs (with a quick argument set, or ``--help`` where a full
-run is long or needs a browser), and every example delta of the README's service section
-is accepted by a real ``lumitrace serve`` of the demo stage: none of them can rot unseen."""
+run is long or needs a browser), and every example delta of the service guide
+(docs/guide/service.md) is accepted by a real ``lumitrace serve`` of the demo stage: none of
+them can rot unseen."""
 from __future__ import annotations
 
 import ast
@@ -26,6 +27,8 @@ QUICK = ("--target-error", 0.3, "--resolution", 8, "--threads", 1, "--quiet")
 #: Each script's quick run ({out}: a fresh folder). A full run of those given "--help" is
 #: minutes long or needs a browser; they are exercised by their own tests where there are.
 RUNS: dict[str, tuple[str, ...]] = {
+    "accuracy_page.py": ("--photons", "20000", "--seeds", "1", "--target-error", "0.3",
+                         "--dry-run", "--images", "{out}"),
     "application_cost.py": ("--photons", "20000", "--repeats", "1"),
     "beam_angle_seeds.py": ("--seeds", "2", "--photons", "20000", "--only", "disc"),
     "bench.py": ("--seconds", "0.5", "--threads", "1"),
@@ -46,6 +49,7 @@ RUNS: dict[str, tuple[str, ...]] = {
     "live_loop_bench.py": ("--edits", "1", "--client", "page"),
     "live_view_screenshot.py": ("--help",),  # drives headless Chromium for a minute
     "part_edit_bench.py": ("--triangles", "20000", "--repeats", "1"),
+    "performance_page.py": ("--quick",),
     "make_stages.py": ("--check",),
     "opening_seeds.py": ("--seeds", "2", "--photons", "8192", "--reference-photons", "16384",
                          "--stages", "disc"),
@@ -154,21 +158,20 @@ def demo(tmp_path) -> Path:
 
 
 def _service_section() -> str:
-    text = (ROOT / "README.md").read_text()
-    start = text.index("## The live service")
-    return text[start:text.index("\n## ", start + 1)]
+    return (ROOT / "docs" / "guide" / "service.md").read_text()
 
 
 def readme_batches() -> list[list[dict]]:
-    """Every JSON block of the README's service section that is a batch of deltas."""
+    """Every JSON block of the service guide that is a batch of deltas."""
     blocks = re.findall(r"```json\n(.*?)```", _service_section(), re.S)
     return [json.loads(b)["deltas"] for b in blocks if '"deltas"' in b]
 
 
 def readme_client_calls() -> list[tuple[str, list]]:
-    """The ``c.set(...)`` style calls of the README's client example: (method, args)."""
+    """The ``c.set(...)`` style calls of the service guide's client example: (method,
+    args)."""
     calls = []
-    for line in re.findall(r"^c\.(\w+\(.*\))", _service_section(), re.M):
+    for line in re.findall(r"^(?:\w+ = )?c\.(\w+\(.*\))", _service_section(), re.M):
         call = ast.parse(line.split("  #")[0].strip()).body[0].value
         calls.append((call.func.id, [ast.literal_eval(a) for a in call.args]))
     return calls
@@ -183,7 +186,7 @@ def test_readme_batches_are_found():
 
 
 def test_every_readme_example_delta_is_accepted_by_the_demo(demo, tmp_path):
-    """Each README batch is accepted as a whole (200) on the demo; then, on a fresh copy,
+    """Each example batch is accepted as a whole (200) on the demo; then, on a fresh copy,
     each of its deltas alone, in order, is accepted and changes what is traced (effect not
     ``none``; the ``layer`` delta only adds a variant set the next delta selects), and so
     is the client example's call; a ``lumitrace:`` name no schema defines is refused,

@@ -1,7 +1,8 @@
 #!/bin/sh
-# Install lumitrace into ./.venv (created if missing). With --test, also the test
-# dependencies: the Python ones, the OpenEXR C++ headers the cube-map tests compile
-# OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
+# Install lumitrace into ./.venv (created if missing). With --docs, also the documentation
+# tools (then: .venv/bin/sphinx-build -W -q docs site). With --test, also the test
+# dependencies (the documentation tools among them): the Python ones, the OpenEXR C++
+# headers the cube-map tests compile OpenEXR's own ImfEnvmap against (Debian/Ubuntu: libopenexr-dev, pkg-config, g++), and
 # the headless Chromium the live view tests drive (chromium, chromium-driver), and
 # pdftoppm (poppler-utils), which renders the datasheet's PDF in its tests, and the
 # Blender environment below.
@@ -47,6 +48,9 @@ if [ "$1" = "--blender" ]; then
     blender_env
     exit 0
 fi
+# setuptools notes at every editable install of a package mapped as this one (schemas/ is
+# lumitrace.schemas) that a folder named like the package could shadow it: none does here
+export PYTHONWARNINGS="${PYTHONWARNINGS:+$PYTHONWARNINGS,}ignore:Editable installation"
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 if [ "$1" = "--test" ]; then
@@ -78,6 +82,8 @@ if [ "$1" = "--test" ]; then
         fi
     fi
     blender_env
+elif [ "$1" = "--docs" ]; then
+    .venv/bin/python -m pip install -q -e '.[plot,docs]'
 else
     .venv/bin/python -m pip install -q -e '.[plot]'
 fi

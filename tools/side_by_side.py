@@ -77,7 +77,7 @@ from lumitrace.run.session import TraceSettings, run  # noqa: E402
 from lumitrace.stage.reader import read_stage  # noqa: E402
 
 #: The ``lumitrace`` command as a user starts it: the installed entry point (its launcher
-#: keeps the compiled dataclass methods and loads with the collector paused), else the
+#: catches signals from the first instant and starts the picture renderer early), else the
 #: same launcher through this interpreter.
 _SCRIPT = Path(sys.executable).with_name("lumitrace")
 LUMITRACE = [str(_SCRIPT)] if _SCRIPT.is_file() else [

@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .method_cache import cache_folder, open_kept, write_kept
+from .cache_files import cache_folder, open_kept, write_kept
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -136,7 +136,7 @@ def _encoded(value: Any) -> bytearray:
 
 
 def write_table(path: Path, value: Any, most_bytes: int | None = None) -> bool:
-    """Keep ``value`` at ``path`` (:func:`~lumitrace.method_cache.write_kept`: two makers
+    """Keep ``value`` at ``path`` (:func:`~lumitrace.cache_files.write_kept`: two makers
     of the same table leave one whole file), unless it is larger than ``most_bytes``;
     whether it was kept. Never raises."""
     try:

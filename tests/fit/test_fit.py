@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers.fit_stages import PROFILE_POINTS, mirror_cup, profile_reflector
+from helpers.fit_stages import PROFILE_POINTS, finished_cup, mirror_cup, profile_reflector
 
 from lumitrace.fit.candidates import CandidateStage
 from lumitrace.fit.measure import Plan, measurement, trace_counts
@@ -32,7 +32,7 @@ WALL = "/Luminaire/Wall.xformOp:translate[2]"
 POINTS = "/Luminaire/Reflector.lumitrace:profile:points[1:5][0]"
 
 
-def _target(stage: Path, out: Path, photons: int = 500_000) -> Path:
+def _target(stage: Path, out: Path, photons: int = 2_000_000) -> Path:
     """The stage's own LDT, traced with a seed no fit uses."""
     from lumitrace.publish.outputs import write_outputs
     from lumitrace.run.session import run
@@ -59,8 +59,8 @@ def _merits(stage: Path, vary: list[str], target: Path, values: list[list], phot
     return out
 
 
-def _fit(stage, target, vary, out, evaluations, **kw) -> dict:
-    return run_fit(FitOptions(stage=stage, target=target, vary=vary, photons=1 << 14,
+def _fit(stage, target, vary, out, evaluations, photons=1 << 14, **kw) -> dict:
+    return run_fit(FitOptions(stage=stage, target=target, vary=vary, photons=photons,
                               evaluations=evaluations, out=out, pictures=False, threads=2,
                               **kw))
 
@@ -128,13 +128,16 @@ def test_a_parts_position_along_the_axis_is_recovered(tmp_path):
 def test_four_points_of_a_profile_are_recovered(tmp_path):
     """A glossy revolved reflector (roughness 0.3: a mirror's faceted bands throw narrow
     rings whose merit is flat but for a needle at the truth) around a small source; four
-    radii start 1.5 mm off, alternately out and in."""
+    radii start 1.5 mm off, alternately out and in; the candidates begin at 32,768
+    photons (at fewer, the photons' noise leaves the four radii free to trade off against
+    one another by a millimetre)."""
     target = _target(profile_reflector(tmp_path / "true.usda", roughness=0.3),
                      tmp_path / "target")
     start = [(r + d, z) for (r, z), d in zip(PROFILE_POINTS, (0, 0.0015, -0.0015, 0.0015,
                                                              -0.0015))]
     stage = profile_reflector(tmp_path / "p.usda", start, roughness=0.3)
-    summary = _fit(stage, target, [f"{POINTS}=+-0.003"], tmp_path / "fit", 160)
+    summary = _fit(stage, target, [f"{POINTS}=+-0.003"], tmp_path / "fit", 160,
+                   photons=1 << 15)
     best = [summary["best"][f"/Luminaire/Reflector.lumitrace:profile:points[{i}][0]"]
             for i in range(1, 5)]
     truth = [r for r, _ in PROFILE_POINTS[1:]]
@@ -142,6 +145,52 @@ def test_four_points_of_a_profile_are_recovered(tmp_path):
     m_best, m_true = _merits(stage, [f"{POINTS}=+-0.003"], target, [best, truth],
                              summary["search_photons"])
     assert m_best <= 1.5 * m_true, (m_best, m_true)
+
+
+def test_a_variant_set_is_a_discrete_parameter(tmp_path):
+    """The wall's finish, a variant set of three, found among them (white, where the
+    stage says mirror)."""
+    target = _target(finished_cup(tmp_path / "true.usda", "white"), tmp_path / "target")
+    stage = finished_cup(tmp_path / "cup.usda", "mirror")
+    summary = _fit(stage, target, ["/Luminaire{finish}"], tmp_path / "fit", 16)
+    assert summary["best"] == {"/Luminaire{finish}": "white"}
+    assert summary["parameters"]["/Luminaire{finish}"]["choices"] == ["black", "mirror",
+                                                                     "white"]
+
+
+def test_a_lights_flux_is_recovered_in_candela(tmp_path):
+    """--absolute: the light's flux scales every candela; with the shape alone it would
+    change nothing the merit sees."""
+    target = _target(finished_cup(tmp_path / "true.usda", flux=1000.0), tmp_path / "target")
+    stage = finished_cup(tmp_path / "cup.usda", flux=700.0)
+    flux = "/Luminaire/Source.lumitrace:luminousFlux=400:2000"
+    summary = _fit(stage, target, [flux], tmp_path / "fit", 40, absolute=True)
+    assert summary["best"][flux.split("=")[0]] == pytest.approx(1000.0, rel=0.02)
+
+
+def test_a_candidate_the_stage_cannot_take_is_set_aside_and_the_search_goes_on(
+        cup, tmp_path, monkeypatch):
+    """Values within the ranges that still make the stage unreadable (here: a mirror
+    reflecting more than 0.97, refused as a stand-in for such a value) are not traced; the
+    candidate gets the worst merit with its reason, and the fit ends with a valid best."""
+    from lumitrace.errors import StageError
+    from lumitrace.fit import candidates
+    from lumitrace.fit.search import FAILED_MERIT
+
+    stage, target, _, _ = cup
+    scene = candidates.CandidateStage.scene
+
+    def refusing(self, params, values):
+        if values[0] > 0.97:
+            raise StageError("refused for the test", "/Luminaire/Materials/Mirror")
+        return scene(self, params, values)
+
+    monkeypatch.setattr(candidates.CandidateStage, "scene", refusing)
+    summary = _fit(stage, target, [f"{REFLECTANCE}=0.5:1"], tmp_path / "fit", 40)
+    data = json.loads(Path(summary["report_json"]).read_text())
+    failed = [e for e in data["evaluations_list"] if e["merit"] == FAILED_MERIT]
+    assert failed and all("refused for the test" in e["terms"][0]["failed"] for e in failed)
+    assert summary["best"][REFLECTANCE] <= 0.97 and summary["merit"] < 1.0
 
 
 def _cli(*args) -> subprocess.Popen:
@@ -198,6 +247,7 @@ def test_a_fit_stopped_by_sigint_resumes_to_the_uninterrupted_result(cup, tmp_pa
     (f"{REFLECTANCE}=0.5:1.5", (), "leaves the attribute's own [0, 1]"),
     ("/Luminaire/Source.inputs:radius", (), "has no range of its own"),
     ("/Luminaire/Wall.points[99999][0]=0:1", (), "index 99999 is out of range"),
+    ("/Luminaire/Materials/Mirror.lumitrace:ior=0:2", (), "at 0 the stage cannot be read"),
     (REFLECTANCE, ("--objective", "beam_width = 30"), "no figure 'beam_width'"),
     (REFLECTANCE, ("--constrain", "light_output_ratio = 0.8"), "a constraint is NAME <="),
 ])

@@ -29,6 +29,38 @@ def mirror_cup(path: Path, reflectance: float = 0.95, wall_z: float | None = Non
     return path
 
 
+def finished_cup(path: Path, finish: str = "mirror", flux: float = 1000.0) -> Path:
+    """The mirror cup whose wall's finish is a variant set on the luminaire, ``finish``
+    selected: ``mirror`` (specular 0.95), ``white`` (diffuse 0.8) or ``black`` (an
+    absorber), each variant binding the wall to its material; its source of ``flux`` lm."""
+    from pxr import Usd, UsdShade
+
+    mirror_cup(path)
+    stage = Usd.Stage.Open(str(path))
+    root = stage.GetRootLayer()
+    wall = root.GetPrimAtPath("/Luminaire/Wall")
+    wall.RemoveProperty(wall.relationships["material:binding"])
+    for name, scattering, attr, value in (("White", "diffuse", "reflectance", 0.8),
+                                          ("Black", "absorber", None, None)):
+        mat = UsdShade.Material.Define(stage, f"/Luminaire/Materials/{name}")
+        mat.GetPrim().ApplyAPI("LumitraceMaterialAPI")
+        mat.GetPrim().GetAttribute("lumitrace:scattering").Set(scattering)
+        if attr:
+            mat.GetPrim().GetAttribute(f"lumitrace:{attr}").Set(value)
+    stage.GetPrimAtPath("/Luminaire/Source").GetAttribute("lumitrace:luminousFlux").Set(
+        float(flux))
+    vset = stage.GetPrimAtPath("/Luminaire").GetVariantSets().AddVariantSet("finish")
+    for variant, material in (("mirror", "Mirror"), ("white", "White"), ("black", "Black")):
+        vset.AddVariant(variant)
+        vset.SetVariantSelection(variant)
+        with vset.GetVariantEditContext():
+            UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath("/Luminaire/Wall")).Bind(
+                UsdShade.Material(stage.GetPrimAtPath(f"/Luminaire/Materials/{material}")))
+    vset.SetVariantSelection(finish)
+    root.Save()
+    return path
+
+
 def profile_reflector(path: Path, points=PROFILE_POINTS, reflectance: float = 0.9,
                       segments: int = 48, source_radius: float = 0.001,
                       roughness: float | None = None) -> Path:

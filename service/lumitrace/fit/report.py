@@ -15,6 +15,7 @@ import numpy as np
 from ..atomic import write_text
 from ..photometry.curves import PLANES, plane_curve
 from ..photometry.distribution import photometry_of
+from .search import FAILED_MERIT
 
 MERIT_PNG = "fit.merit.png"
 POLAR_PNG = "fit.polar.png"
@@ -99,7 +100,7 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
 
     plt = pyplot()
     out = {}
-    evs = result.evaluations
+    evs = [e for e in result.evaluations if e.merit < FAILED_MERIT]  # traced ones
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
     photons = np.array([e.photons for e in evs])
     levels = sorted(set(photons.tolist()))
@@ -114,8 +115,9 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
         gens = sorted({e.generation for e in evs})
         floor = [float(np.median([e.noise for e in evs if e.generation == g])) for g in gens]
         last = [max(x_of(e) for e in evs if e.generation == g) for g in gens]
-        ax.step(last, floor, where="pre", lw=1, ls=":", color="#555555",
-                label="noise floor (a perfect candidate)")
+        if any(f > 0 for f in floor):  # (no target: no floor)
+            ax.step(last, floor, where="pre", lw=1, ls=":", color="#555555",
+                    label="noise floor (a perfect candidate)")
         best = np.minimum.accumulate([e.merit for e in evs])
         ax.plot([x_of(e) for e in evs], best, "-", lw=1, color="black", label="lowest so far")
         ax.axhline(summary["merit"], color="#c0392b", lw=1, ls="--",
@@ -178,7 +180,7 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
 
     continuous = [p for p in params if not p.discrete]
     if continuous:
-        fig, ax = plt.subplots(figsize=(8, 0.55 * len(continuous) + 1.2),
+        fig, ax = plt.subplots(figsize=(8, max(2.0, 0.75 * len(continuous) + 1.0)),
                                constrained_layout=True)
         for i, p in enumerate(continuous):
             info = summary["parameters"][p.name]
@@ -195,8 +197,11 @@ def draw(folder: Path, result, params, summary, target, ph, absolute: bool,
                     color="#777777")
             ax.text(b, y - 0.22, f"{info['best']:.4g}", ha="center", va="top", fontsize=6,
                     color="#2c5aa0")
-        ax.set_yticks(range(len(continuous)))
-        ax.set_yticklabels([p.name for p in reversed(continuous)], fontsize=7)
+        for i, p in enumerate(continuous):  # each name over its bar: names are long
+            ax.text(0.5, len(continuous) - 1 - i + 0.28, p.name, ha="center", va="bottom",
+                    fontsize=7, family="monospace")
+        ax.set_yticks([])
+        ax.set_ylim(-0.7, len(continuous) - 0.2)
         ax.set_xlim(-0.03, 1.03)
         ax.set_xlabel("position in the range (0: low, 1: high); grey: start, blue: best, "
                       "red: best on an edge", fontsize=8)
@@ -237,6 +242,13 @@ def _reach(curves) -> float:
     return float(min(180.0, max(20.0, 1.15 * max(lit, default=90.0))))
 
 
+_CSS = ("body{font-family:system-ui,sans-serif;max-width:72rem;margin:1.5rem auto;"
+        "padding:0 1rem;color:#222}table{border-collapse:collapse;margin:0.5rem 0 1.2rem}"
+        "td,th{border-bottom:1px solid #ddd;padding:0.25rem 0.6rem;text-align:left;"
+        "font-size:0.9rem}figure{display:inline-block;margin:0.5rem}"
+        "img{max-width:100%;border:1px solid #eee}code{font-size:0.85rem}")
+
+
 def _fmt(v, digits: int = 4) -> str:
     if v is None:
         return "-"
@@ -269,41 +281,53 @@ def _html(data: dict, images: dict) -> str:
         v, s = figs.get(key), figs.get(f"{key}_error")
         best = "-" if v is None else f"{v:.4g} &plusmn; {s:.2g} {unit}" if s is not None \
             else f"{v:.4g} {unit}"
-        frows.append(f"<tr><td>{label}</td><td>{best}</td><td>{_fmt(tfig.get(key))}</td></tr>")
-    trows = "".join(
-        f"<tr><td><code>{e(t['term'])}</code></td><td>{_fmt(t['value'])}</td>"
-        f"<td>{_fmt(t['error'], 2)}</td><td>{'' if t['met'] is None else ('met' if t['met'] else '<b>not met</b>')}</td></tr>"
-        for t in data.get("terms", []))
+        frows.append(f"<tr><td>{label}</td><td>{best}</td>"
+                     f"<td>{_fmt(tfig.get(key))}</td></tr>")
+    def met(t) -> str:
+        return "" if t["met"] is None else "met" if t["met"] else "<b>not met</b>"
+
+    trows = "".join(f"<tr><td><code>{e(t['term'])}</code></td><td>{_fmt(t['value'])}</td>"
+                    f"<td>{_fmt(t['error'], 2)}</td><td>{met(t)}</td></tr>"
+                    for t in data.get("terms", []))
     captions = {"merit": "the merit of every candidate, with its standard error, against "
                          "evaluations and seconds",
                 "polar": "the target and the best, in both planes",
                 "parameters": "how far each parameter moved within its range",
                 "profile": "the profile, as it started and as fitted"}
     pics = "".join(f'<figure><img src="{e(f)}" alt="{e(captions.get(k, k))}"><figcaption>'
-                   f"{e(captions.get(k, k))}</figcaption></figure>" for k, f in images.items())
+                   f"{e(captions.get(k, k))}</figcaption></figure>"
+                   for k, f in images.items())
     target = data.get("target")
-    tgt = f"<p>Target <code>{e(target['file'])}</code> ({e(target['symmetry'])} symmetry), " \
-          f"compared {'in candela' if data['objective']['absolute'] else 'by shape (each distribution in cd/klm of its own flux)'}.</p>" \
-        if target else ""
+    tgt = ""
+    if target:
+        how = "in candela" if data["objective"]["absolute"] else \
+            "by shape (each distribution in cd/klm of its own flux)"
+        tgt = (f"<p>Target <code>{e(target['file'])}</code> ({e(target['symmetry'])} "
+               f"symmetry), compared {how}.</p>")
+    floor = (f"; a perfect candidate would show {data['noise_floor']:.2g} at these photons"
+             if data.get("match") is not None else "")
+    terms = ("<h2>Terms and constraints</h2><table><tr><th>term</th><th>value</th>"
+             f"<th>error</th><th></th></tr>{trows}</table>") if trows else ""
     return f"""<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>lumitrace fit: {e(data['stage'])}</title>
-<style>body{{font-family:system-ui,sans-serif;max-width:72rem;margin:1.5rem auto;padding:0 1rem;color:#222}}
-table{{border-collapse:collapse;margin:0.5rem 0 1.2rem}}td,th{{border-bottom:1px solid #ddd;padding:0.25rem 0.6rem;text-align:left;font-size:0.9rem}}
-figure{{display:inline-block;margin:0.5rem}}img{{max-width:100%;border:1px solid #eee}}code{{font-size:0.85rem}}</style></head>
+<html lang="en"><head><meta charset="utf-8">
+<title>lumitrace fit: {e(data['stage'])}</title><style>{_CSS}</style></head>
 <body><h1>Fit of <code>{e(data['stage'])}</code></h1>
 {tgt}
-<p><b>Merit {data['merit']:.4g} &plusmn; {data['merit_error']:.2g}</b> (the best traced again with seed {data['final_seed']},
-{data['final_photons']:,} photons; a perfect candidate would show {data['noise_floor']:.2g} at these photons).
-In the search: {data['search_merit']:.4g} &plusmn; {data['search_merit_error']:.2g} at {data['search_photons']:,} photons.
-{data['evaluations']} evaluations in {data['generations']} generations, {data['seconds']:.1f} s ({e(data['stopped'])}).</p>
-<p>Edits layer: <code>{e(data['edits'])}</code> (<code>lumitrace trace STAGE --edits LAYER</code> composes it;
-<code>lumitrace edits merge STAGE --layer LAYER</code> keeps it).</p>
+<p><b>Merit {data['merit']:.4g} &plusmn; {data['merit_error']:.2g}</b> (the best traced
+again with seed {data['final_seed']}, {data['final_photons']:,} photons{floor}).
+In the search: {data['search_merit']:.4g} &plusmn; {data['search_merit_error']:.2g} at
+{data['search_photons']:,} photons. {data['evaluations']} evaluations in
+{data['generations']} generations, {data['seconds']:.1f} s ({e(data['stopped'])}).</p>
+<p>Edits layer: <code>{e(data['edits'])}</code> (<code>lumitrace trace STAGE --edits
+LAYER</code> composes it; <code>lumitrace edits merge STAGE --layer LAYER</code> keeps it).</p>
 <h2>Parameters</h2>
-<table><tr><th>parameter</th><th>prim</th><th>range</th><th>start</th><th>best</th><th>moved</th><th></th></tr>
+<table><tr><th>parameter</th><th>prim</th><th>range</th><th>start</th><th>best</th>
+<th>moved</th><th></th></tr>
 {''.join(rows)}</table>
-{('<h2>Terms and constraints</h2><table><tr><th>term</th><th>value</th><th>error</th><th></th></tr>' + trows + '</table>') if trows else ''}
+{terms}
 <h2>Figures</h2>
-<table><tr><th>figure</th><th>best (&plusmn; standard error)</th><th>target</th></tr>{''.join(frows)}</table>
+<table><tr><th>figure</th><th>best (&plusmn; standard error)</th><th>target</th></tr>
+{''.join(frows)}</table>
 <h2>Pictures</h2>{pics or '<p>(not drawn)</p>'}
 </body></html>
 """

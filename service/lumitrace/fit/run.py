@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import Interrupted
+from ..errors import Interrupted, StageError
 from ..schema import PROFILE_POINTS
 from ..filenames import stage_name
 from ..run.settings import TraceSettings, default_threads
@@ -84,7 +84,8 @@ def _writable(folder: Path) -> None:
 
 def _check_changes(stage: CandidateStage, params: list[Parameter], start_hash: str) -> None:
     """Refuse a parameter whose values change nothing the tracer sees (an attribute the
-    reader does not read, a prim outside the luminaire, an unused variant set)."""
+    reader does not read, a prim outside the luminaire, an unused variant set), or whose
+    range's ends make the stage unreadable (an index of refraction of 0)."""
     starts = [p.start for p in params]
     for i, p in enumerate(params):
         tries = [c for c in p.choices if c != p.start] if p.discrete else [p.lo, p.hi]
@@ -94,7 +95,12 @@ def _check_changes(stage: CandidateStage, params: list[Parameter], start_hash: s
                 continue
             values = list(starts)
             values[i] = v
-            if stage.scene(params, values).content_hash() != start_hash:
+            try:
+                scene = stage.scene(params, values)
+            except StageError as exc:
+                raise FitError(f"at {v:g} the stage cannot be read ({exc}): give a range "
+                               "within the values it takes", f"--vary {p.name}") from None
+            if scene.content_hash() != start_hash:
                 changed = True
                 break
         if not changed:

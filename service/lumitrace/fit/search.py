@@ -4,8 +4,9 @@ Continuous parameters are searched in [0, 1] over their ranges, discrete ones (v
 sets, whole numbers) by the index of their choice, rounded (``cma``'s integer handling
 keeps its steps from shrinking below one choice). Every candidate of a generation is traced
 with the same photons; the photons double for the next generation whenever the spread of
-the generation's merits is no longer above their typical standard error (the differences
-being judged are drowning in noise), up to a most. The search ends at the evaluations or
+the generation's merits is less than twice the noise of comparing them
+(:func:`comparison_noise`, from the photons' two halves: the differences being judged are
+drowning in it), up to a most. The search ends at the evaluations or
 time given, or when ``cma`` says it has converged. The best is the lowest merit measured
 at the last photon count, the optimiser's mean among the candidates.
 """
@@ -18,6 +19,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import StageError
 from .candidates import CandidateStage
 from .journal import Journal, pack_state, unpack_state
 from .objective import Merit, Objective
@@ -31,6 +33,8 @@ SIGMA0 = 0.25
 GROW_BELOW = 2.0
 #: ``cma``'s step tolerance, in shares of the ranges: closer than this is converged.
 TOLX = 1e-4
+#: The merit of a candidate whose values make the stage unreadable (worse than any).
+FAILED_MERIT = 1e3
 
 
 @dataclass(frozen=True)
@@ -193,7 +197,7 @@ class Search:
                                    len(evaluations), clock)
             es.tell(xs, [e.merit for e in batch])
             evaluations += batch
-            noise = comparison_noise(batch)
+            noise = comparison_noise([e for e in batch if e.merit < FAILED_MERIT] or batch)
             steps.append((generation, photons, noise))
             next_photons = self._next_photons(batch, photons)
             seconds, cpu = clock()
@@ -226,6 +230,7 @@ class Search:
         """The next generation's photons: twice these where the spread of this
         generation's merits is less than :data:`GROW_BELOW` times the noise of comparing
         them (:func:`comparison_noise`), at most the settings' most."""
+        batch = [e for e in batch if e.merit < FAILED_MERIT]
         if photons >= self.settings.max_photons or len(batch) < 3:
             return photons
         spread = float(np.std([e.merit for e in batch], ddof=1))
@@ -234,11 +239,25 @@ class Search:
 
     def _evaluate(self, values: list[tuple], photons: int, generation: int, first: int,
                   clock, mean: bool = False) -> list[Evaluation]:
-        scenes = [self.stage.scene(self.params, v) for v in values]
-        traced = self.evaluator.evaluate(scenes, photons)
+        """Trace and measure candidates; one whose values make the stage unreadable (a
+        StageError: what its parameters' ranges should have kept out) is not traced and
+        gets :data:`FAILED_MERIT`, its reason kept, so the search goes on around it."""
+        scenes, failed = [], {}
+        for i, v in enumerate(values):
+            try:
+                scenes.append(self.stage.scene(self.params, v))
+            except StageError as exc:
+                failed[i] = str(exc)
+        traced = iter(self.evaluator.evaluate(scenes, photons))
         seconds, cpu = clock()
         out = []
-        for i, (v, t) in enumerate(zip(values, traced)):
+        for i, v in enumerate(values):
+            if i in failed:
+                out.append(Evaluation(first + i, generation, v, photons, FAILED_MERIT, 0.0,
+                                      0.0, None, ({"failed": failed[i]},), False, None,
+                                      seconds, cpu, mean))
+                continue
+            t = next(traced)
             m: Merit = self.objective.merit(t.measurement)
             out.append(Evaluation(first + i, generation, v, photons, m.merit, m.error,
                                   m.noise, m.match, m.terms, m.feasible, t.retraced,

@@ -1,8 +1,9 @@
 """The target distribution a fit matches: an IES LM-63 or EULUMDAT file, read once.
 
-Its grid is taken as the file states it (candela for its lamps), its symmetry as the file
-declares it (IES by its horizontal angles, EULUMDAT by its symmetry indicator), and zero
-outside its gamma range (an IES file of a downlight often stops at 90 deg).
+Its grid is taken as the file states it (candela for its lamps; a point value a little
+below zero where a measured file's noise put it there), its symmetry as the file declares
+it (IES by its horizontal angles, EULUMDAT by its symmetry indicator), and zero outside its
+gamma range (an IES file of a downlight often stops at 90 deg).
 """
 from __future__ import annotations
 
@@ -44,6 +45,22 @@ class Target:
         out[:, (g < self.gamma_lo - 1e-9) | (g > self.gamma_hi + 1e-9)] = 0.0
         return out
 
+    def half_width(self) -> float | None:
+        """Half-angle (deg from the peak's gamma, outward) where the mean profile over C
+        falls to half of its peak; None where it never does."""
+        g = np.asarray(self.grid.gamma, np.float64)
+        rows = self.grid.at(np.arange(0.0, 360.0, 5.0))
+        profile = rows.mean(axis=0)
+        k = int(np.argmax(profile))
+        below = np.flatnonzero(profile[k:] < 0.5 * profile[k])
+        if not below.size:
+            return None
+        j = k + int(below[0])
+        # linear between the last value above half and the first below
+        a, b = profile[j - 1], profile[j]
+        cross = g[j - 1] + (a - 0.5 * profile[k]) / (a - b) * (g[j] - g[j - 1])
+        return float(cross - g[k])
+
     def as_dict(self) -> dict:
         return {"file": self.path, "symmetry": self.symmetry, "lamp_flux": self.lamp_flux,
                 "gamma_range": [self.gamma_lo, self.gamma_hi]}
@@ -73,8 +90,6 @@ def read_target(path: str | os.PathLike) -> Target:
     if cd.size == 0 or g.size < 2 or not np.all(np.isfinite(cd)) or not np.all(np.diff(g) > 0):
         raise FitError("cannot read the target: its gamma angles must rise and its values "
                        "be finite numbers", where)
-    if (cd < 0).any():
-        raise FitError("cannot read the target: it holds negative intensities", where)
     if not (cd > 0).any():
         raise FitError("the target holds no light (every intensity is 0)", where)
     return Target(grid, float(g[0]), float(g[-1]), lamp_flux, str(p))

@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 
 from ..digests import file_stamp, readable_digest
-from ..method_cache import cache_folder, read_kept, write_kept
+from ..cache_files import cache_folder, read_kept, write_kept
 from ..scene import Scene
 from ..schema import PLUGIN_PATH_VARIABLE
 from ..table_cache import read_table, sources_stamp, write_table
