@@ -88,16 +88,35 @@ class PageService:
         assert self.proc.returncode == 0, err[-3000:]
 
 
+#: What a ``blender`` Python block runs after: the add-on registered in an empty scene, as
+#: in Blender with the add-on installed and a new empty file.
+BLENDER_PRELUDE = ("import bpy, lumitrace_blender\n"
+                   "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+                   "lumitrace_blender.register()\n")
+
+
+def blender_python() -> Path | None:
+    """The bpy environment's interpreter (``LUMITRACE_BLENDER_PYTHON``, else the
+    checkout's ``.venv-blender``), None where there is none."""
+    given = os.environ.get("LUMITRACE_BLENDER_PYTHON")
+    python = Path(given) if given else ROOT / ".venv-blender" / "bin" / "python"
+    return python if python.exists() else None
+
+
 def _run(block: Block, page: Path, cwd: Path, port: str | None) -> None:
     text = block.text if port is None else block.text.replace(EXAMPLE_PORT, port)
     where = f"{page.relative_to(ROOT)}:{block.line}"
+    env = _env()
     if block.lang == "sh":
         argv = ["bash", "-e", "-o", "pipefail", "-c", text]
+    elif block.directive == "blender":
+        argv = [str(blender_python()), "-c", BLENDER_PRELUDE + text]
+        env["PYTHONPATH"] = str(ROOT / "service")
     else:
         argv = [sys.executable, "-c", text]
     expected = int(block.directive.split()[1]) if block.directive.startswith("expect-exit") \
         else 0
-    p = subprocess.run(argv, cwd=cwd, env=_env(), capture_output=True, text=True,
+    p = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True,
                        timeout=BLOCK_TIMEOUT)
     assert p.returncode == expected, \
         f"{where} exited {p.returncode}, not {expected}:\n{text}\n{p.stdout[-2000:]}" \
@@ -119,6 +138,8 @@ def run_page(page: Path, work: Path) -> int:
                 (work / said.split(None, 1)[1]).write_text(block.text)
                 ran += 1
                 continue
+            if said == "blender" and blender_python() is None:
+                continue  # Blender's Python is not installed here: the Blender tests say so
             if said == "stop-service":
                 assert service is not None, f"{page}:{block.line}: no service to stop"
                 service.stop()
@@ -168,7 +189,14 @@ def work_folder(tmp_path: Path) -> Path:
     work = tmp_path / "work"
     work.mkdir()
     shutil.copytree(ROOT / "schemas", work / "schemas")
-    shutil.copytree(ROOT / "stages", work / "stages",
-                    ignore=shutil.ignore_patterns("*.ies", "*.ldt", "*.exr", "*.png",
-                                                  "*.lumitrace.usda", ".*"))
+    tracked = subprocess.run(["git", "ls-files", "stages"], cwd=ROOT, capture_output=True,
+                             text=True).stdout.split()
+    if tracked:  # the stages and their inputs as committed, not a trace's outputs beside them
+        for name in tracked:
+            (work / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, work / name)
+    else:  # not a git checkout: everything but what a trace writes
+        shutil.copytree(ROOT / "stages", work / "stages",
+                        ignore=shutil.ignore_patterns("*.exr", "*.png", "*.lumitrace.usda",
+                                                      "*.photometry.json", ".*"))
     return work

@@ -154,12 +154,12 @@ def test_a_target_error_is_not_taken_from_the_first_small_rounds(downlight):
                                          workers="threads"))
     assert result.files_accuracy.meets(0.5)
     assert MIN_PHOTONS_FOR_FILES_TARGET <= result.photons < MIN_PHOTONS_FOR_TARGET
-    # the demo as it is: a square by its geometry, round only if the counts show it; the
-    # target waits until they have shown it or shown it away, whatever the error
+    # the demo as it is: a square by its geometry, its files the square's until the counts
+    # show it round; a rounder symmetry not yet shown does not hold the target back
     result = run(downlight, TraceSettings(target_error=0.5, resolution=8, threads=1,
                                           workers="threads"))
-    assert result.files_accuracy.settled and result.files_accuracy.meets(0.5)
-    assert result.photons > MIN_PHOTONS_FOR_FILES_TARGET
+    assert result.files_accuracy.meets(0.5)
+    assert MIN_PHOTONS_FOR_FILES_TARGET <= result.photons < MIN_PHOTONS_FOR_TARGET
 
 
 def test_many_small_emitters_are_not_split_into_tiny_jobs():

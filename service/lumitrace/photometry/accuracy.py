@@ -33,13 +33,13 @@ class FilesAccuracy:
     bound: float | None
     worst: float | None
     worst_at: tuple[float, float] | None = None
-    #: whether the files' symmetry is settled (no stronger one could still be shown)
-    settled: bool = True
 
     def meets(self, target: float) -> bool:
-        """Whether the files are converged at ``target`` (relative): within it, and of a
-        symmetry more photons could not change."""
-        return (self.settled and self.bound is not None and self.worst is not None
+        """Whether the files are converged at ``target`` (relative). A stronger symmetry
+        more photons may still show does not hold it back: the files of the symmetry
+        shown are unbiased and their error stated; a stronger one shown later only
+        averages more planes, which lowers it."""
+        return (self.bound is not None and self.worst is not None
                 and self.bound <= target and self.worst <= WORST_FACTOR * target)
 
     @property

@@ -146,17 +146,15 @@ def files_accuracy(scene: Scene, acc: Accumulator, ph: Photometry | None = None
                    ) -> FilesAccuracy:
     """The accuracy of the files :func:`photometry_of` would write from these counts (or
     of ``ph``'s, written already): the same grid (gammas, C step, symmetry), without the
-    figures (a few tens of ms: what a session judges its target on); not met while the
-    symmetry could still change. None of it where the counts cannot tell their spread
-    (fewer than two photons a light)."""
+    figures (a few tens of ms: what a session judges its target on). None of it where the
+    counts cannot tell their spread (fewer than two photons a light)."""
     if not acc.photons or not acc.spread_known:
         return FilesAccuracy(None, None, None)
     if ph is None:
-        grid, _, choice = _files_grid(scene, acc,
-                                      default_gammas(beam_half_width(emitter_rings(acc))))
+        grid = _files_grid(scene, acc, default_gammas(beam_half_width(emitter_rings(acc))))[0]
     else:
-        grid, choice = ph.grid, ph.symmetry
-    return replace(grid_accuracy(grid, C_STEP), settled=choice.settled)
+        grid = ph.grid
+    return grid_accuracy(grid, C_STEP)
 
 
 #: The files' grids last measured, by counts and lights' fluxes: a session judges the

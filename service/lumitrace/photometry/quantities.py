@@ -428,7 +428,7 @@ def plane_spreads(grid: CGammaGrid, halves: tuple[CGammaGrid, CGammaGrid],
             level = f * tops[c][0]
             draws[c, f] = []
             if not level > 0:
-                out[c, f] = (None, None, (), "no light in the plane")
+                out[c, f] = (None, None, (), "no photon counted in the plane")
                 continue
             halfs[c, f] = fit_half_widths(x, prof[None], np.array([level]))
             outer = outermost_crossings(x, prof[None], np.array([level]), sigma, halfs[c, f])

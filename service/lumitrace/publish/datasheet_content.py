@@ -183,7 +183,8 @@ def ugr_section(record: Mapping) -> Section | None:
         rows.append([Cell("observer position, S =")] + [Cell("") for _ in refl])
         for k, s in enumerate(variation["spacing_h"]):
             c, e = variation["crosswise"][k], variation["endwise"][k]
-            text = f"{c[0]:+.1f} / {c[1]:+.1f}  ·  {e[0]:+.1f} / {e[1]:+.1f}"
+            text = "  ·  ".join(" / ".join("-" if v is None else f"{v:+.1f}" for v in pair)
+                                for pair in (c, e))
             rows.append([Cell(f"  {s:g}H"), Cell(text, f"ugr_observer_variation.crosswise[{k}]",
                                                  c)] + [Cell("") for _ in refl[1:]])
     lamp = record.get("ugr_lamp_flux")
