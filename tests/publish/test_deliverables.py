@@ -386,3 +386,17 @@ def test_the_summary_prints_the_opening_the_datasheet_and_the_gldf(demo):
     assert f"GLDF            {outputs['gldf']}" in text
     assert f"datasheet       {outputs['datasheet_html']}  {outputs['datasheet_pdf']}" in text
     assert "(round, measured)" in text
+
+
+def test_an_observer_variation_it_could_not_read_is_a_dash_in_the_table():
+    """Few photons of a narrow beam (the fit's candidates): a rise or fall of the observer
+    variation undefined is written "-", not a failed datasheet."""
+    from lumitrace.publish.datasheet_content import ugr_section
+
+    table = {"reflectances": ["70/50/20"], "rooms_h": [[4, 8]], "crosswise": [[20.1]],
+             "endwise": [[20.4]], "crosswise_error": [[0.1]], "spacing_h": 0.25}
+    variation = {"spacing_h": [1.0, 1.5], "crosswise": [[0.4, None], [0.6, -0.2]],
+                 "endwise": [[None, None], [0.5, -0.3]]}
+    section = ugr_section({"ugr_table": table, "ugr_observer_variation": variation})
+    texts = [cell.text for row in section.rows for cell in row]
+    assert "+0.4 / -  ·  - / -" in texts and "+0.6 / -0.2  ·  +0.5 / -0.3" in texts
