@@ -1,5 +1,6 @@
 """What a small ``lumitrace trace`` loads: only what it uses (each module a command loads
 costs every command its start; the run's own cost is measured by tools/startup.py)."""
+import os
 import re
 import subprocess
 import sys
@@ -16,7 +17,9 @@ def test_a_small_trace_loads_no_module_it_does_not_use(tmp_path):
     p = subprocess.run([sys.executable, "-X", "importtime", "-c", LAUNCH, "trace", str(stage),
                         "--photons", "1000", "--no-pictures", "--quiet", "--no-sublayer",
                         "--out", str(tmp_path / "out")],
-                       capture_output=True, text=True, timeout=120, check=True)
+                       capture_output=True, text=True, timeout=120, check=True,
+                       # a first run: USD reads the stage (no kept scene of another test's)
+                       env={**os.environ, "LUMITRACE_CACHE_DIR": str(tmp_path / "cache")})
     loaded = set(re.findall(r"^import time:.*\|\s*([\w.]+)$", p.stderr, re.M))
     assert {"lumitrace.cli", "lumitrace.trace.compiled", "pxr.UsdLux"} <= loaded
     unused = {"concurrent.futures",  # a round of one batch is traced in the calling thread

@@ -110,7 +110,7 @@ def test_the_page_and_the_pdf_are_published_together_or_not_at_all(traced, tmp_p
 
     monkeypatch.setattr(datasheet_pdf, "datasheet_pdf", broken)
     args = Namespace(stage=stage, results=None, out=out, photons=2e4, seed=0, threads=1,
-                     json=True)
+                     json=True, bug_forward=None)
     with pytest.raises(LumitraceError, match="the PDF could not be drawn"):
         datasheet_command.command(args)
     assert {f: (out / f).read_bytes() for f in os.listdir(out)} == before

@@ -34,7 +34,7 @@ from lumitrace.publish.gldf import GldfFiles, gldf_bytes
 from lumitrace.publish.l3d import l3d_bytes
 from lumitrace.publish.outputs import build_record
 from lumitrace.publish.photometric import photometric_paths, write_photometric_files
-from lumitrace.schema import (CATALOGUE_NUMBER, COLOUR_RENDERING_INDEX, INPUT_POWER,
+from lumitrace.schema import (AUTHOR, CATALOGUE_NUMBER, COLOUR_RENDERING_INDEX, INPUT_POWER,
                               LAMP_DESCRIPTION, LUMINAIRE_NAME, LUMINAIRE_TEXT, MANUFACTURER)
 from lumitrace.stage.luminaire_data import refused_character
 from lumitrace.stage.reader import scene_from_stage
@@ -214,10 +214,17 @@ def test_any_text_is_refused_by_name_or_written_intact(base, name, text):
         return
     info = read
     value = {MANUFACTURER: info.manufacturer, LUMINAIRE_NAME: info.name,
-             CATALOGUE_NUMBER: info.catalogue_number, LAMP_DESCRIPTION: info.lamp}[name]
+             CATALOGUE_NUMBER: info.catalogue_number, LAMP_DESCRIPTION: info.lamp,
+             AUTHOR: info.author}[name]
     assert value == text.strip()
     paths, gldf, l3d, shown = _written(base, info)
     ldt, from_ies, keywords, doc, structure = _check_files(base, paths, gldf, l3d, shown)
+    if name == AUTHOR:  # the GLDF's alone; left out where not given (gldf-rs then
+        # fills in its placeholder)
+        assert doc["Header"].get("Author") == (value or "__empty__")
+        assert (b"<Author>" in zipfile.ZipFile(io.BytesIO(gldf)).read("product.xml")) \
+            == bool(value)
+        return
     if not value:  # not given: the files' defaults
         return
     # EULUMDAT: the field as one Latin-1 line cut at its length; exact where it fits

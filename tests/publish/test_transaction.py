@@ -87,7 +87,8 @@ def test_signals_at_any_moment_leave_the_old_set_or_the_new_set(disc):
             seen["new"] += 1
             continue
         assert p.returncode == 128 + sigs[k % 3], err
-        assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+        said = [line for line in err.strip().splitlines() if not line.startswith("warning: ")]
+        assert "Traceback" not in err and len(said) == 1, err  # (warnings printed before it)
         if after == before:
             assert "nothing was written" in err, err
             seen["old"] += 1

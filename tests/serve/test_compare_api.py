@@ -7,7 +7,6 @@ of ``docs/live-view.md`` run as it is written."""
 from __future__ import annotations
 
 import json
-import re
 import shutil
 import subprocess
 import sys
@@ -168,10 +167,12 @@ def test_events_follow_from_now_or_from_a_revision(served):
 
 
 def test_the_documented_client_example_runs(served):
-    text = (ROOT / "docs" / "live-view.md").read_text()
-    block = re.search(r"<!-- test: client example -->\n```python\n(.*?)```", text, re.S)
-    assert block, "the client example is marked in docs/live-view.md"
-    code = block.group(1).replace("http://127.0.0.1:8650", served.url.rstrip("/"))
+    from helpers.doc_examples import blocks
+
+    found = [b.text for b in blocks(ROOT / "docs" / "live-view.md")
+             if b.lang == "python" and "c.events(revision=revision)" in b.text]
+    assert len(found) == 1, "the client example that follows a revision, in docs/live-view.md"
+    code = found[0].replace("http://127.0.0.1:8650", served.url.rstrip("/"))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        timeout=180)
     assert r.returncode == 0, r.stderr

@@ -226,3 +226,39 @@ def test_the_reach_box_is_the_normalised_triangles_box_widened(name):
     pts = np.random.default_rng(3).normal(size=(1001, 3)) * [1.0, 1e-3, 1e3]
     assert all(np.array_equal(a, b) for a, b in
                zip(point_bounds(pts), (pts.min(axis=0), pts.max(axis=0))))
+
+
+
+_FIRST_DEVICES_AT_ONCE = """
+import threading
+from lumitrace.trace import embree
+
+start = threading.Barrier(4)
+got = []
+
+def first():
+    start.wait()  # four threads ask for the process's first Embree device at once
+    got.append(embree._device())
+
+threads = [threading.Thread(target=first) for _ in range(4)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+print(len(set(got)))
+"""
+
+
+def test_threads_making_their_first_scenes_at_once_share_one_device():
+    """Threads of a fresh process (a Dask worker's first candidates) that build their
+    scenes at once get the one device: with a device each, one device's geometry went into
+    another's scene, and a candidate's counts mixed another's (1 in 2 runs of the Dask
+    test)."""
+    import subprocess
+    import sys
+
+    for _ in range(3):
+        p = subprocess.run([sys.executable, "-c", _FIRST_DEVICES_AT_ONCE], capture_output=True,
+                           text=True, timeout=120)
+        assert p.returncode == 0, p.stderr[-3000:]
+        assert p.stdout.split()[-1] == "1", p.stdout

@@ -114,9 +114,18 @@ def _parts(part_index, n: int) -> np.ndarray:
     return np.asarray(part_index, np.int64) if len(part_index) else np.zeros(n, np.int64)
 
 
-@functools.lru_cache(maxsize=1)
+_devices: list[int] = []
+
+
 def _device() -> int:
-    return library().rtcNewDevice(None)
+    """The process's one Embree device, made by the first caller: threads tracing their
+    first scenes at once must not make one each (a geometry of one device in a scene of
+    another mixes the scenes' hits)."""
+    if not _devices:
+        with _lock:
+            if not _devices:
+                _devices.append(library().rtcNewDevice(None))
+    return _devices[0]
 
 
 class PartScene:
