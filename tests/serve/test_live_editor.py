@@ -321,8 +321,10 @@ def test_the_transform_fields_show_the_parts_transform(page, served):
     _select_part(page, "Housing")
     assert _fields(page)[:3] == ["0", "0", "2"]
     _select_part(page, "Board")
-    note = page.find_element("id", "transform-note")
-    assert note.is_displayed() and "not a translate, rotate and scale" in note.text
+    # read in one script: the panel is drawn again when the service's scene refreshes
+    until(page, "document.getElementById('transform-note').offsetParent !== null && "
+                "document.getElementById('transform-note').textContent"
+                ".includes('not a translate, rotate and scale')")
     assert page.execute_script("return document.getElementById('apply-transform').disabled "
                                "&& document.getElementById('sx').disabled")
 
