@@ -443,10 +443,12 @@ def test_edits_merge_keeps_the_stage_files_comments_and_prim_order(stage):
                         "properties": {"radius": 30, "height": 5}}])
         assert s.stop()[0] == 0
     assert stage.read_text() == text  # the service never edits it
+    edits = stage.with_name(stage.stem + ".lumitrace-edits.usda").read_text()
     run = _edits("merge", stage)
     assert run.returncode == 0, run.stderr
     merged = stage.read_text()
-    assert "reorder" not in merged and "# a comment above the luminaire" in merged
+    # (the edits layer said, where the merge was not made as text)
+    assert "reorder" not in merged and "# a comment above the luminaire" in merged, edits
     old, new = text.splitlines(), merged.splitlines()
     changes = [(op, [line.strip() for line in old[i1:i2]], [line.strip() for line in new[j1:j2]])
                for op, i1, i2, j1, j2 in difflib.SequenceMatcher(None, old, new).get_opcodes()
