@@ -119,12 +119,33 @@ def test_a_flux_edits_preview_is_the_last_one_rescaled(engine):
     _same_preview((header, arrays), preview_parts(**eng.snapshot()))
     for name, a in arrays.items():
         np.testing.assert_allclose(a, before[1][name] * k, rtol=2e-7)
-    # the files are written from an estimate made afresh, not the rescaled one
-    ph = photometry_of(rev.scene, eng.refinement.accumulator)
+    # the files are written from an estimate made afresh, not the rescaled one (their
+    # photometry is the session seed's)
+    ph = photometry_of(rev.scene, eng.refinement.accumulator, SETTINGS.seed)
     assert eng.record.summary()["photometry"]["peak_intensity"] == \
         ph.figures.peak_intensity
     assert scaled_figures({"peak_intensity": 2.0, "beam_angle_c0_c180": 3.0}, 2.0) == \
         {"peak_intensity": 4.0, "beam_angle_c0_c180": 3.0}
+
+
+def test_a_previews_opening_and_ugr_are_the_files_of_the_sessions_seed(engine):
+    """The preview measures the luminous opening (hence UGR and luminance) with the
+    session's seed, as the files do: whichever of the two measured the counts last, the
+    preview shows the same UGR (the opening of seed 0 is another one)."""
+    from lumitrace.photometry import distribution
+    from lumitrace.serve.viewer import UGR_KEYS, catalogue_ugr
+
+    live, eng = engine
+    _done(eng, 0)
+    snap = eng.snapshot()
+    distribution._LAST.clear()  # nothing measured: the preview measures afresh
+    header, _ = read_frame(PreviewCache().get(eng))
+    files = photometry_of(snap["scene"], snap["accumulator"], SETTINGS.seed)
+    other = photometry_of(snap["scene"], snap["accumulator"], SETTINGS.seed + 1)
+    want, unlike = catalogue_ugr(files), catalogue_ugr(other)
+    for key in UGR_KEYS:
+        assert header["figures"][key] == pytest.approx(want[key], rel=1e-12), key
+    assert want[UGR_KEYS[0]] != unlike[UGR_KEYS[0]]  # the seed matters
 
 
 def test_the_writer_writes_the_newest_and_a_flush_waits_for_it():

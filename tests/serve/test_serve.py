@@ -570,6 +570,9 @@ def test_edits_merge_into_the_stage_or_are_discarded(stage, tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert not edits.exists()
+    # a deactivated prim is prim metadata, which a text edit does not carry: USD writes
+    # the file, and says so and why
+    assert "comments and formatting are not kept" in p.stderr and "prim metadata" in p.stderr
     from pxr import Sdf
 
     Sdf.Layer.Find(str(stage)).Reload(force=True)  # this process read the stage before

@@ -447,8 +447,10 @@ def test_edits_merge_keeps_the_stage_files_comments_and_prim_order(stage):
     run = _edits("merge", stage)
     assert run.returncode == 0, run.stderr
     merged = stage.read_text()
-    # (the edits layer said, where the merge was not made as text)
-    assert "reorder" not in merged and "# a comment above the luminaire" in merged, edits
+    # (the edits layer and the merge's warning said, where it was not made as text)
+    assert "reorder" not in merged and "# a comment above the luminaire" in merged, \
+        edits + run.stderr
+    assert "not kept" not in run.stderr
     old, new = text.splitlines(), merged.splitlines()
     changes = [(op, [line.strip() for line in old[i1:i2]], [line.strip() for line in new[j1:j2]])
                for op, i1, i2, j1, j2 in difflib.SequenceMatcher(None, old, new).get_opcodes()

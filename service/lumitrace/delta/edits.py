@@ -9,12 +9,13 @@ delta: :func:`merge_edits` folds the edits into the root layer when a user keeps
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 from pxr import Sdf, Tf, Usd, UsdUtils
 
 from ..atomic import atomic_path, fsync_path, write_text_durably
-from ..errors import StageError
+from ..errors import LumitraceWarning, StageError
 from ..filenames import edits_layer_path
 from ..stage.diagnostics import tf_message
 from .lock import StageLock
@@ -123,10 +124,13 @@ def _merge_edits(stage_path: Path, layer: str | os.PathLike | None = None) -> Pa
                 "timeCodesPerSecond"):
         if root.pseudoRoot.HasInfo(key):
             strong.pseudoRoot.SetInfo(key, root.pseudoRoot.GetInfo(key))
-    if _merge_as_text(stage_path, edits, strong):
+    why = _merge_as_text(stage_path, edits, strong)
+    if not why:
         root.Reload(force=True)
         _discard_edits(stage_path, layer)
         return stage_path
+    warnings.warn(f"{stage_path.name}: written again as USD writes it (its comments and "
+                  f"formatting are not kept): {why}", LumitraceWarning, stacklevel=3)
     _keep_child_order(strong, root, Sdf.Path.absoluteRootPath)
     with atomic_path(stage_path) as tmp:  # keeps the suffix: .usda text, .usdc binary
         if not strong.Export(str(tmp)):
@@ -138,23 +142,24 @@ def _merge_edits(stage_path: Path, layer: str | os.PathLike | None = None) -> Pa
     return stage_path
 
 
-def _merge_as_text(stage_path: Path, edits: Sdf.Layer, merged: Sdf.Layer) -> bool:
+def _merge_as_text(stage_path: Path, edits: Sdf.Layer, merged: Sdf.Layer) -> str:
     """Write a ``.usda`` stage merged with its edits as a text edit of the file (comments,
-    formatting and prim order kept: :mod:`lumitrace.delta.usda_merge`); False where the
-    file is not ``.usda`` text or the edit cannot be certain to equal ``merged``."""
+    formatting and prim order kept: :mod:`lumitrace.delta.usda_merge`) and return "";
+    else write nothing and return why (the file is not ``.usda`` text, or the edit cannot
+    be certain to equal ``merged``)."""
     if stage_path.suffix != ".usda":
-        return False
+        return "the stage is not a .usda file"
     try:
         text = stage_path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
-        return False
+        return "the stage is not UTF-8 text"
     if not text.startswith("#usda"):
-        return False
-    edited = merge_text(text, edits, merged)
+        return "the stage is not USD text"
+    edited, why = merge_text(text, edits, merged)
     if edited is None:
-        return False
+        return why
     write_text_durably(stage_path, edited)
-    return True
+    return ""
 
 
 def _keep_child_order(layer: Sdf.Layer, like: Sdf.Layer, parent: Sdf.Path) -> None:

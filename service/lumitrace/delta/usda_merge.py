@@ -185,22 +185,25 @@ def _edits_supported(edits: Sdf.Layer) -> list[Sdf.Path] | None:
     return changed if walk(edits.pseudoRoot) else None
 
 
-def merge_text(text: str, edits: Sdf.Layer, merged: Sdf.Layer) -> str | None:
+def merge_text(text: str, edits: Sdf.Layer, merged: Sdf.Layer) -> tuple[str | None, str]:
     """``text`` (a ``.usda`` root layer) with the statements ``edits`` change replaced by
-    their text in ``merged`` (the Sdf merge of the two), or None when that is not certain
-    to read back as ``merged`` (see the module docstring)."""
+    their text in ``merged`` (the Sdf merge of the two), and ""; or None and why, when
+    that is not certain to read back as ``merged`` (see the module docstring)."""
     paths = _edits_supported(edits)
     if paths is None:
-        return None
+        return None, "the edits hold prim metadata, variants or an order of prims"
     source = merged.ExportToString()
     try:
         for path in paths:
             text = _replace(text, source, path)
             if text is None:
-                return None
-    except ValueError:
-        return None
-    return text if _same(text, merged) else None
+                return None, f"the file has no single block for the prim of {path}"
+    except ValueError as e:
+        return None, f"the file's text could not be followed ({e})"
+    differs = _differences(text, merged)
+    if differs:
+        return None, f"the edited text would not read back as the merge ({differs})"
+    return text, ""
 
 
 def _replace(text: str, source: str, path: Sdf.Path) -> str | None:
@@ -255,12 +258,15 @@ def _canonical(layer: Sdf.Layer) -> dict:
     return out
 
 
-def _same(text: str, merged: Sdf.Layer) -> bool:
-    """Whether ``text`` reads back as ``merged``."""
+def _differences(text: str, merged: Sdf.Layer) -> str:
+    """Where ``text`` does not read back as ``merged`` (a few spec paths), "" where it
+    does."""
     check = layer_of_text(text)
     if check is None:
-        return False
+        return "USD does not read it"
     try:
-        return _canonical(check) == _canonical(merged)
+        have, want = _canonical(check), _canonical(merged)
     except TypeError:  # a field Python cannot read: not certain, so not equal
-        return False
+        return "a field that cannot be compared"
+    paths = sorted(p for p in set(have) | set(want) if have.get(p) != want.get(p))
+    return ", ".join(paths[:3]) + (" ..." if len(paths) > 3 else "")

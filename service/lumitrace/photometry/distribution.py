@@ -88,17 +88,19 @@ def photometry_of(scene: Scene, acc: Accumulator, seed: int = 0) -> Photometry:
     last = _LAST[0] if _LAST else None
     # the same counts: the same photons through the same parts, hence the same opening
     # (declared the same way)
-    if last is not None and last[0] == _light_key(acc) and last[3] == scene.declared_opening:
+    if last is not None and last[0] == _light_key(acc) and last[3] == scene.declared_opening \
+            and last[4] == seed:
         k = _common_factor(last[1], [t.flux for t in acc.emitters])
         if k is not None:
             return _scaled(last[2], k, scene.total_flux)
     ph = _measured(scene, acc, seed)
-    _LAST[:] = [(_light_key(acc), [t.flux for t in acc.emitters], ph, scene.declared_opening)]
+    _LAST[:] = [(_light_key(acc), [t.flux for t in acc.emitters], ph, scene.declared_opening,
+                 seed)]
     return ph
 
 
 #: The last photometry measured: (counts and lights' colours, lights' fluxes, photometry,
-#: the opening the scene declared).
+#: the opening the scene declared, the seed its opening is measured with).
 _LAST: list[tuple] = []
 
 

@@ -238,7 +238,7 @@ class Engine:
             return {"scene": r.scene, "accumulator": r.accumulator.snapshot(),
                     "estimate_": est, "revision": rev.number,
                     "photons": r.accumulator.photons, "iteration": r.iteration,
-                    "threshold": self.settings.threshold,
+                    "threshold": self.settings.threshold, "seed": self.settings.seed,
                     "target": self.settings.convergence_target,
                     "converged": bool(est and est.meets(self.settings.convergence_target)),
                     "seconds": time.perf_counter() - self.started}

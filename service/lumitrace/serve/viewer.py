@@ -236,14 +236,16 @@ def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: floa
 
 def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
-                  converged: bool, seconds: float, ugr: bool = True) -> tuple[dict, dict]:
+                  converged: bool, seconds: float, seed: int = 0, ugr: bool = True
+                  ) -> tuple[dict, dict]:
     """The header and arrays of a refinement's preview (an
     :meth:`~lumitrace.serve.engine.Engine.snapshot`): the map (filtered and raw, cd) on a
     lat-long grid in the photometric frame, the published C-gamma grid (cd) with its
-    standard errors, and the figures, tagged with revision and photons."""
+    standard errors, and the figures, tagged with revision and photons. The luminous
+    opening is measured with the session's ``seed``, as for its files."""
     est = estimate_ if estimate_ is not None and estimate_.threshold == threshold \
         else estimate(accumulator, threshold)
-    ph = photometry_of(scene, accumulator)
+    ph = photometry_of(scene, accumulator, seed)
     full = ph.grid.full()
     taps = _latlong_taps(scene, face_size(est.filtered.shape[0]))
     shape = (len(LATLONG_GAMMA), len(LATLONG_C))
