@@ -252,10 +252,32 @@ def _canonical(layer: Sdf.Layer) -> dict:
             return
         values = {key: (list(layer.subLayerOffsets) if key == "subLayerOffsets" else
                         spec.GetInfo(key)) for key in spec.ListInfoKeys() if key not in skip}
-        out[str(path)] = {key: repr(v) for key, v in values.items()
+        out[str(path)] = {key: _plain(v) for key, v in values.items()
                           if not (isinstance(v, dict) and not v)}  # {} is no data
     layer.Traverse(Sdf.Path.absoluteRootPath, visit)
     return out
+
+
+#: The item lists of an Sdf list op (``apiSchemas``, a relationship's targets).
+_LIST_OP_FIELDS = ("isExplicit", "explicitItems", "addedItems", "prependedItems",
+                   "appendedItems", "deletedItems", "orderedItems")
+
+
+def _plain(value):
+    """A field's value as plain comparable data: a list op by its item lists, a
+    dictionary by its sorted items, anything else by its ``repr`` (TypeError where that
+    names only an object's address: not comparable, so not certain)."""
+    if all(hasattr(value, f) for f in _LIST_OP_FIELDS):
+        return tuple(_plain(getattr(value, f)) if f != "isExplicit" else bool(value.isExplicit)
+                     for f in _LIST_OP_FIELDS)
+    if isinstance(value, dict):
+        return tuple(sorted((str(k), _plain(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return tuple(_plain(v) for v in value)
+    text = repr(value)
+    if " object at 0x" in text:
+        raise TypeError(f"no comparable form of {type(value).__name__}")
+    return text
 
 
 def _differences(text: str, merged: Sdf.Layer) -> str:
