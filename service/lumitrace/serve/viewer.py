@@ -273,21 +273,22 @@ def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: 
 #: followed by its standard error.
 UGR_KEYS = ("ugr_4h8h_70_50_20", "ugr_4h8h_70_50_20_error", "ugr_4h8h_70_50_20_endwise",
             "ugr_4h8h_70_50_20_endwise_error")
-#: The last photometry whose UGR was computed, and its UGR figures.
-_LAST_UGR: list = [None, None]
+#: The last photometry whose UGR was computed and its UGR figures, as one pair.
+_LAST_UGR: list = [None]
 
 
 def catalogue_ugr(ph) -> dict[str, float | None]:
     """The catalogue UGR figures (:data:`UGR_KEYS`) of a
     :class:`~lumitrace.photometry.distribution.Photometry` (None where its opening has no
     area or no light leaves), computed once per photometry (a few ms)."""
-    if _LAST_UGR[0] is ph:
-        return _LAST_UGR[1]
+    last = _LAST_UGR[0]  # read once: another thread may replace it meanwhile
+    if last is not None and last[0] is ph:
+        return last[1]
     out = dict.fromkeys(UGR_KEYS)
     if (ph.opening.area > 0 or ph.opening.height > 0) and ph.figures.luminous_flux > 0:
         table = ugr_table(ph.grid, ph.opening).as_dict()
         out = {k: defined(table[k]) for k in UGR_KEYS}
-    _LAST_UGR[:] = [ph, out]
+    _LAST_UGR[0] = (ph, out)
     return out
 
 
