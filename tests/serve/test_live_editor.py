@@ -241,7 +241,7 @@ def test_an_empty_or_unparsable_field_is_never_sent(page, served):
     tx = page.find_element("id", "tx")
     tx.send_keys(Keys.CONTROL, "a")
     tx.send_keys("1e")
-    page.find_element("id", "apply-transform").click()
+    page.execute_script("document.getElementById('apply-transform').click()")
     assert "not a number" in _problem(page, "#tx")
     assert page.find_element("id", "tx").get_attribute("value") == "0"
     # one real edit: the only revision since; nothing of the above reached the stage
@@ -272,9 +272,12 @@ def _set_transform(page, **values) -> int:
     """Type ``values`` into the transform fields (the others left as shown), press Set;
     the revision it made."""
     before = page.execute_script("return lumitrace.scene.revision")
-    for key, v in values.items():
-        page.execute_script(f"document.getElementById('{key}').value = '{v}'")
-    page.find_element("id", "apply-transform").click()
+    # typed and pressed in one script: the panel is drawn again (its fields the stage's)
+    # when the service's scene refreshes, which may come between two WebDriver calls
+    page.execute_script("for (const [id, v] of Object.entries(arguments[0])) "
+                        "document.getElementById(id).value = v; "
+                        "document.getElementById('apply-transform').click()",
+                        {key: str(v) for key, v in values.items()})
     until(page, f"lumitrace.scene.revision > {before}")
     return page.execute_script("return lumitrace.scene.revision")
 
@@ -295,7 +298,7 @@ def test_the_transform_fields_show_the_parts_transform(page, served):
     m = UsdGeom.Xformable(stage.GetPrimAtPath(DIFFUSER)).GetLocalTransformation()
     assert m == Gf.Matrix4d().SetTranslate(Gf.Vec3d(1, 0, -5))
     # undo is the inverse delta: the transform before the last set
-    page.find_element("id", "undo").click()
+    page.execute_script("document.getElementById('undo').click()")
     until(page, "document.getElementById('tx').value === '0' && "
                 "document.getElementById('tz').value === '-5'")
     assert _diffuser(page)["translate"] == [0.0, 0.0, -5.0]
