@@ -268,8 +268,7 @@ def _plain(value):
     dictionary by its sorted items, anything else by its ``repr`` (TypeError where that
     names only an object's address: not comparable, so not certain)."""
     if all(hasattr(value, f) for f in _LIST_OP_FIELDS):
-        return tuple(_plain(getattr(value, f)) if f != "isExplicit" else bool(value.isExplicit)
-                     for f in _LIST_OP_FIELDS)
+        return tuple(_plain(getattr(value, f)) for f in _LIST_OP_FIELDS)
     if isinstance(value, dict):
         return tuple(sorted((str(k), _plain(v)) for k, v in value.items()))
     if isinstance(value, (list, tuple)):

@@ -236,7 +236,7 @@ def _rescaled(header: dict, arrays: dict, k: float, revision: int, seconds: floa
 
 def preview_parts(scene: Scene, accumulator, estimate_, revision: int, photons: int,
                   iteration: int, threshold: float, target: float,
-                  converged: bool, seconds: float, seed: int = 0, ugr: bool = True
+                  converged: bool, seconds: float, seed: int, ugr: bool = True
                   ) -> tuple[dict, dict]:
     """The header and arrays of a refinement's preview (an
     :meth:`~lumitrace.serve.engine.Engine.snapshot`): the map (filtered and raw, cd) on a
