@@ -513,7 +513,7 @@ def figures(acc: Accumulator, grid: CGammaGrid, halves: tuple[CGammaGrid, CGamma
                                         halves[1].candela, halves[1].sigma)
     picks = [np.unravel_index(a, grid.candela.shape) for a in (a0, a1)]
     top = fitted_peak(acc, tuple((float(grid.c[i]), float(grid.gamma[j])) for i, j in picks),
-                      half_width) if grid.candela.max() > 0 else None
+                      half_width, grid.symmetry) if grid.candela.max() > 0 else None
     if top is None:  # too little light near the top for a fit: the cells' split estimate
         i, j = picks[0] if grid.candela.flat[a0] >= grid.candela.flat[a1] else picks[1]
         top = Peak(peak, peak_err, float(grid.c[i]), float(grid.gamma[j]))
