@@ -38,9 +38,11 @@ def fit_layer_name(stage_path: str | os.PathLike) -> str:
 
 
 class CandidateStage:
-    """The stage opened once, with a layer over it that holds one candidate at a time."""
+    """The stage opened once, with a layer over it that holds one candidate at a time
+    (over ``edits``, an edits layer's file, where given: the live view's session)."""
 
-    def __init__(self, stage_path: str | os.PathLike, luminaire: str | None = None):
+    def __init__(self, stage_path: str | os.PathLike, luminaire: str | None = None,
+                 edits: str | os.PathLike | None = None):
         self.path = Path(stage_path).absolute()
         if not self.path.is_file():
             raise StageError("stage file not found" if not self.path.exists() else
@@ -50,6 +52,9 @@ class CandidateStage:
         self.layer = Sdf.Layer.CreateAnonymous("lumitrace-fit.usda")
         session = Sdf.Layer.CreateAnonymous("lumitrace-fit-session.usda")
         session.subLayerPaths.append(self.layer.identifier)
+        if edits is not None:
+            check_layer_file(Path(edits))
+            session.subLayerPaths.append(str(Path(edits).absolute()))
         try:
             root = Sdf.Layer.FindOrOpen(str(self.path))
             self.stage = Usd.Stage.Open(root, session, Usd.Stage.LoadAll) if root else None

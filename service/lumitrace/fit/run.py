@@ -61,6 +61,8 @@ class FitOptions:
     out: Path | None = None
     luminaire: str | None = None
     pictures: bool = True
+    #: an edits layer's file composed over the stage (the live view's session)
+    edits: Path | None = None
 
 
 def out_folder(opts: FitOptions) -> Path:
@@ -123,8 +125,10 @@ def fit_key(scene_hash: str, params: list[Parameter], objective: Objective, opts
 
 
 def run_fit(opts: FitOptions, say: Callable[[str], None] | None = None,
-            progress: bool = False) -> dict:
-    """Run the fit ``opts`` asks for; returns its summary (the ``--json`` object)."""
+            progress: bool = False, watch: Callable | None = None,
+            should_stop: Callable[[], bool] | None = None) -> dict:
+    """Run the fit ``opts`` asks for; returns its summary (the ``--json`` object).
+    ``watch`` and ``should_stop``: see :class:`~.search.Search`."""
     say = say or (lambda _s: None)
     if not 0 <= opts.seed <= 2 ** 31 - 2:
         raise FitError(f"must be between 0 and {2 ** 31 - 2}, got {opts.seed}", "--seed")
@@ -138,7 +142,7 @@ def run_fit(opts: FitOptions, say: Callable[[str], None] | None = None,
     if opts.scheduler is not None and opts.workers != "threads":
         raise FitError("give --scheduler or --workers processes, not both", "--scheduler")
     folder = out_folder(opts)
-    stage = CandidateStage(opts.stage, opts.luminaire)
+    stage = CandidateStage(opts.stage, opts.luminaire, opts.edits)
     params = resolve(stage.stage, opts.vary)
     starts = [p.start for p in params]
     scene0 = stage.scene(params, starts)
@@ -167,7 +171,8 @@ def run_fit(opts: FitOptions, say: Callable[[str], None] | None = None,
     bar, update = _progress(budget, opts.seconds, progress)
     journal = Journal(folder, key)
     try:
-        search = Search(params, objective, stage, evaluator, settings, journal, update)
+        search = Search(params, objective, stage, evaluator, settings, journal, update,
+                        watch, should_stop)
         result = search.run(fresh=opts.fresh)
     except Interrupted as exc:
         exc.fit_journal = journal.path

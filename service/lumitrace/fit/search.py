@@ -114,15 +114,20 @@ def _json_value(v):
 class Search:
     """A fit's search over ``params`` of ``objective``: candidates made on ``stage``,
     traced by ``evaluator``, journalled in ``journal``; ``progress(evaluations,
-    generation, photons, best merit, error)`` is told after every generation."""
+    generation, photons, best merit, error)`` is told after every generation, and
+    ``watch(generation's evaluations, its best's measurement)`` too; the search ends
+    before a generation when ``should_stop()`` says so (the live view's Stop)."""
 
     def __init__(self, params: Sequence[Parameter], objective: Objective,
                  stage: CandidateStage, evaluator: Evaluator, settings: SearchSettings,
                  journal: Journal,
-                 progress: Callable[[int, int, int, float, float], None] | None = None):
+                 progress: Callable[[int, int, int, float, float], None] | None = None,
+                 watch: Callable[[list, object], None] | None = None,
+                 should_stop: Callable[[], bool] | None = None):
         self.params, self.objective, self.stage = list(params), objective, stage
         self.evaluator, self.settings, self.journal = evaluator, settings, journal
-        self.progress = progress
+        self.progress, self.watch, self.should_stop = progress, watch, should_stop
+        self._measured: dict[int, object] = {}  # the last generation's measurements
 
     def _options(self) -> dict:
         opts = {"seed": self.settings.seed + 1, "verbose": -9, "tolx": TOLX,
@@ -188,6 +193,9 @@ class Search:
             if s.seconds is not None and clock()[0] >= s.seconds:
                 stopped = f"{s.seconds:g} s"
                 break
+            if self.should_stop is not None and self.should_stop():
+                stopped = "stopped"
+                break
             done = es.stop()
             if done:
                 stopped = "converged (" + ", ".join(sorted(done)) + ")"
@@ -209,10 +217,12 @@ class Search:
                                  "state": pack_state(es)})
             photons = next_photons
             generation += 1
+            best = min(batch, key=lambda e: e.merit)
             if self.progress is not None:
-                best = min(batch, key=lambda e: e.merit)
                 self.progress(len(evaluations), generation, photons, best.merit,
                               best.merit_error)
+            if self.watch is not None:
+                self.watch(batch, self._measured.get(best.index))
         last_photons = max((e.photons for e in evaluations), default=photons)
         mean = self.values(es.mean)
         final = [e for e in evaluations if e.photons == last_photons]
@@ -251,6 +261,7 @@ class Search:
         traced = iter(self.evaluator.evaluate(scenes, photons))
         seconds, cpu = clock()
         out = []
+        self._measured = {}
         for i, v in enumerate(values):
             if i in failed:
                 out.append(Evaluation(first + i, generation, v, photons, FAILED_MERIT, 0.0,
@@ -258,6 +269,7 @@ class Search:
                                       seconds, cpu, mean))
                 continue
             t = next(traced)
+            self._measured[first + i] = t.measurement
             m: Merit = self.objective.merit(t.measurement)
             out.append(Evaluation(first + i, generation, v, photons, m.merit, m.error,
                                   m.noise, m.match, m.terms, m.feasible, t.retraced,

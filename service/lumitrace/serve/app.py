@@ -18,6 +18,7 @@ from ..errors import LumitraceError
 from ..run.settings import ServiceLimits, with_knobs
 from .engine import Engine
 from .events import EventLog
+from .fitting import FitRequest, LiveFit
 from .guard import Guard
 from .live import LiveStage
 from .reference import MAX_FILE_CHARS, KeptFrames, reference_frame
@@ -206,7 +207,66 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
     if viewer:
         app.add_routes([web.get("/", page), web.get("/page/{name}", page)])
         app.add_routes(_compare_routes(kept))
+    app["fit"] = fit = LiveFit(live.stage_path, live.edits_path, live.luminaire,
+                               fit_folder(live, engine), events.publish)
+    app.add_routes(_fit_routes(live, engine, fit))
     return app
+
+
+def fit_folder(live: LiveStage, engine: Engine):
+    """Where the live view's fits write: ``fit/`` in the service's output folder, else
+    ``NAME.fit`` beside the stage (as ``lumitrace fit`` does)."""
+    from ..filenames import stage_name
+
+    if engine.out_dir is not None:
+        return engine.out_dir / "fit"
+    return live.stage_path.with_name(f"{stage_name(live.stage_path)}.fit")
+
+
+def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit) -> list:
+    """A fit started from the page (:mod:`~lumitrace.serve.fitting`): its state, start,
+    stop, and its best applied as a delta."""
+
+    async def state(_request: web.Request) -> web.Response:
+        return _json(fit.status())
+
+    async def start(request: web.Request) -> web.Response:
+        from ..fit.parameters import resolve
+
+        loop = asyncio.get_running_loop()
+        try:
+            body = FitRequest.of(parse_json_object(await request.read()))
+            # the parameters and the target read before anything starts
+            await live.acall(lambda: resolve(live.stage, list(body.vary)))
+            await loop.run_in_executor(None, reference_frame, body.target_name,
+                                       body.target_text)
+            return _json(fit.start(body), 202)
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+        except LumitraceError as exc:
+            return _problem(422, str(exc))
+
+    async def stop(_request: web.Request) -> web.Response:
+        try:
+            return _json(fit.stop())
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+
+    async def apply(_request: web.Request) -> web.Response:
+        try:
+            number, layer = fit.layer_to_apply()
+            revision = await live.acall(live.apply, [{"op": "layer", "usda": layer}])
+        except DeltaError as exc:
+            return _problem(exc.status, str(exc), exc.problems)
+        except LumitraceError as exc:
+            return _problem(422, str(exc))
+        engine.submit(revision)
+        fit.applied(number, revision.number)
+        return _json({"revision": revision.number, "effect": revision.effect.as_dict(),
+                      "fit": number, "edits_layer": str(live.edits_path)})
+
+    return [web.get("/fit", state), web.post("/fit", start), web.post("/fit/stop", stop),
+            web.post("/fit/apply", apply)]
 
 
 def _start(events: EventLog, query, last_id: int) -> tuple[int, dict | None]:

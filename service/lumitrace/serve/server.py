@@ -126,6 +126,7 @@ async def _main(live: LiveStage, engine: Engine, events: EventLog, host: str, po
                                                engine.report_error))
     await stop.wait()
     events.publish("stopping", revision=live.revision)
+    await loop.run_in_executor(None, runner.app["fit"].close)
     await loop.run_in_executor(None, engine.stop)
     events.close()
     if echo is not None:

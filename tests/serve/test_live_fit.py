@@ -1,0 +1,146 @@
+"""A fit started from the live view, over HTTP against a real ``lumitrace serve``: the
+mirror cup served at reflectance 0.7 (an edit of the session, not the stage file), its
+own LDT traced at 0.95 uploaded as the target; the fit runs in its own process, publishes
+``fit`` events with its merit, shows the best's curves against the target's, recovers the
+reflectance, and its best applied is one delta (a revision whose edits layer holds the
+value, the stage file untouched). Bad requests are 4xx naming what is wrong, before
+anything starts; a second fit while one runs is 409; Stop ends a fit with its best so far
+confirmed."""
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+from helpers.fit_stages import mirror_cup
+from service_process import Service
+
+from pxr import Sdf
+
+FAST = ("--photons", "40000", "--resolution", "32", "--threads", "2")
+MIRROR = "/Luminaire/Materials/Mirror"
+REFLECTANCE = f"{MIRROR}.lumitrace:specularReflectance"
+
+
+def _call(url: str, body: dict | None = None) -> tuple[int, dict]:
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data, method="GET" if body is None else "POST",
+                                 headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+    from lumitrace.stage.reader import read_stage
+
+    root = tmp_path_factory.mktemp("live-fit")
+    truth = mirror_cup(root / "truth.usda", 0.95)
+    result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
+    ldt = Path(write_outputs(result, root / "target", sublayer=False, pictures=False)["ldt"])
+    stage = mirror_cup(root / "cup.usda", 0.95)
+    with Service(stage, *FAST, "--out", root / "out") as service:
+        service.wait_done(0, pictures=False)
+        revision = service.client.set(MIRROR, "lumitrace:specularReflectance", 0.7)[
+            "revision"]
+        service.wait_done(revision, pictures=False)
+        before = stage.read_bytes()  # (its result layer sublayered by the service)
+        yield service, ldt.read_text(encoding="latin-1"), stage, before
+
+
+def _wait_fit(service, number: int, states=("done", "failed")):
+    event = service.wait_event(lambda e: e.kind == "fit" and e.data["fit"] == number
+                               and e.data["state"] in states, timeout=300)
+    return event.data
+
+
+def test_bad_fit_requests_are_refused_naming_what_is_wrong(served):
+    service, target, *_ = served
+    good = {"target": {"name": "t.ldt", "text": target}, "vary": [f"{REFLECTANCE}=0.5:1"]}
+    for body, where in (
+            ({**good, "vary": ["/Luminaire/Nothing.lumitrace:reflectance"]}, "Nothing"),
+            ({**good, "vary": [f"{MIRROR}.lumitrace:scattering"]}, "scattering"),
+            ({**good, "vary": [f"{REFLECTANCE}=0.9:0.1"]}, "0.9"),
+            ({**good, "vary": []}, "vary"),
+            ({**good, "target": {"name": "t.txt", "text": target}}, ".ies or .ldt"),
+            ({**good, "target": {"name": "t.ies", "text": "not a photometric file"}},
+             "t.ies"),
+            ({**good, "evaluations": 0}, "evaluations"),
+            ({**good, "photons": "many"}, "photons"),
+            ({**good, "colour": 1}, "colour")):
+        code, answer = _call(service.url + "fit", body)
+        assert code == 422, (body, answer)
+        text = answer["error"] + json.dumps(answer["problems"])
+        assert where in text, (where, answer)
+    assert _call(service.url + "fit")[1]["state"] == "idle"  # nothing started
+    assert _call(service.url + "fit/apply", {})[0] == 409
+    assert _call(service.url + "fit/stop", {})[0] == 409
+
+
+def test_a_fit_from_the_page_recovers_the_reflectance_and_applies_as_one_delta(served):
+    service, target, stage, before = served
+    code, started = _call(service.url + "fit", {
+        "target": {"name": "truth.ldt", "text": target}, "vary": [f"{REFLECTANCE}=0.5:1"],
+        "evaluations": 40, "photons": 16384})
+    assert code == 202 and started["state"] == "starting"
+    number = started["fit"]
+    again = _call(service.url + "fit", {"target": {"name": "truth.ldt", "text": target},
+                                        "vary": [f"{REFLECTANCE}=0.5:1"]})
+    assert again[0] == 409 or _call(service.url + "fit")[1]["state"] == "done"
+    end = _wait_fit(service, number)
+    assert end["state"] == "done", _call(service.url + "fit")[1]
+    state = _call(service.url + "fit")[1]
+    # the merit after each generation, the best's curves against the target's
+    history = state["history"]
+    assert len(history) >= 3 and history[-1]["evaluations"] >= 40
+    assert all(h["merit_error"] > 0 for h in history)
+    assert min(h["merit"] for h in history) < history[0]["merit"]
+    curves = state["curves"]
+    n = len(curves["gamma"])
+    for plane in ("0", "90"):
+        best, want = curves["planes"][plane]["best"], curves["planes"][plane]["target"]
+        assert len(best) == len(want) == n
+        # where the target is at least half its top, the best holds as much light as it
+        # (each value of a candidate's 16,384 photons is noisy; their sum is not)
+        lit = [k for k, v in enumerate(want) if v >= 0.5 * max(want)]
+        ratio = sum(best[k] for k in lit) / sum(want[k] for k in lit)
+        assert len(lit) > 5 and abs(ratio - 1) < 0.05, ratio
+    summary = state["summary"]
+    assert summary["best"][REFLECTANCE] == pytest.approx(0.95, abs=0.05)
+    assert state["can_apply"] and state["applied"] is None
+    # the stage file is never written; applying the best is a revision of the session
+    assert stage.read_bytes() == before
+    code, applied = _call(service.url + "fit/apply", {})
+    assert code == 200 and applied["fit"] == number
+    service.wait_done(applied["revision"], pictures=False)
+    edits = Sdf.Layer.FindOrOpen(applied["edits_layer"])
+    spec = edits.GetAttributeAtPath(REFLECTANCE)
+    assert spec.default == pytest.approx(summary["best"][REFLECTANCE], rel=1e-6)
+    assert _call(service.url + "fit")[1]["applied"] == applied["revision"]
+    assert stage.read_bytes() == before
+
+
+def test_stop_ends_the_search_and_confirms_its_best_so_far(served):
+    service, target, *_ = served
+    code, started = _call(service.url + "fit", {
+        "target": {"name": "truth.ldt", "text": target}, "vary": [f"{REFLECTANCE}=0.5:1"],
+        "evaluations": 2000, "photons": 16384})
+    assert code == 202
+    number = started["fit"]
+    # stopped once its first generation is told
+    service.wait_event(lambda e: e.kind == "fit" and e.data["fit"] == number
+                       and e.data.get("evaluations"), timeout=300)
+    code, stopping = _call(service.url + "fit/stop", {})
+    assert code == 200 and stopping["state"] in ("stopping", "done")
+    end = _wait_fit(service, number)
+    assert end["state"] == "done"
+    summary = _call(service.url + "fit")[1]["summary"]
+    assert summary["stopped"] == "stopped" and summary["evaluations"] < 2000
