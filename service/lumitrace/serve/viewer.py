@@ -40,7 +40,8 @@ MAX_TRIANGLES = 150_000
 #: The files the page is made of (served from the package, no network).
 PAGE_DIR = Path(__file__).with_name("page")
 PAGE_FILES = {"index.html": "text/html", "viewer.js": "text/javascript",
-              "compare.js": "text/javascript", "viewer.css": "text/css"}
+              "compare.js": "text/javascript", "fit.js": "text/javascript",
+              "viewer.css": "text/css"}
 
 
 def frame_bytes(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:

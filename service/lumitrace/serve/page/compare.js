@@ -130,6 +130,7 @@ function setReference(ref) {
     document.getElementById("target-file").value = "";
   }
   redrawComparison();
+  if (typeof showFitTarget !== "undefined") showFitTarget();
 }
 
 async function refreshRevisions() {
@@ -181,7 +182,7 @@ async function loadTarget(name, text) {
     problem.textContent = why;
     return false;
   }
-  setReference({ kind: "file", name, frame: readFrame(await r.arrayBuffer()) });
+  setReference({ kind: "file", name, text, frame: readFrame(await r.arrayBuffer()) });
   return true;
 }
 

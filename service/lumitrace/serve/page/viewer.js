@@ -168,6 +168,7 @@ function onEvent(kind, e) {
     refresh();
   }
   if (kind === "revision" || kind === "done") refreshRevisions();
+  if (kind === "fit" && typeof refreshFit !== "undefined") refreshFit();
   if (kind === "iteration") remember(e.revision, e.photons, e.seconds, e.relative_error, null);
   refreshStatus();
 }
@@ -185,6 +186,7 @@ function logEvent(kind, e) {
   if (kind === "written") bits.push(`${fmtInt(e.photons)} photons${e.pictures ? ", pictures" : ""}`);
   if (kind === "done") bits.push(judgedText(e));
   if (kind === "settings") bits.push(e.paused ? "paused" : "running");
+  if (kind === "fit") bits.push(`fit ${e.fit} ${e.state}${e.evaluations ? `, ${e.evaluations} evaluations, merit ${fmt(e.merit)}` : ""}`);
   if (e.message) bits.push(e.message);
   li.textContent = `${new Date().toLocaleTimeString()} ${kind}: ${bits.join(" · ")}`;
   const log = document.getElementById("log");
@@ -927,6 +929,7 @@ function fillEditor() {
         const max = range[1] == null ? "" : `max="${range[1]}"`;
         row.innerHTML = `<label>${label} <input type="number" step="any" data-prop="${key}" data-label="${label}" min="${range[0]}" ${max}></label><span class="problem"></span>`;
         stageValue(row.querySelector("input"), m[key]);
+        varyTick(row, `${m.path}.${sc.properties[key]}`, m[key], range);
         fs.appendChild(row);
       }
       fs.querySelectorAll("[data-prop]").forEach((input) => {
@@ -951,6 +954,7 @@ function fillEditor() {
   ebox.querySelectorAll("[data-emitter]").forEach((input) => {
     const e = sc.emitters[parseInt(input.dataset.emitter, 10)];
     stageValue(input, e.flux);
+    varyTick(input.closest(".row"), `${e.path}.${sc.properties.flux}`, e.flux, [0, null]);
     input.addEventListener("change", () => {
       problemOf(input).textContent = "";
       const value = readNumber(input, `the flux of ${e.path}`);
@@ -999,6 +1003,24 @@ function fillTransform(part) {
     const inverse = tf.matrix ? [{ op: "transform", path: part.path, matrix: tf.matrix }] : null;
     edit([{ op: "transform", path: part.path, ...values }], inverse, at);
   });
+}
+
+// A "fit" tick beside an editor field: ticked, the field's attribute is a parameter of the
+// next fit (fit.js), its range the schema's, or half to twice the value where it has none.
+function varyTick(row, name, value, range) {
+  if (typeof fitParameters === "undefined" || value == null || typeof value !== "number") return;
+  const label = document.createElement("label");
+  label.className = "vary";
+  label.innerHTML = `<input type="checkbox" data-vary="${esc(name)}"> fit`;
+  const box = label.querySelector("input");
+  box.checked = fitParameters.has(name);
+  box.addEventListener("change", () => {
+    if (box.checked) {
+      const lo = range[1] != null ? range[0] : 0.5 * value, hi = range[1] != null ? range[1] : 2 * value;
+      addFitParameter(name, lo, hi);
+    } else removeFitParameter(name);
+  });
+  row.insertBefore(label, row.querySelector(".problem"));
 }
 
 function problemOf(control) {
