@@ -209,7 +209,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
         app.add_routes(_compare_routes(kept))
     app["fit"] = fit = LiveFit(live.stage_path, live.edits_path, live.luminaire,
                                fit_folder(live, engine), events.publish)
-    app.add_routes(_fit_routes(live, engine, fit))
+    app.add_routes(_fit_routes(live, engine, fit, limits))
     return app
 
 
@@ -223,9 +223,11 @@ def fit_folder(live: LiveStage, engine: Engine):
     return live.stage_path.with_name(f"{stage_name(live.stage_path)}.fit")
 
 
-def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit) -> list:
+def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit,
+                limits: ServiceLimits) -> list:
     """A fit started from the page (:mod:`~lumitrace.serve.fitting`): its state, start,
-    stop, and its best applied as a delta."""
+    stop, and its best applied as a delta; its photons and final error within the
+    service's ``limits``, as ``/settings``'s are."""
 
     async def state(_request: web.Request) -> web.Response:
         return _json(fit.status())
@@ -236,6 +238,12 @@ def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit) -> list:
         loop = asyncio.get_running_loop()
         try:
             body = FitRequest.of(parse_json_object(await request.read()))
+            if body.photons > limits.max_photons:
+                return _problem(422, f"/photons: at most {limits.max_photons:,} (the "
+                                     "service's --max-photons)")
+            if body.final_error < limits.min_target_error:
+                return _problem(422, f"/final_error: at least {limits.min_target_error:g} "
+                                     "(the service's --min-target-error)")
             # the parameters and the target read before anything starts
             await live.acall(lambda: resolve(live.stage, list(body.vary)))
             await loop.run_in_executor(None, reference_frame, body.target_name,
