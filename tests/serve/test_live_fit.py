@@ -144,3 +144,56 @@ def test_stop_ends_the_search_and_confirms_its_best_so_far(served):
     assert end["state"] == "done"
     summary = _call(service.url + "fit")[1]["summary"]
     assert summary["stopped"] == "stopped" and summary["evaluations"] < 2000
+
+
+def test_a_fit_ends_when_its_service_is_killed(tmp_path, served):
+    """A fit's process follows its service: the service killed (SIGKILL, no clean-up), the
+    fit's process is gone too, not left tracing for nobody."""
+    import os
+    import shutil
+    import time
+
+    _, target, stage, _ = served
+    copy = tmp_path / "cup.usda"
+    shutil.copy(stage, copy)
+    with Service(copy, *FAST, "--out", tmp_path / "out") as service:
+        code, started = _call(service.url + "fit", {
+            "target": {"name": "truth.ldt", "text": target},
+            "vary": [f"{REFLECTANCE}=0.5:1"], "evaluations": 2000, "photons": 16384})
+        assert code == 202
+        service.wait_event(lambda e: e.kind == "fit" and e.data.get("evaluations"),
+                           timeout=300)
+        children = [int(p) for p in os.listdir("/proc") if p.isdigit()
+                    and _parent(int(p)) == service.proc.pid
+                    and b"spawn_main" in _cmdline(int(p))]
+        assert len(children) == 1
+        service.kill()
+    deadline = time.monotonic() + 30
+    while os.path.exists(f"/proc/{children[0]}") and _state(children[0]) != "Z" \
+            and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not os.path.exists(f"/proc/{children[0]}") or _state(children[0]) == "Z"
+
+
+def _parent(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1])
+    except OSError:
+        return None
+
+
+def _state(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return f.read()
+    except OSError:
+        return b""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import queue
 import threading
 import time
@@ -121,10 +122,26 @@ def _curves(objective, m) -> dict | None:
     return {"gamma": [float(a) for a in angles], "planes": planes}
 
 
+def _end_with_parent() -> None:
+    """End this process at once when the service that started it is gone (killed): a
+    fit nobody follows would trace on, and its next message would wait for a reader
+    forever."""
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        parent.join()
+        os._exit(3)
+
+    threading.Thread(target=watch, name="lumitrace-fit-parent", daemon=True).start()
+
+
 def _child(stage: str, edits: str | None, luminaire: str | None, folder: str,
            request: FitRequest, messages, stop) -> None:
     """The fit's process: run it, telling ``messages`` of each generation and of the end;
     ``stop`` (an Event) ends the search before its next generation."""
+    _end_with_parent()
     try:
         from ..fit.objective import Objective
         from ..fit.run import FitOptions, run_fit
