@@ -75,11 +75,14 @@ def test_bad_fit_requests_are_refused_naming_what_is_wrong(served):
              "t.ies"),
             ({**good, "evaluations": 0}, "evaluations"),
             ({**good, "photons": "many"}, "photons"),
-            ({**good, "colour": 1}, "colour")):
+            ({**good, "colour": 1}, "colour"),
+            ({**good, "target": {"revision": "x"}}, "revision")):
         code, answer = _call(service.url + "fit", body)
         assert code == 422, (body, answer)
         text = answer["error"] + json.dumps(answer["problems"])
         assert where in text, (where, answer)
+    code, answer = _call(service.url + "fit", {**good, "target": {"revision": 99}})
+    assert code == 404 and "revision 99" in answer["error"]
     assert _call(service.url + "fit")[1]["state"] == "idle"  # nothing started
     assert _call(service.url + "fit/apply", {})[0] == 409
     assert _call(service.url + "fit/stop", {})[0] == 409
@@ -126,6 +129,20 @@ def test_a_fit_from_the_page_recovers_the_reflectance_and_applies_as_one_delta(s
     assert spec.default == pytest.approx(summary["best"][REFLECTANCE], rel=1e-6)
     assert _call(service.url + "fit")[1]["applied"] == applied["revision"]
     assert stage.read_bytes() == before
+
+
+def test_a_pinned_revision_is_a_target(served):
+    """Revision 0 (the stage's reflectance, 0.95), kept by the live view, as the target
+    of a fit started from revision 1 (0.7): its preview written as the target file."""
+    service, *_ = served
+    code, started = _call(service.url + "fit", {
+        "target": {"revision": 0}, "vary": [f"{REFLECTANCE}=0.5:1"], "evaluations": 24,
+        "photons": 16384})
+    assert code == 202 and started["request"]["target"] == "revision-0.ies"
+    end = _wait_fit(service, started["fit"])
+    assert end["state"] == "done", _call(service.url + "fit")[1]["error"]
+    best = _call(service.url + "fit")[1]["summary"]["best"][REFLECTANCE]
+    assert best == pytest.approx(0.95, abs=0.08)  # (a 40,000-photon preview's noise)
 
 
 def test_stop_ends_the_search_and_confirms_its_best_so_far(served):

@@ -18,7 +18,7 @@ from ..errors import LumitraceError
 from ..run.settings import ServiceLimits, with_knobs
 from .engine import Engine
 from .events import EventLog
-from .fitting import FitRequest, LiveFit
+from .fitting import FitRequest, LiveFit, revision_target
 from .guard import Guard
 from .live import LiveStage
 from .reference import MAX_FILE_CHARS, KeptFrames, reference_frame
@@ -209,7 +209,7 @@ def make_app(live: LiveStage, engine: Engine, events: EventLog,
         app.add_routes(_compare_routes(kept))
     app["fit"] = fit = LiveFit(live.stage_path, live.edits_path, live.luminaire,
                                fit_folder(live, engine), events.publish)
-    app.add_routes(_fit_routes(live, engine, fit, limits))
+    app.add_routes(_fit_routes(live, engine, fit, limits, kept))
     return app
 
 
@@ -224,7 +224,7 @@ def fit_folder(live: LiveStage, engine: Engine):
 
 
 def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit,
-                limits: ServiceLimits) -> list:
+                limits: ServiceLimits, kept: KeptFrames) -> list:
     """A fit started from the page (:mod:`~lumitrace.serve.fitting`): its state, start,
     stop, and its best applied as a delta; its photons and final error within the
     service's ``limits``, as ``/settings``'s are."""
@@ -237,7 +237,10 @@ def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit,
 
         loop = asyncio.get_running_loop()
         try:
-            body = FitRequest.of(parse_json_object(await request.read()))
+            raw = parse_json_object(await request.read())
+            if isinstance(raw.get("target"), dict) and "revision" in raw["target"]:
+                raw["target"] = revision_target(kept, raw["target"]["revision"])
+            body = FitRequest.of(raw)
             if body.photons > limits.max_photons:
                 return _problem(422, f"/photons: at most {limits.max_photons:,} (the "
                                      "service's --max-photons)")

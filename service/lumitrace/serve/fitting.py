@@ -4,7 +4,7 @@ the service's USD and its tracing are untouched by it, its progress published as
 events, its best applied as one delta when the designer asks.
 
 One fit at a time. The target is a photometric file the page uploads (IES or EULUMDAT
-text); the parameters are spelled as ``lumitrace fit --vary`` spells them. The fit writes
+text), or a kept revision's preview (:func:`revision_target`); the parameters are spelled as ``lumitrace fit --vary`` spells them. The fit writes
 its folder (``fit.json``, its files, ``NAME.lumitrace-fit.usda``) in the service's
 output folder, under ``fit/``; the stage and the edits layer are never written by it:
 only :meth:`LiveFit.apply_layer` hands the best to the session, as a ``layer`` delta.
@@ -92,6 +92,31 @@ class FitRequest:
                    numbers["evaluations"], numbers["photons"], numbers["seed"], float(final))
 
 
+def revision_target(kept, revision) -> dict:
+    """A kept revision as a fit's target: its last preview's grid (cd, every plane)
+    written as an IES file's text, ``{"name", "text"}``, as an uploaded file is given;
+    a :class:`DeltaError` where ``revision`` is not a number (422) or not kept (404)."""
+    from ..photometry.grid import CGammaGrid
+    from ..photometry.lm63 import format_ies
+    from .viewer import read_frame
+
+    if isinstance(revision, bool) or not isinstance(revision, int):
+        raise _bad("/target/revision", "must be a revision number")
+    data = kept.get(revision)
+    if data is None:
+        raise DeltaError([Problem("/target/revision", f"no preview of revision {revision} "
+                                  "is kept (the kept ones: GET /revisions)")], 404)
+    header, arrays = read_frame(data)
+    c, cd = np.asarray(header["c"], np.float64), np.asarray(arrays["grid"], np.float64)
+    if c[-1] < 360.0 - 1e-9:  # every plane, as a file lists them: 360 repeats 0
+        c, cd = np.append(c, 360.0), np.vstack([cd, cd[:1]])
+    grid = CGammaGrid(c, np.asarray(header["gamma"], np.float64), cd, "none")
+    text = format_ies(grid, float(header.get("lamp_lumens") or 1000.0), 0.0, 0.0, 0.0,
+                      {"TEST": f"revision {revision}'s preview ({header.get('photons')} "
+                               "photons), the live view's fit target"})
+    return {"name": f"revision-{revision}.ies", "text": text}
+
+
 def _curves(objective, m) -> dict | None:
     """The best candidate's and the target's curves in the planes of
     :data:`CURVE_PLANES` (cd/klm, each of its own flux over the match grid): {"gamma":
@@ -99,7 +124,7 @@ def _curves(objective, m) -> dict | None:
     from -180 to 180 deg."""
     if m is None or m.candela is None or objective.target is None:
         return None
-    from ..film.goniometer import C_STEP
+    from ..fit.objective import C_STEP  # the match grid's planes
     from ..photometry.measured import planes_kept
 
     c_kept, target, omega = objective.match_grid()

@@ -1,5 +1,5 @@
-// lumitrace live view: a fit started from the page. The target is the file loaded in
-// Compare; the parameters are ticked beside the Editor's fields (their ranges the
+// lumitrace live view: a fit started from the page. The target is the reference in
+// Compare (a loaded file, or a pinned revision); the parameters are ticked beside the Editor's fields (their ranges the
 // schema's) or typed as `lumitrace fit --vary` spells them. The service runs the fit in a
 // process of its own and tells each generation as a "fit" event: the merit with its
 // standard error against evaluations, and the best's polar curves against the target's.
@@ -44,15 +44,19 @@ function drawFitParameters() {
   });
 }
 
+// The reference in Compare, as the fit's target: a loaded file, or a pinned revision
+// (the service writes its kept preview as the target file).
 function fitTarget() {
   const ref = LT.reference;
-  return ref && ref.kind === "file" && ref.text ? ref : null;
+  if (ref && ref.kind === "file" && ref.text) return { label: ref.name, body: { name: ref.name, text: ref.text } };
+  if (ref && ref.kind === "revision") return { label: `revision ${ref.revision} (pinned)`, body: { revision: ref.revision } };
+  return null;
 }
 
 function showFitTarget() {
   const t = fitTarget();
-  document.getElementById("fit-target").textContent = t ? `target: ${t.name}`
-    : "target: load a target IES or LDT file in Compare";
+  document.getElementById("fit-target").textContent = t ? `target: ${t.label}`
+    : "target: pin a revision or load a target IES or LDT file in Compare";
 }
 
 async function refreshFit() {
@@ -137,14 +141,14 @@ document.getElementById("fit-add-button").addEventListener("click", () => {
 document.getElementById("fit-start").addEventListener("click", async () => {
   fitProblem("");
   const target = fitTarget();
-  if (!target) { fitProblem("load a target IES or LDT file in Compare first"); return; }
+  if (!target) { fitProblem("pin a revision or load a target file in Compare first"); return; }
   if (!fitParameters.size) { fitProblem("tick a field in the Editor or add a parameter"); return; }
   const vary = [...fitParameters.entries()].map(([name, r]) =>
     r.lo == null || r.hi == null ? name : `${name}=${r.lo}:${r.hi}`);
   const evaluations = Number(document.getElementById("fit-evaluations").value);
   const photons = Number(document.getElementById("fit-photons").value);
   if (!Number.isInteger(evaluations) || !Number.isInteger(photons)) { fitProblem("evaluations and photons are whole numbers"); return; }
-  const r = await postJSON("/fit", { target: { name: target.name, text: target.text }, vary, evaluations, photons });
+  const r = await postJSON("/fit", { target: target.body, vary, evaluations, photons });
   if (!r.ok) { fitProblem(r.body.error || `refused (${r.status})`); return; }
   LT.fit = r.body;
   drawFit();
