@@ -32,8 +32,9 @@ RANKS = {
     "trace": 3,
     "run": 4,
     "publish": 5,
-    "report": 6, "serve": 6,
+    "report": 6,
     "fit": 6,  # parameters, objectives, the optimiser over traced candidates: above run/
+    "serve": 6.5,  # the service: the live view starts fits
     "cli": 7, "api": 7, "__main__": 8,
     "client": 0,  # the standard library only: it runs in a DCC's own Python
     "quick_exit": 0,  # the standard library only: how a command's process ends
