@@ -33,7 +33,7 @@ def served(tmp_path_factory):
     truth = mirror_cup(root / "truth.usda", 0.95)
     result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
     ldt = Path(write_outputs(result, root / "target", sublayer=False, pictures=False)["ldt"])
-    stage = mirror_cup(root / "cup.usda", 0.7)
+    stage = mirror_cup(root / "cup.usda", 0.7, wall_z=0.0)  # the wall placed by an op
     with Service(stage, *FAST, "--out", root / "out") as service:
         service.wait_done(0, pictures=False)
         yield service, ldt
@@ -58,6 +58,16 @@ def test_a_fit_from_the_page_shows_its_merit_and_curves_and_applies_its_best(ser
         row = until(page, f"document.querySelector('#fit-params tr[data-name=\"{REFLECTANCE}\"]')")
         ends = [i.get_attribute("value") for i in row.find_elements("css selector", "input")]
         assert [float(v) for v in ends] == [0.0, 1.0]  # the schema's range
+        # a component of the wall's translate op: ticked and unticked again
+        z = "/Luminaire/Wall.xformOp:translate[2]"
+        page.find_element("css selector", f'[data-vary="{z}"]').click()
+        row = until(page, f"document.querySelector('#fit-params tr[data-name=\"{z}\"]')")
+        lo, hi = (float(i.get_attribute("value"))
+                  for i in row.find_elements("css selector", "input"))
+        assert lo < 0.0 < hi and hi == pytest.approx(-lo)  # about the wall's place, 0
+        row.find_element("css selector", "[data-remove]").click()
+        until(page, f"!document.querySelector('#fit-params tr[data-name=\"{z}\"]')")
+        assert not page.find_element("css selector", f'[data-vary="{z}"]').is_selected()
         page.execute_script("""
             document.getElementById('fit-evaluations').value = '40';
             document.getElementById('fit-photons').value = '16384';

@@ -984,6 +984,12 @@ function fillTransform(part) {
       const input = document.getElementById(id + a);
       stageValue(input, tf.editable ? tf[key][k] : null);
       input.disabled = !tf.editable;
+      const op = TRANSFORM_OPS[key];
+      if (tf.editable && (tf.ops || []).includes(op)) {
+        const v = tf[key][k];
+        varyTick(input.closest(".row"), `${part.path}.${op}[${k}]`, v, transformRange(key, v),
+                 input.closest("label").nextSibling);
+      }
     });
   }
   const at = document.getElementById("apply-transform");
@@ -1007,8 +1013,9 @@ function fillTransform(part) {
 
 // A "fit" tick beside an editor field: ticked, the field's attribute is a parameter of the
 // next fit (fit.js), its range the schema's, or half to twice the value where it has none.
-function varyTick(row, name, value, range) {
+function varyTick(row, name, value, range, before = row.querySelector(".problem")) {
   if (typeof fitParameters === "undefined" || value == null || typeof value !== "number") return;
+  // (range: [lo, hi]; an open end, null, is half or twice the value)
   const label = document.createElement("label");
   label.className = "vary";
   label.innerHTML = `<input type="checkbox" data-vary="${esc(name)}"> fit`;
@@ -1020,7 +1027,17 @@ function varyTick(row, name, value, range) {
       addFitParameter(name, lo, hi);
     } else removeFitParameter(name);
   });
-  row.insertBefore(label, row.querySelector(".problem"));
+  row.insertBefore(label, before);
+}
+
+// The op a transform row's fields are, where the part's transform is that op's value
+// (XformCommonAPI's stack), and the range a fit varies a component over: a fifth of the
+// luminaire's size about a position, 15 degrees about an angle, half to twice a scale.
+const TRANSFORM_OPS = { translate: "xformOp:translate", rotate: "xformOp:rotateXYZ", scale: "xformOp:scale" };
+function transformRange(key, v) {
+  if (key === "translate") { const d = 0.2 * (LT.extent || 0.05) * 2; return [v - d, v + d]; }
+  if (key === "rotate") return [v - 15, v + 15];
+  return v > 0 ? [0.5 * v, 2 * v] : [v - 1, v + 1];
 }
 
 function problemOf(control) {
