@@ -2,8 +2,9 @@
 ``lumitrace serve``): the mirror cup served at reflectance 0.7, its own LDT traced at 0.95
 loaded as the target in Compare, the mirror's reflectance ticked in the Editor (its range
 the schema's, 0 to 1); Start; the merit curve and the best's polar curves against the
-target's drawn as the fit's events come; the confirmed best recovers the reflectance, and
-Apply best makes it a revision of the session, the Editor then showing the value."""
+target's drawn as the fit's events come; the confirmed best recovers the reflectance,
+Apply best makes it a revision of the session, the Editor then showing the value, and
+Undo takes it back."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -90,6 +91,10 @@ def test_a_fit_from_the_page_shows_its_merit_and_curves_and_applies_its_best(ser
         until(page, f"Math.abs(lumitrace.scene.materials.find((m) => m.path === '{MIRROR}')"
                     f".specularReflectance - {best}) < 1e-6")  # (a float attribute)
         assert "applied as revision" in page.find_element("id", "fit-state").text
+        # Undo takes the fit's best back to the value the fit started from
+        page.find_element("id", "undo").click()
+        until(page, f"Math.abs(lumitrace.scene.materials.find((m) => m.path === '{MIRROR}')"
+                    f".specularReflectance - 0.7) < 1e-6")
         assert not severe(page)
     finally:
         page.quit()

@@ -128,6 +128,12 @@ def test_a_fit_from_the_page_recovers_the_reflectance_and_applies_as_one_delta(s
     spec = edits.GetAttributeAtPath(REFLECTANCE)
     assert spec.default == pytest.approx(summary["best"][REFLECTANCE], rel=1e-6)
     assert _call(service.url + "fit")[1]["applied"] == applied["revision"]
+    # its inverse, sent as the page's Undo sends it, sets the value the fit started from
+    undone = service.client.send(applied["inverse"])
+    service.wait_done(undone["revision"], pictures=False)
+    edits = Sdf.Layer.FindOrOpen(applied["edits_layer"])
+    edits.Reload()
+    assert edits.GetAttributeAtPath(REFLECTANCE).default == pytest.approx(0.7, rel=1e-6)
     assert stage.read_bytes() == before
 
 

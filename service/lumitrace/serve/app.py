@@ -265,7 +265,7 @@ def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit,
 
     async def apply(_request: web.Request) -> web.Response:
         try:
-            number, layer = fit.layer_to_apply()
+            number, layer, undo = fit.layer_to_apply()
             revision = await live.acall(live.apply, [{"op": "layer", "usda": layer}])
         except DeltaError as exc:
             return _problem(exc.status, str(exc), exc.problems)
@@ -274,7 +274,8 @@ def _fit_routes(live: LiveStage, engine: Engine, fit: LiveFit,
         engine.submit(revision)
         fit.applied(number, revision.number)
         return _json({"revision": revision.number, "effect": revision.effect.as_dict(),
-                      "fit": number, "edits_layer": str(live.edits_path)})
+                      "fit": number, "edits_layer": str(live.edits_path),
+                      "inverse": [{"op": "layer", "usda": undo}]})
 
     return [web.get("/fit", state), web.post("/fit", start), web.post("/fit/stop", stop),
             web.post("/fit/apply", apply)]

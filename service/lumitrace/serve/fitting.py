@@ -162,6 +162,19 @@ def _end_with_parent() -> None:
     threading.Thread(target=watch, name="lumitrace-fit-parent", daemon=True).start()
 
 
+def _start_layer(stage: str, luminaire: str | None, edits: str | None,
+                 vary: tuple[str, ...]) -> str:
+    """The parameters' values when the fit starts, as a layer fragment: the delta that
+    undoes the best's (the same attributes, the values they had)."""
+    from ..fit.candidates import CandidateStage
+    from ..fit.parameters import resolve
+
+    cs = CandidateStage(stage, luminaire, edits)
+    params = resolve(cs.stage, list(vary))
+    cs.author(params, [p.start for p in params])
+    return cs.layer.ExportToString()
+
+
 def _child(stage: str, edits: str | None, luminaire: str | None, folder: str,
            request: FitRequest, messages, stop) -> None:
     """The fit's process: run it, telling ``messages`` of each generation and of the end;
@@ -178,6 +191,7 @@ def _child(stage: str, edits: str | None, luminaire: str | None, folder: str,
         target.write_text(request.target_text, encoding="latin-1" if target.suffix ==
                           ".ldt" else "utf-8", errors="replace")
         objective = Objective(read_target(target))
+        undo = _start_layer(stage, luminaire, edits, request.vary)
         opts = FitOptions(stage=Path(stage), vary=list(request.vary), target=target,
                           photons=request.photons, evaluations=request.evaluations,
                           seed=request.seed, final_error=request.final_error, out=out,
@@ -200,7 +214,7 @@ def _child(stage: str, edits: str | None, luminaire: str | None, folder: str,
         messages.put({"kind": "started"})
         summary = run_fit(opts, watch=watch, should_stop=stop.is_set)
         layer = Path(summary["edits"]).read_text(encoding="utf-8")
-        messages.put({"kind": "done", "summary": summary, "layer": layer})
+        messages.put({"kind": "done", "summary": summary, "layer": layer, "undo": undo})
     except BaseException as exc:  # noqa: BLE001 (told to the page, whatever it is)
         messages.put({"kind": "failed", "error": str(exc) or type(exc).__name__})
 
@@ -219,6 +233,7 @@ class FitState:
     curves: dict | None = None
     summary: dict | None = None
     layer: str | None = None
+    undo: str | None = None
     error: str | None = None
     applied: int | None = None
 
@@ -296,6 +311,7 @@ class LiveFit:
                     s.best, s.curves = msg["values"], msg["curves"] or s.curves
                 elif kind == "done":
                     s.state, s.summary, s.layer = "done", msg["summary"], msg["layer"]
+                    s.undo = msg["undo"]
                     s.best = msg["summary"]["best"]
                 else:
                     s.state, s.error = "failed", msg["error"]
@@ -319,12 +335,13 @@ class LiveFit:
         self.publish("fit", fit=state["fit"], state="stopping")
         return state
 
-    def layer_to_apply(self) -> tuple[int, str]:
-        """The confirmed best's layer, to apply as a delta (409 where there is none)."""
+    def layer_to_apply(self) -> tuple[int, str, str]:
+        """The confirmed best's layer, to apply as a delta, and the layer that undoes it
+        (the values at the fit's start); 409 where there is none."""
         with self._lock:
             if self._state.layer is None:
                 raise DeltaError([Problem("/fit", "no finished fit to apply")], 409)
-            return self._state.number, self._state.layer
+            return self._state.number, self._state.layer, self._state.undo
 
     def applied(self, number: int, revision: int) -> None:
         with self._lock:

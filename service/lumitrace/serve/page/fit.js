@@ -3,7 +3,8 @@
 // schema's) or typed as `lumitrace fit --vary` spells them. The service runs the fit in a
 // process of its own and tells each generation as a "fit" event: the merit with its
 // standard error against evaluations, and the best's polar curves against the target's.
-// "Apply best" sends the confirmed best to the session as one delta: a revision like any.
+// "Apply best" sends the confirmed best to the session as one delta: a revision like any,
+// which the Editor's Undo takes back.
 
 const fitParameters = new Map();  // --vary name -> { lo, hi }
 
@@ -164,6 +165,8 @@ document.getElementById("fit-apply").addEventListener("click", async () => {
   fitProblem("");
   const r = await postJSON("/fit/apply", {});
   if (!r.ok) { fitProblem(r.body.error || `refused (${r.status})`); return; }
+  LT.undo.push(r.body.inverse);  // Undo sets the parameters back to their values at the start
+  document.getElementById("undo").disabled = false;
   refreshFit();
 });
 
