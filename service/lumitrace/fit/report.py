@@ -64,7 +64,8 @@ def write_reports(folder: Path, summary: dict, result, params, objective, target
     """Write ``fit.json`` and ``fit.html`` (and, with ``pictures``, their PNGs) into
     ``folder``; ``profiles``: per profiled mesh, its (start, best) profile points."""
     folder = Path(folder)
-    ph = photometry_of(traced.scene, traced.accumulator)
+    # measured as the files are: the luminous opening from the confirming trace's seed
+    ph = photometry_of(traced.scene, traced.accumulator, traced.settings.seed)
     figs = ph.figures.as_dict()
     tfig = target_figures(target.grid) if target is not None else {}
     data = {**summary,

@@ -196,7 +196,8 @@ def _figures(scene, result) -> dict:
     from ..publish.record import defined
 
     return {k: defined(list(v) if isinstance(v, tuple) else v)
-            for k, v in photometry_of(scene, result.accumulator).figures.as_dict().items()}
+            for k, v in photometry_of(scene, result.accumulator,
+                                      result.settings.seed).figures.as_dict().items()}
 
 
 def _pick_snapshots(iterations: list[int]) -> list[int]:
