@@ -220,3 +220,17 @@ def _cmdline(pid: int) -> bytes:
             return f.read()
     except OSError:
         return b""
+
+
+def test_a_new_service_numbers_its_fits_after_the_folders(tmp_path):
+    """The fits of an earlier session (``fit-1``, ``fit-7``) are never overwritten: the
+    next is ``fit-8``."""
+    from lumitrace.serve.fitting import LiveFit
+
+    for name in ("fit-1", "fit-7", "fit-x", "notes"):
+        (tmp_path / name).mkdir()
+    fit = LiveFit(tmp_path / "s.usda", tmp_path / "s.edits.usda", None, tmp_path,
+                  lambda *a, **k: None)
+    assert fit.status()["fit"] == 7 and fit.status()["state"] == "idle"
+    assert LiveFit(tmp_path / "s.usda", tmp_path / "e.usda", None, tmp_path / "none",
+                   lambda *a, **k: None).status()["fit"] == 0

@@ -253,7 +253,8 @@ class LiveFit:
         self.folder = Path(folder)
         self.publish = publish
         self._lock = threading.Lock()
-        self._state = FitState()
+        # numbered on from the folder's fits: an earlier session's are never overwritten
+        self._state = FitState(number=_last_number(self.folder))
         self._process = None
         self._stop = None
 
@@ -358,6 +359,13 @@ class LiveFit:
             if process.is_alive():
                 process.terminate()
                 process.join(END_WAIT)
+
+
+def _last_number(folder: Path) -> int:
+    """The largest N of the ``fit-N`` folders in ``folder`` (0: none)."""
+    numbers = [int(p.name[4:]) for p in folder.glob("fit-*") if p.name[4:].isdigit()] \
+        if folder.is_dir() else []
+    return max(numbers, default=0)
 
 
 def _finite(x):
