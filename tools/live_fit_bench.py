@@ -30,9 +30,10 @@ import urllib.request
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from service_process import Service  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 REFLECTANCE = "/Luminaire/Materials/Mirror.lumitrace:specularReflectance"
 
@@ -46,7 +47,6 @@ def _post(url: str, body: dict) -> dict:
 
 def problem(folder: Path) -> tuple[Path, Path]:
     """The stage (reflectance 0.7) and its target LDT (0.95)."""
-    from helpers.fit_stages import mirror_cup
     from lumitrace.publish.outputs import write_outputs
     from lumitrace.run.session import run
     from lumitrace.run.settings import TraceSettings
@@ -56,6 +56,15 @@ def problem(folder: Path) -> tuple[Path, Path]:
     result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
     ldt = Path(write_outputs(result, folder / "target", sublayer=False, pictures=False)["ldt"])
     return mirror_cup(folder / "cup.usda", 0.7), ldt
+
+
+def mirror_cup(path: Path, reflectance: float) -> Path:
+    """The reference mirror cup at ``path``, its mirror reflecting ``reflectance``."""
+    text = (ROOT / "stages" / "reference" / "mirror_cup.usda").read_text()
+    old = "float lumitrace:specularReflectance = 0.95"
+    assert old in text
+    path.write_text(text.replace(old, f"float lumitrace:specularReflectance = {reflectance!r}"))
+    return path
 
 
 def command(stage: Path, ldt: Path, out: Path, args) -> float:
