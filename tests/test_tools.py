@@ -47,7 +47,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "many_emitters.py": ("--side", "3", "--photons", "20000", "--repeats", "1",
                          "--resolution", "8", "--threads", "1"),
     "live_loop_bench.py": ("--edits", "1", "--client", "page"),
-    "live_fit_bench.py": ("--repeats", "1", "--evaluations", "4", "--photons", "4096"),
+    "live_fit_bench.py": ("--repeats", "1", "--evaluations", "4", "--photons", "4096",
+                          "--target-photons", "100000"),
     "live_view_screenshot.py": ("--help",),  # drives headless Chromium for a minute
     "part_edit_bench.py": ("--triangles", "20000", "--repeats", "1"),
     "performance_page.py": ("--quick",),

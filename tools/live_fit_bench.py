@@ -1,9 +1,10 @@
 """A fit started from the live view against the same fit as a command, side by side.
 
     python tools/live_fit_bench.py [--repeats 5] [--evaluations 40] [--photons 16384]
+                                   [--target-photons 1000000]
 
 The problem: the reference mirror cup with its mirror at reflectance 0.7, fitted to its own
-LDT traced at 0.95 (1M photons, seed 99), the reflectance varied over [0.5, 1]. In each
+LDT traced at 0.95 (``--target-photons``, seed 99), the reflectance varied over [0.5, 1]. In each
 repeat, in turn:
 
 - **command**: ``lumitrace fit STAGE --target LDT --vary ... --evaluations N --photons P
@@ -45,7 +46,7 @@ def _post(url: str, body: dict) -> dict:
         return json.loads(r.read())
 
 
-def problem(folder: Path) -> tuple[Path, Path]:
+def problem(folder: Path, photons: int) -> tuple[Path, Path]:
     """The stage (reflectance 0.7) and its target LDT (0.95)."""
     from lumitrace.publish.outputs import write_outputs
     from lumitrace.run.session import run
@@ -53,7 +54,7 @@ def problem(folder: Path) -> tuple[Path, Path]:
     from lumitrace.stage.reader import read_stage
 
     truth = mirror_cup(folder / "truth.usda", 0.95)
-    result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
+    result = run(read_stage(truth), TraceSettings(photons=photons, seed=99, threads=2))
     ldt = Path(write_outputs(result, folder / "target", sublayer=False, pictures=False)["ldt"])
     return mirror_cup(folder / "cup.usda", 0.7), ldt
 
@@ -97,9 +98,10 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--evaluations", type=int, default=40)
     ap.add_argument("--photons", type=int, default=16384)
+    ap.add_argument("--target-photons", type=int, default=1_000_000)
     args = ap.parse_args(argv)
     folder = Path(tempfile.mkdtemp(prefix="live-fit-bench-"))
-    stage, ldt = problem(folder)
+    stage, ldt = problem(folder, args.target_photons)
     runs = {"command": [], "live": []}
     with Service(stage, "--photons", "40000", "--threads", "2",
                  "--out", folder / "served") as service:
