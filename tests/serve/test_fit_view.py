@@ -52,7 +52,8 @@ def test_a_fit_from_the_page_shows_its_merit_and_curves_and_applies_its_best(ser
         # the wall, bound to the mirror, in the Editor; its reflectance ticked for the fit
         page.execute_script("""
             const sel = document.getElementById('part-select');
-            sel.value = String(lumitrace.scene.parts.findIndex((p) => p.path === '/Luminaire/Wall'));
+            const wall = lumitrace.scene.parts.findIndex((p) => p.path === '/Luminaire/Wall');
+            sel.value = String(wall);
             sel.dispatchEvent(new Event('change'));""")
         tick = until(page, f"document.querySelector('[data-vary=\"{REFLECTANCE}\"]')")
         tick.click()

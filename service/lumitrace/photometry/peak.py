@@ -8,10 +8,16 @@ coordinates, deg) to the goniometer's fine cells within a radius of its own pick
 top, and takes the fit's stationary point (kept within the radius) as the peak's
 direction; the other half's fit there, an unbiased estimate of the intensity at a point
 chosen independently of it, is the value (the pick itself, the top cell of the published
-grid, where the fit's maximum is not clearly elsewhere). The two halves' values are averaged. The fit's
-standard error is the least-squares sandwich with each cell's binomial variance. What is
-left is second order: the spread of the located direction times the top's curvature, and
-the surface's departure from a quadratic within the radius.
+grid, where the fit's maximum is not clearly elsewhere). The two halves' values are
+averaged. The fit's standard error is the least-squares sandwich with each cell's binomial
+variance.
+
+A value measured at a located direction is low by the top's curvature times the
+direction's scatter (a Lambertian disc's flat top, located at 100,000 photons, 1% low).
+Where the symmetry fixes a pole (rotational, quadrant) and the top falls away from it, the
+top is the pole, located without noise (:func:`pole_top`). The measuring fit has even
+quartic terms, so a sharp top's departure from a parabola within the radius does not pull
+its value down. What is left is the scatter of a top located elsewhere.
 """
 from __future__ import annotations
 
@@ -197,12 +203,13 @@ def local_fit(cells: HalfCells, centre: np.ndarray, radius_deg: float,
     """Quadratic fit of the intensity (cd) over the cells within ``radius_deg`` of
     ``centre`` (area-weighted least squares). Returns (value at ``centre``, its standard
     error, the fit's stationary point as a unit vector, within the radius, its Hessian's
-    eigenvalues in cd/deg^2, ascending), or None where too few cells hold light. ``quartic``: the even
-    quartic terms are fitted too, so that the value at the centre of a sharp top is not
-    pulled down by its departure from a parabola (a cos^30 beam's, fitted over half its
-    half width, by 0.25%: a level of the beam's read as low puts its crossings outward),
-    where the fit reaches :data:`QUARTIC_CELLS` cells (at a pole, fewer rings than that
-    cannot tell a quartic from a parabola)."""
+    eigenvalues in cd/deg^2, ascending), or None where too few cells hold light.
+
+    ``quartic``: the even quartic terms are fitted too, so that the value at the centre
+    of a sharp top is not pulled down by its departure from a parabola (a cos^30 beam's,
+    fitted over half its half width, by 0.25%: a beam's level read low puts its crossings
+    outward), where the fit reaches :data:`QUARTIC_CELLS` cells (at a pole, fewer rings
+    than that cannot tell a quartic from a parabola)."""
     gamma = math.degrees(math.acos(max(-1.0, min(1.0, -float(centre[2])))))
     cell = max(GAMMA_STEP, C_STEP * abs(math.sin(math.radians(gamma))))
     quartic = quartic and radius_deg >= QUARTIC_CELLS * cell

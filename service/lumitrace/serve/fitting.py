@@ -4,10 +4,11 @@ the service's USD and its tracing are untouched by it, its progress published as
 events, its best applied as one delta when the designer asks.
 
 One fit at a time. The target is a photometric file the page uploads (IES or EULUMDAT
-text), or a kept revision's preview (:func:`revision_target`); the parameters are spelled as ``lumitrace fit --vary`` spells them. The fit writes
-its folder (``fit.json``, its files, ``NAME.lumitrace-fit.usda``) in the service's
-output folder, under ``fit/``; the stage and the edits layer are never written by it:
-only :meth:`LiveFit.apply_layer` hands the best to the session, as a ``layer`` delta.
+text), or a kept revision's preview (:func:`revision_target`); the parameters are spelled
+as ``lumitrace fit --vary`` spells them. The fit writes its folder (``fit.json``, its
+files, ``NAME.lumitrace-fit.usda``) as ``fit-N`` in the service's output folder's
+``fit/``; the stage and the edits layer are never written by it: the best reaches the
+session only when the page applies it (``POST /fit/apply``), as one ``layer`` delta.
 """
 from __future__ import annotations
 
