@@ -196,7 +196,8 @@ def _child(stage: str, edits: str | None, luminaire: str | None, folder: str,
         opts = FitOptions(stage=Path(stage), vary=list(request.vary), target=target,
                           photons=request.photons, evaluations=request.evaluations,
                           seed=request.seed, final_error=request.final_error, out=out,
-                          luminaire=luminaire, pictures=False, edits=edits and Path(edits),
+                          luminaire=luminaire, pictures=False,
+                          edits=Path(edits) if edits else None,
                           fresh=True)
         started = time.perf_counter()
         count = [0]
