@@ -84,6 +84,8 @@ function drawFit() {
   if (s.error) text += ` · ${s.error}`;
   document.getElementById("fit-state").textContent = text;
   drawFitParameters();
+  // the plots once there is something to draw: a fit's first generation
+  document.querySelector("#fit-panel .fit-plots").hidden = !s.history.length && !s.curves;
   drawMeritCurve(s.history);
   drawFitPolar(s.curves);
 }

@@ -1015,7 +1015,7 @@ function fillTransform(part) {
 // next fit (fit.js), its range the schema's, or half to twice the value where it has none.
 function varyTick(row, name, value, range, before = row.querySelector(".problem")) {
   if (typeof fitParameters === "undefined" || value == null || typeof value !== "number") return;
-  // (range: [lo, hi]; an open end, null, is half or twice the value)
+  // (range: [lo, hi]; hi null: half to twice the value, no less than lo)
   const label = document.createElement("label");
   label.className = "vary";
   label.innerHTML = `<input type="checkbox" data-vary="${esc(name)}"> fit`;
@@ -1023,7 +1023,9 @@ function varyTick(row, name, value, range, before = row.querySelector(".problem"
   box.checked = fitParameters.has(name);
   box.addEventListener("change", () => {
     if (box.checked) {
-      const lo = range[1] != null ? range[0] : 0.5 * value, hi = range[1] != null ? range[1] : 2 * value;
+      // (an open end: half or twice the value, within the schema's least)
+      const lo = range[1] != null ? range[0] : Math.max(range[0] ?? -Infinity, 0.5 * value);
+      const hi = range[1] != null ? range[1] : 2 * value;
       addFitParameter(name, lo, hi);
     } else removeFitParameter(name);
   });
