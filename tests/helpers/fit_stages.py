@@ -97,3 +97,18 @@ def profile_reflector(path: Path, points=PROFILE_POINTS, reflectance: float = 0.
     light.GetPrim().GetAttribute("lumitrace:luminousFlux").Set(1000.0)
     stage.GetRootLayer().Save()
     return path
+
+
+def mirror_cup_target(folder: Path, reflectance: float = 0.95,
+                      photons: int = 1_000_000) -> Path:
+    """The LDT of the mirror cup at ``reflectance``, traced with ``photons`` and a seed no
+    fit uses (99), written in ``folder``: a fit's target."""
+    from lumitrace.publish.outputs import write_outputs
+    from lumitrace.run.session import run
+    from lumitrace.run.settings import TraceSettings
+    from lumitrace.stage.reader import read_stage
+
+    truth = mirror_cup(Path(folder) / "truth.usda", reflectance)
+    result = run(read_stage(truth), TraceSettings(photons=photons, seed=99, threads=2))
+    return Path(write_outputs(result, Path(folder) / "target", sublayer=False,
+                              pictures=False)["ldt"])

@@ -7,11 +7,10 @@ Apply best makes it a revision of the session, the Editor then showing the value
 Undo takes it back."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 from helpers.browser import CHROMIUM, DRIVER, SKIP_WHY, browser, severe, until
-from helpers.fit_stages import mirror_cup
+from helpers.fit_stages import mirror_cup, mirror_cup_target
 from service_process import Service
 
 pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
@@ -25,15 +24,8 @@ REFLECTANCE = f"{MIRROR}.lumitrace:specularReflectance"
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    from lumitrace.publish.outputs import write_outputs
-    from lumitrace.run.session import run
-    from lumitrace.run.settings import TraceSettings
-    from lumitrace.stage.reader import read_stage
-
     root = tmp_path_factory.mktemp("fit-view")
-    truth = mirror_cup(root / "truth.usda", 0.95)
-    result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
-    ldt = Path(write_outputs(result, root / "target", sublayer=False, pictures=False)["ldt"])
+    ldt = mirror_cup_target(root)
     stage = mirror_cup(root / "cup.usda", 0.7, wall_z=0.0)  # the wall placed by an op
     with Service(stage, *FAST, "--out", root / "out") as service:
         service.wait_done(0, pictures=False)

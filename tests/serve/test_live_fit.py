@@ -11,10 +11,10 @@ from __future__ import annotations
 import json
 import urllib.error
 import urllib.request
-from pathlib import Path
 
 import pytest
-from helpers.fit_stages import mirror_cup
+from helpers.fit_stages import mirror_cup, mirror_cup_target
+from helpers.http import call_json as _call
 from service_process import Service
 
 from pxr import Sdf
@@ -24,28 +24,10 @@ MIRROR = "/Luminaire/Materials/Mirror"
 REFLECTANCE = f"{MIRROR}.lumitrace:specularReflectance"
 
 
-def _call(url: str, body: dict | None = None) -> tuple[int, dict]:
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(url, data, method="GET" if body is None else "POST",
-                                 headers={"Content-Type": "application/json"})
-    try:
-        with urllib.request.urlopen(req) as r:
-            return r.status, json.loads(r.read())
-    except urllib.error.HTTPError as exc:
-        return exc.code, json.loads(exc.read())
-
-
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    from lumitrace.publish.outputs import write_outputs
-    from lumitrace.run.session import run
-    from lumitrace.run.settings import TraceSettings
-    from lumitrace.stage.reader import read_stage
-
     root = tmp_path_factory.mktemp("live-fit")
-    truth = mirror_cup(root / "truth.usda", 0.95)
-    result = run(read_stage(truth), TraceSettings(photons=1_000_000, seed=99, threads=2))
-    ldt = Path(write_outputs(result, root / "target", sublayer=False, pictures=False)["ldt"])
+    ldt = mirror_cup_target(root)
     stage = mirror_cup(root / "cup.usda", 0.95)
     with Service(stage, *FAST, "--out", root / "out") as service:
         service.wait_done(0, pictures=False)
@@ -81,6 +63,16 @@ def test_bad_fit_requests_are_refused_naming_what_is_wrong(served):
         assert code == 422, (body, answer)
         text = answer["error"] + json.dumps(answer["problems"])
         assert where in text, (where, answer)
+    # another origin's page cannot start, stop or apply a fit (as it cannot send a delta)
+    for path in ("fit", "fit/stop", "fit/apply"):
+        req = urllib.request.Request(service.url + path, json.dumps(good).encode(),
+                                     method="POST", headers={
+                                         "Content-Type": "application/json",
+                                         "Origin": "http://127.0.0.1:1", "Sec-Fetch-Site":
+                                         "cross-site"})
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(req)
+        assert refused.value.code == 403, path
     code, answer = _call(service.url + "fit", {**good, "target": {"revision": 99}})
     assert code == 404 and "revision 99" in answer["error"]
     assert _call(service.url + "fit")[1]["state"] == "idle"  # nothing started

@@ -12,6 +12,7 @@ import urllib.request
 
 import numpy as np
 import pytest
+from helpers.http import call_json as post
 from helpers.paths import ROOT
 from service_process import Service
 
@@ -24,16 +25,6 @@ FAST = ("--photons", "150000", "--resolution", "32", "--threads", "2")
 def get(url: str):
     with urllib.request.urlopen(url) as r:
         return r.read()
-
-
-def post(url: str, body: dict) -> tuple[int, dict]:
-    req = urllib.request.Request(url, json.dumps(body).encode(), method="POST",
-                                 headers={"Content-Type": "application/json"})
-    try:
-        with urllib.request.urlopen(req) as r:
-            return r.status, json.loads(r.read())
-    except urllib.error.HTTPError as exc:
-        return exc.code, json.loads(exc.read())
 
 
 @pytest.fixture(scope="module")

@@ -210,9 +210,9 @@ def local_fit(cells: HalfCells, centre: np.ndarray, radius_deg: float,
     fitted over half its half width, by 0.25%: a beam's level read low puts its crossings
     outward), where the fit reaches :data:`QUARTIC_CELLS` cells (at a pole, fewer rings
     than that cannot tell a quartic from a parabola)."""
-    gamma = math.degrees(math.acos(max(-1.0, min(1.0, -float(centre[2])))))
-    cell = max(GAMMA_STEP, C_STEP * abs(math.sin(math.radians(gamma))))
-    quartic = quartic and radius_deg >= QUARTIC_CELLS * cell
+    if quartic:  # a cell's size at the centre: the wider of its gamma and its C extent
+        sin_gamma = math.sqrt(max(0.0, 1.0 - float(centre[2]) ** 2))
+        quartic = radius_deg >= QUARTIC_CELLS * max(GAMMA_STEP, C_STEP * sin_gamma)
     near = _cells_within(centre, radius_deg)
     if near.size < (24 if quartic else 12):
         return None
